@@ -1,0 +1,8 @@
+# The libFuzzer targets: NAME -> tests/fuzz/NAME.cc, seeds in tests/fuzz/corpus/NAME/.
+# LIBS are the idms libraries each links. Shared by the clang build and the CTest runner.
+set(IDMS_FUZZ_TARGETS fem_fuzz plg_fuzz obj_fuzz)
+set(IDMS_FUZZ_LIBS_fem_fuzz idms_sim)
+set(IDMS_FUZZ_LIBS_plg_fuzz idms_sim)
+set(IDMS_FUZZ_LIBS_obj_fuzz idms_sim)
+# Seconds each target runs inside the test suite (a longer run: scripts/fuzz.sh).
+set(IDMS_FUZZ_SECONDS 20)
