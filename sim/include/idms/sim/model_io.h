@@ -34,6 +34,7 @@ struct SurfaceMesh {
   std::string name;
   std::vector<double> vert_pos;   // (num_verts x 3), model units
   std::vector<int32_t> tri_verts; // (num_tris x 3), vertex ids, counter-clockwise seen from outside
+  std::vector<int32_t> vert_line; // (num_verts), 1-based source line of each vertex, for errors
   int32_t num_verts() const { return static_cast<int32_t>(vert_pos.size() / 3); }
   int32_t num_tris() const { return static_cast<int32_t>(tri_verts.size() / 3); }
 };
@@ -44,8 +45,7 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
 bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, LoadError* error);
 
 // Checks that `mesh` is the surface of `model` (vertex i = i-th external atom, positions within
-// tolerance) and, if so, sets the model's triangles. `file` and the per-vertex line numbers
-// (from ParsePlg, may be empty) locate the error.
+// tolerance) and, if so, sets the model's triangles. `file` and mesh.vert_line locate the error.
 bool AttachSurface(const SurfaceMesh& mesh, std::string_view file, double tolerance, Model* model,
                    LoadError* error);
 
@@ -64,6 +64,8 @@ void ModelPaths(const std::string& prefix_or_fem, std::string* fem_path, std::st
 std::string WriteFem(const Model& model);
 std::string WritePlg(const Model& model);
 std::string WriteObj(const Model& model);
+// The surface at `positions` (num_atoms x 3), e.g. a deformed state, as Wavefront .obj.
+std::string WriteObj(const Model& model, const double* positions);
 
 // Writes PREFIX.fem and PREFIX.plg, each through a temporary file and rename, so a reader
 // never sees a half-written file. Returns false and sets *error on failure.
