@@ -66,29 +66,29 @@ bool BeginText(std::string_view text, std::string_view file, std::string_view he
 // Reads the .fem atom lines into `m`.
 bool ParseFemAtoms(TextScanner& in, int64_t na, Model& m) {
   for (int64_t i = 0; i < na; ++i) {
-    const std::string which = "atom " + std::to_string(i) + " of " + std::to_string(na);
-    if (!in.NextLine()) return in.FailAtEof("expected " + which + " (x y z mass bc sc)");
+    in.SetItem("atom", i, na);
+    if (!in.NextLine()) return in.FailAtEof("expected " + in.Item() + " (x y z mass bc sc)");
     double x, y, z, mass;
-    if (!in.Real("x of " + which, &x) || !in.Real("y of " + which, &y) || !in.Real("z of " + which, &z)) return false;
+    if (!in.Real("x", &x) || !in.Real("y", &y) || !in.Real("z", &z)) return false;
     const int mass_col = (in.AtEndOfLine(), in.column());
-    if (!in.Real("mass of " + which, &mass)) return false;
+    if (!in.Real("mass", &mass)) return false;
     int64_t bc, sc;
     const int bc_col = (in.AtEndOfLine(), in.column());
-    if (!in.Int("boundary condition of " + which, INT32_MIN, INT32_MAX, &bc)) return false;
+    if (!in.Int("boundary condition", INT32_MIN, INT32_MAX, &bc)) return false;
     if (bc != kBcFixed && bc != kBcFree) {
-      return in.Fail(bc_col, "expected boundary condition 1000 (fixed) or 1001 (free) for " + which + ", found " +
+      return in.Fail(bc_col, "expected boundary condition 1000 (fixed) or 1001 (free) for " + in.Item() + ", found " +
                                  std::to_string(bc));
     }
     const int sc_col = (in.AtEndOfLine(), in.column());
-    if (!in.Int("surface condition of " + which, INT32_MIN, INT32_MAX, &sc)) return false;
+    if (!in.Int("surface condition", INT32_MIN, INT32_MAX, &sc)) return false;
     if (sc != kScInternal && sc != kScExternal) {
-      return in.Fail(sc_col, "expected surface condition 2000 (internal) or 2001 (external) for " + which +
+      return in.Fail(sc_col, "expected surface condition 2000 (internal) or 2001 (external) for " + in.Item() +
                                  ", found " + std::to_string(sc));
     }
-    if (!in.ExpectEndOfLine(which)) return false;
-    if (mass < 0) return in.Fail(mass_col, "expected mass >= 0 for " + which + ", found " + Num(mass));
+    if (!in.ExpectEndOfLine()) return false;
+    if (mass < 0) return in.Fail(mass_col, "expected mass >= 0 for " + in.Item() + ", found " + Num(mass));
     if (mass == 0 && bc == kBcFree) {
-      return in.Fail(mass_col, "expected a positive mass for free " + which + ", found 0 (only fixed atoms may be massless)");
+      return in.Fail(mass_col, "expected a positive mass for free " + in.Item() + ", found 0 (only fixed atoms may be massless)");
     }
     m.atom_pos_eq.insert(m.atom_pos_eq.end(), {x, y, z});
     m.atom_mass.push_back(mass);
@@ -101,21 +101,21 @@ bool ParseFemAtoms(TextScanner& in, int64_t na, Model& m) {
 // Reads the .fem element lines into `m`, remembering each element's line for later errors.
 bool ParseFemElements(TextScanner& in, int64_t na, int64_t ne, Model& m, std::vector<int32_t>& lines) {
   for (int64_t e = 0; e < ne; ++e) {
-    const std::string which = "element " + std::to_string(e) + " of " + std::to_string(ne);
-    if (!in.NextLine()) return in.FailAtEof("expected " + which + " (a1 a2 stiffness viscosity)");
+    in.SetItem("element", e, ne);
+    if (!in.NextLine()) return in.FailAtEof("expected " + in.Item() + " (a1 a2 stiffness viscosity)");
     int64_t a0, a1;
-    if (!in.Int("first atom id of " + which, 0, na - 1, &a0)) return false;
+    if (!in.Int("first atom id", 0, na - 1, &a0)) return false;
     const int a1_col = (in.AtEndOfLine(), in.column());
-    if (!in.Int("second atom id of " + which, 0, na - 1, &a1)) return false;
-    if (a0 == a1) return in.Fail(a1_col, which + " joins atom " + std::to_string(a0) + " to itself: expected two different atoms");
+    if (!in.Int("second atom id", 0, na - 1, &a1)) return false;
+    if (a0 == a1) return in.Fail(a1_col, in.Item() + " joins atom " + std::to_string(a0) + " to itself: expected two different atoms");
     double k, b;
     const int k_col = (in.AtEndOfLine(), in.column());
-    if (!in.Real("stiffness of " + which, &k)) return false;
-    if (k < 0) return in.Fail(k_col, "expected stiffness >= 0 for " + which + ", found " + Num(k));
+    if (!in.Real("stiffness", &k)) return false;
+    if (k < 0) return in.Fail(k_col, "expected stiffness >= 0 for " + in.Item() + ", found " + Num(k));
     const int b_col = (in.AtEndOfLine(), in.column());
-    if (!in.Real("viscosity of " + which, &b)) return false;
-    if (b < 0) return in.Fail(b_col, "expected viscosity >= 0 for " + which + ", found " + Num(b));
-    if (!in.ExpectEndOfLine(which)) return false;
+    if (!in.Real("viscosity", &b)) return false;
+    if (b < 0) return in.Fail(b_col, "expected viscosity >= 0 for " + in.Item() + ", found " + Num(b));
+    if (!in.ExpectEndOfLine()) return false;
     m.elem_atoms.insert(m.elem_atoms.end(), {static_cast<int32_t>(a0), static_cast<int32_t>(a1)});
     m.elem_k.push_back(k);
     m.elem_b.push_back(b);
@@ -182,7 +182,7 @@ bool ParseFem(std::string_view text, std::string_view file, Model* model, LoadEr
   int64_t na, ne;
   if (!in.Word("model name", &name)) return false;
   if (!in.Int("number of atoms", 1, kMaxAtoms, &na) || !in.Int("number of elements", 0, kMaxElems, &ne)) return false;
-  if (!in.ExpectEndOfLine("the header 'name na ne'")) return false;
+  if (!in.ExpectEndOfLine()) return false;
 
   // Atoms, then elements; blank lines anywhere are separators.
   Model m;
@@ -212,7 +212,7 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   int64_t nv, np;
   if (!in.Word("surface name", &name)) return false;
   if (!in.Int("number of vertices", 0, kMaxAtoms, &nv) || !in.Int("number of polygons", 0, kMaxElems, &np)) return false;
-  if (!in.ExpectEndOfLine("the header 'name nv np'")) return false;
+  if (!in.ExpectEndOfLine()) return false;
 
   // Vertices.
   SurfaceMesh out;
@@ -220,11 +220,11 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   const size_t verts = SafeReserve(nv, text.size(), 6);
   out.vert_pos.reserve(3 * verts), out.vert_line.reserve(verts);
   for (int64_t i = 0; i < nv; ++i) {
-    const std::string which = "vertex " + std::to_string(i) + " of " + std::to_string(nv);
-    if (!in.NextLine()) return in.FailAtEof("expected " + which + " (x y z)");
+    in.SetItem("vertex", i, nv);
+    if (!in.NextLine()) return in.FailAtEof("expected " + in.Item() + " (x y z)");
     double p[3];
-    if (!in.Real("x of " + which, &p[0]) || !in.Real("y of " + which, &p[1]) || !in.Real("z of " + which, &p[2])) return false;
-    if (!in.ExpectEndOfLine(which)) return false;
+    if (!in.Real("x", &p[0]) || !in.Real("y", &p[1]) || !in.Real("z", &p[2])) return false;
+    if (!in.ExpectEndOfLine()) return false;
     out.vert_pos.insert(out.vert_pos.end(), p, p + 3);
     out.vert_line.push_back(in.line_number());
   }
@@ -234,22 +234,22 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   std::vector<int32_t> ids;
   std::vector<int> cols;
   for (int64_t p = 0; p < np; ++p) {
-    const std::string which = "polygon " + std::to_string(p) + " of " + std::to_string(np);
-    if (!in.NextLine()) return in.FailAtEof("expected " + which + " (n v1 ... vn)");
+    in.SetItem("polygon", p, np);
+    if (!in.NextLine()) return in.FailAtEof("expected " + in.Item() + " (n v1 ... vn)");
     int64_t sides;
     const int sides_col = (in.AtEndOfLine(), in.column());
-    if (!in.Int("number of sides of " + which, INT32_MIN, INT32_MAX, &sides)) return false;
+    if (!in.Int("number of sides", INT32_MIN, INT32_MAX, &sides)) return false;
     if (sides < 3 || sides > kMaxPolygonSides) {
-      return in.Fail(sides_col, "expected a polygon of at least 3 vertices for " + which + ", found " + std::to_string(sides));
+      return in.Fail(sides_col, "expected a polygon of at least 3 vertices for " + in.Item() + ", found " + std::to_string(sides));
     }
     ids.clear(), cols.clear();
     for (int64_t s = 0; s < sides; ++s) {
       int64_t v;
       cols.push_back((in.AtEndOfLine(), in.column()));
-      if (!in.Int("vertex id " + std::to_string(s + 1) + " of " + which, 0, nv - 1, &v)) return false;
+      if (!in.Int("vertex id " + std::to_string(s + 1), 0, nv - 1, &v)) return false;
       ids.push_back(static_cast<int32_t>(v));
     }
-    if (!in.ExpectEndOfLine(which) || !CheckDistinct(in, ids, cols, which)) return false;
+    if (!in.ExpectEndOfLine() || !CheckDistinct(in, ids, cols, in.Item())) return false;
     AddPolygon(ids, out);
   }
   if (!in.ExpectEndOfFile(std::to_string(nv) + " vertices and " + std::to_string(np) + " polygons")) return false;
@@ -270,9 +270,10 @@ bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
     if (keyword == "v") {
       // Vertex: x y z, an optional w (ignored).
       double p[3], w;
-      if (!in.Real("vertex x", &p[0]) || !in.Real("vertex y", &p[1]) || !in.Real("vertex z", &p[2])) return false;
-      if (!in.AtEndOfLine() && !in.Real("vertex w", &w)) return false;
-      if (!in.ExpectEndOfLine("vertex")) return false;
+      in.SetItem("vertex", static_cast<int64_t>(out.vert_pos.size() / 3) + 1, 0);
+      if (!in.Real("x", &p[0]) || !in.Real("y", &p[1]) || !in.Real("z", &p[2])) return false;
+      if (!in.AtEndOfLine() && !in.Real("w", &w)) return false;
+      if (!in.ExpectEndOfLine()) return false;
       if (out.vert_pos.size() / 3 >= static_cast<size_t>(kMaxAtoms)) return in.Fail(keyword_col, "too many vertices");
       out.vert_pos.insert(out.vert_pos.end(), p, p + 3);
       out.vert_line.push_back(in.line_number());

@@ -40,13 +40,23 @@ bool TextScanner::NextLine(char comment) {
   return false;
 }
 
+std::string TextScanner::Item() const {
+  if (!kind_) return "the header";
+  std::string item = std::string(kind_) + " " + std::to_string(index_);
+  return count_ > 0 ? item + " of " + std::to_string(count_) : item;
+}
+
+std::string TextScanner::Field(std::string_view what) const {
+  return kind_ ? std::string(what) + " of " + Item() : std::string(what);
+}
+
 void TextScanner::SkipBlanks() {
   while (pos_ < line_.size() && IsBlank(line_[pos_])) ++pos_;
 }
 
 bool TextScanner::Word(std::string_view what, std::string_view* out) {
   SkipBlanks();
-  if (pos_ >= line_.size()) return Fail(column(), "expected " + std::string(what) + ", found end of line");
+  if (pos_ >= line_.size()) return Fail(column(), "expected " + Field(what) + ", found end of line");
   const size_t start = pos_;
   while (pos_ < line_.size() && !IsBlank(line_[pos_])) ++pos_;
   *out = line_.substr(start, pos_ - start);
@@ -61,13 +71,13 @@ bool TextScanner::Int(std::string_view what, int64_t lo, int64_t hi, int64_t* ou
   int64_t value = 0;
   const auto [end, ec] = std::from_chars(word.data(), word.data() + word.size(), value);
   if (ec == std::errc::result_out_of_range) {
-    return Fail(col, "expected " + std::string(what) + ", found out-of-range integer " + Quote(word));
+    return Fail(col, "expected " + Field(what) + ", found out-of-range integer " + Quote(word));
   }
   if (ec != std::errc() || end != word.data() + word.size()) {
-    return Fail(col, "expected " + std::string(what) + " (an integer), found " + Quote(word));
+    return Fail(col, "expected " + Field(what) + " (an integer), found " + Quote(word));
   }
   if (value < lo || value > hi) {
-    return Fail(col, "expected " + std::string(what) + " in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+    return Fail(col, "expected " + Field(what) + " in [" + std::to_string(lo) + ", " + std::to_string(hi) +
                          "], found " + std::to_string(value));
   }
   *out = value;
@@ -85,13 +95,13 @@ bool TextScanner::Real(std::string_view what, double* out) {
   if (digits.size() > 1 && digits[0] == '+' && digits[1] != '-') digits.remove_prefix(1);
   const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
   if (ec == std::errc::result_out_of_range) {
-    return Fail(col, "expected " + std::string(what) + ", found out-of-range number " + Quote(word));
+    return Fail(col, "expected " + Field(what) + ", found out-of-range number " + Quote(word));
   }
   if (ec != std::errc() || end != digits.data() + digits.size()) {
-    return Fail(col, "expected " + std::string(what) + " (a number), found " + Quote(word));
+    return Fail(col, "expected " + Field(what) + " (a number), found " + Quote(word));
   }
   if (!std::isfinite(value)) {
-    return Fail(col, "expected " + std::string(what) + " (a finite number), found " + Quote(word));
+    return Fail(col, "expected " + Field(what) + " (a finite number), found " + Quote(word));
   }
   *out = value;
   return true;
@@ -102,12 +112,12 @@ bool TextScanner::AtEndOfLine() {
   return pos_ >= line_.size();
 }
 
-bool TextScanner::ExpectEndOfLine(std::string_view what) {
+bool TextScanner::ExpectEndOfLine() {
   if (AtEndOfLine()) return true;
   const size_t start = pos_;
   size_t stop = start;
   while (stop < line_.size() && !IsBlank(line_[stop])) ++stop;
-  return Fail(column(), "expected end of line after " + std::string(what) + ", found extra field " +
+  return Fail(column(), "expected end of line after " + Item() + ", found extra field " +
                             Quote(line_.substr(start, stop - start)));
 }
 
