@@ -6,33 +6,29 @@
 #include <complex>
 #include <functional>
 #include <optional>
-#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "idms/sim/model.h"
+#include "idms/sim/step.h"  // Integrator: the same four schemes the step runs
 
 namespace idms {
 
-// The integrators of issue 3, as `--integrator` spells them: euler, symplectic, rk4, implicit.
-enum class Integrator { kEuler, kSymplectic, kRk4, kImplicit };
-
-const char* IntegratorName(Integrator integrator);
-std::optional<Integrator> ParseIntegrator(std::string_view name);
-
 // Media-fragment parameters of figure 4-2. Defaults are the thesis's nominal values (4.2).
 struct HapticWindowParams {
-  double k = 15.0;    // element stiffness, force / length, >= 0
-  double b = 0.45;    // element viscosity, force / (length / s), >= 0
-  double m = 0.002;   // atom mass, > 0
+  double k = 15.0;      // element stiffness, force / length, >= 0
+  double b = 0.45;      // element viscosity, force / (length / s), >= 0
+  double m = 0.002;     // atom mass, > 0
   double dt_s = 0.001;  // time step T, s, > 0
 };
 
-// A pole on the unit circle (|z| within this of 1) is not asymptotically stable: a free mode
-// (k = b = 0) sits at z = 1 exactly and drifts, so "stable" means radius < 1 - kMarginalTol.
-// 1e-9 is far above the eigensolver's error on these 6x6 matrices (~1e-14) and far below
-// any margin that matters for a haptic loop.
+// A pole on the unit circle (|z| within this of 1) is not asymptotically stable, so "stable"
+// means radius < 1 - kMarginalTol: a free mode (k = b = 0) sits at z = 1 exactly and drifts,
+// and symplectic Euler on an undamped window (b = 0) keeps every pole on the circle (bounded,
+// never decaying); both are reported not stable. 1e-9 is far above the eigensolver's error on
+// these 6x6 matrices (~1e-14) and far below any margin that matters; it moves a reported edge
+// by ~1e-8 relative (k = b / T comes out as 449.999997 instead of 450).
 inline constexpr double kMarginalTol = 1e-9;
 
 // eq. 4.17 exactly as written: state x1..x6 = position and velocity of masses 1, 2, 3; each mass
@@ -42,10 +38,10 @@ Eigen::MatrixXd HapticWindowA(const HapticWindowParams& params);
 // The one-step matrix A_z (x[n+1] = A_z x[n]) of `integrator` with step dt_s > 0 on x' = A x.
 // `a` is square of even size with states interleaved (position, velocity) per degree of freedom,
 // as in eq. 4.17; symplectic Euler relies on that layout. Allocates.
-//   euler:      I + A T (eq. 4.18)
-//   symplectic: v' = v + T a(x, v), then x' = x + T v' (position rows use the new velocity)
-//   rk4:        I + AT + (AT)^2/2 + (AT)^3/6 + (AT)^4/24
-//   implicit:   (I - A T)^-1, backward Euler on the linear system
+//   kExplicitEuler:   I + A T (eq. 4.18)
+//   kSymplecticEuler: v' = v + T a(x, v), then x' = x + T v' (position rows use the new velocity)
+//   kRk4:             I + AT + (AT)^2/2 + (AT)^3/6 + (AT)^4/24
+//   kImplicitEuler:   (I - A T)^-1, backward Euler on the linear system
 Eigen::MatrixXd OneStepMatrix(const Eigen::MatrixXd& a, Integrator integrator, double dt_s);
 
 // Eigenvalues sorted by decreasing modulus, then decreasing imaginary part (conjugate pairs
@@ -75,8 +71,8 @@ double EulerEdgeDt(const std::vector<std::complex<double>>& continuous);
 double StabilityLimitDt(const Eigen::MatrixXd& a, Integrator integrator, double dt_max);
 
 // Parameter values in [lo, hi] where `stable_at` changes, found on `num_steps` uniform samples
-// and refined by bisection to |hi - lo| * 1e-12. Each entry: the value and the side it leaves
-// to (true = stable above the value). Calls stable_at O(num_steps + 40 * crossings) times.
+// and refined by bisection to |hi - lo| * 1e-12. Each entry: the value, and whether the stable
+// side is above it. Misses a stable island narrower than the sample spacing. Calls stable_at O(num_steps + 40 * crossings) times.
 struct StabilityEdge {
   double value = 0;
   bool stable_above = false;
@@ -89,8 +85,8 @@ std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>&
 Model HapticWindowModel(const HapticWindowParams& params);
 
 // The stable step stability.h predicts for the window (Summarize over its free atoms: the
-// middle atom's row has centre 3k/m and radius 2k/m, damping likewise). Euler and symplectic
-// only; returns nullopt for rk4 and implicit, for which stability.h has no prediction.
+// middle atom's row has centre 3k/m and radius 2k/m, damping likewise). Explicit and symplectic
+// Euler only; nullopt for RK4 and implicit Euler, for which stability.h has no prediction.
 std::optional<double> GershgorinStableDt(const HapticWindowParams& params, Integrator integrator);
 
 }  // namespace idms

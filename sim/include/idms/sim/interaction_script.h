@@ -1,0 +1,44 @@
+// The scripted interactions of thesis chapter 6 — palpation (6.1.1), slow and fast stroking
+// (6.1.2) and plucking (6.1.3) — as reproducible MIO trajectories over any model's surface.
+// Used by `idms-sim run`, the benches and the agent's scripted device.
+#pragma once
+
+#include <cstdint>
+#include <string_view>
+
+namespace idms {
+
+struct Model;
+
+enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck };
+
+// Where a script acts: the model's surface seen from above. For the hex fragment the top lies
+// at z = 0 and the tool comes down along z (thesis figure 6-1).
+struct ScriptGeometry {
+  double center[2] = {0, 0};  // x, y of the palpation point (middle of the surface)
+  double x_min = 0, x_max = 0;  // stroke extent along x
+  double stroke_y = 0;          // stroke line (thesis: y = 1.5 on the fragment)
+  double top_z = 0;             // highest external atom near the centre
+  double mio_radius = 1.5;      // the MIO radius r: contact starts when z = top_z + r
+};
+
+// One sample of the trajectory: the MIO centre in model units and the tweezers' state.
+struct ScriptSample {
+  double pos[3] = {0, 0, 0};
+  bool closed = false;
+};
+
+// The script's geometry over `model`'s external atoms for an MIO of radius `mio_radius`.
+ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius);
+
+// The MIO pose at time t_s (clamped to [0, duration]). Smooth (C1) in position; pure function.
+ScriptSample SampleScript(Script script, const ScriptGeometry& geometry, double t_s);
+
+// Length of the script in seconds.
+double ScriptDuration(Script script);
+
+// "palpate", "stroke-slow", "stroke-fast", "pluck".
+const char* ScriptName(Script script);
+bool ParseScriptName(std::string_view name, Script* script);
+
+}  // namespace idms

@@ -1,0 +1,98 @@
+// State: everything a step changes (thesis 4.1 state vector, eq. 4.6 filter state, tools,
+// counters). It holds no pointers into the Model, so snapshot, rollback and replay are plain
+// copies, and every array has a fixed size from MakeState on, so stepping never allocates.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace idms {
+
+struct Model;
+
+// The scalar of the evolving state. Double by default: positions are absolute (eq. 4.15), and a
+// 10^6-atom model spans ~10^3 units, where float keeps only ~6e-5 units of resolution. Define
+// IDMS_SIM_REAL_FLOAT on the whole build (it changes the ABI) to measure single precision.
+#ifdef IDMS_SIM_REAL_FLOAT
+using Real = float;
+#else
+using Real = double;
+#endif
+
+// Tools (devices) stepped at once; ToolInput and the reports hold this many slots.
+inline constexpr int kMaxTools = 4;
+
+// What a tool slot remembers between ticks (thesis table 5.1 plus the tweezers of 6.1.3).
+struct ToolState {
+  double pos[3] = {0, 0, 0};        // last valid device endpoint, model frame and units
+  double blade_tip[3] = {0, 0, 0};  // scalpel: last valid blade tip (the blade is pos..blade_tip)
+  double radius = 0, stiffness = 0;  // sphere/tweezers: last valid MIO r and k
+  uint8_t kind = 0;                 // ToolKind of the last valid sample
+  uint8_t has_pos = 0;              // the fields above hold a valid sample
+  uint8_t closed = 0;               // tweezers were closed last tick (grasping is edge-triggered)
+  // The tweezers' grasp element (thesis 6.1.3): atom -> MIO centre. The centre is not an atom,
+  // so the element lives here rather than in the Model, which stays const during a step.
+  int32_t grasp_atom = -1;  // -1 = not grasping
+  double grasp_leq = 0;     // model units: distance atom-centre when the tweezers closed
+  double grasp_k = 0;       // force / length: the MIO's k at closure
+  double force_out[3] = {0, 0, 0};  // device force sent last tick (for the rate clamp), force units
+};
+
+// Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).
+struct WarningCounters {
+  int64_t bad_tool_input = 0;     // non-finite or negative tool input; the last valid pose was held
+  int64_t substep_limit = 0;      // predicted substeps exceeded max_substeps and no fallback allowed
+  int64_t implicit_fallback = 0;  // a tick switched from an explicit integrator to implicit Euler
+  int64_t rollback = 0;           // an attempt failed the finiteness/energy check and was undone
+  int64_t unrecovered = 0;        // every attempt failed: the active region was restored at rest
+  int64_t state_repaired = 0;     // non-finite atoms found at a tick's start were reset to rest
+  int64_t device_force_nonfinite = 0;  // device force was NaN/Inf and was zeroed
+  int64_t device_force_clamped = 0;    // device force magnitude hit max_device_force
+  int64_t device_force_rate_limited = 0;  // device force change hit max_device_force_rate
+  int64_t cg_not_converged = 0;   // implicit Euler: CG stopped at its iteration limit
+  int64_t implicit_grew = 0;      // implicit Euler: the active system outgrew its buffers (allocated)
+  int64_t workspace_resync = 0;   // the Workspace was rebuilt from a State it had not stepped
+};
+
+struct State {
+  double time_s = 0;  // simulated time
+  int64_t tick = 0;   // completed steps
+  // Substeps taken so far; the eq. 4.6 filter of an element is continuous only when it was
+  // last updated in the previous substep (elem_stamp == substep_clock - 1).
+  int64_t substep_clock = 0;
+
+  // Thesis 4.1: x1 (held as the absolute position p of eq. 4.15) and x2.
+  std::vector<Real> atom_pos;  // (num_atoms x 3), model units
+  std::vector<Real> atom_vel;  // (num_atoms x 3), model units / s; 0 for fixed and inactive atoms
+
+  // Eq. 4.6 filter state per element.
+  std::vector<Real> elem_len;      // (num_elems), model units: l at the last update (l_{n-1})
+  std::vector<Real> elem_rate;     // (num_elems), model units / s: filtered length rate
+  std::vector<int64_t> elem_stamp;  // (num_elems): substep_clock at the last update
+
+  // Local simulation (thesis 5.5.2): the atoms integrated last tick, in order. The buffer has
+  // num_atoms entries; the first num_active are meaningful. atom_linger counts the ticks an atom
+  // that left the haptic window may still move while it settles (StepOptions::settle_time_s).
+  std::vector<int32_t> active_atoms;  // (num_atoms)
+  int32_t num_active = 0;
+  std::vector<int32_t> atom_linger;  // (num_atoms), ticks
+
+  std::array<ToolState, kMaxTools> tools{};
+  // Energy the dynamics gained with the tools held still, accumulated over recent ticks
+  // (StabilityOptions::energy_memory_s): catches a divergence too slow for one tick's check.
+  double energy_excess = 0;
+  WarningCounters warnings;
+};
+
+// A model at rest: p = p_eq, v = 0, element lengths at their current (rest) value. Allocates.
+State MakeState(const Model& model);
+
+// Restarts the eq. 4.6 filters at the current positions (l_{n-1} = l, rate 0): call after
+// setting positions by hand (initial conditions, draping), so the first step sees no jump.
+void SyncFilterToPositions(const Model& model, State& state);
+
+// The sum of all warning counters (0 in a clean run).
+int64_t TotalWarnings(const WarningCounters& warnings);
+
+}  // namespace idms

@@ -1,0 +1,152 @@
+// One DSM step (thesis fig. 4-1 and 5-7): tools, active set, forces, integration, checks,
+// device force. The options that shape a step live in the Workspace (see MakeWorkspace).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "idms/sim/state.h"
+#include "idms/sim/tool.h"
+
+namespace idms {
+
+struct Model;
+struct Workspace;
+
+enum class Integrator : uint8_t {
+  kExplicitEuler,    // eqs. 4.13-4.15 exactly: x += T v(n), v += T a(n)  (the thesis reference)
+  kSymplecticEuler,  // v(n+1) = v(n) + T a(x(n), v(n)), then x(n+1) = x(n) + T v(n+1)
+  kRk4,              // classical Runge-Kutta on (x, v); the tool is held still within a step
+  kImplicitEuler,    // linearised backward Euler on the active set (Baraff-Witkin), CG solve
+};
+
+// Where the element length rate of eq. 4.8 comes from. RK4 and implicit Euler always use
+// kAnalytic: their stages and Jacobian need a force that is a function of (x, v), which a
+// filter state is not. Elements with b = 0 everywhere skip the rate altogether.
+enum class LengthRate : uint8_t {
+  kAuto,      // kFiltered for the Euler schemes
+  kFiltered,  // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}, T = the substep
+  kAnalytic,  // s^ . (v1 - v0)
+};
+
+// How a step reacts when the predicted stable step is shorter than dt.
+struct StabilityOptions {
+  bool predict = true;      // Gershgorin bound over active atoms, tool stiffness included
+  double safety = 0.9;      // substep length = safety * predicted stable step
+  int32_t max_substeps = 8;
+  bool implicit_fallback = true;  // beyond max_substeps, or after a failed check: implicit Euler
+  bool energy_check = true;       // reject a tick whose active-region energy grows (see below)
+  // A tick fails when H_after > H_before + energy_rel_tol * scale + energy_abs_tol, where H is
+  // kinetic + elastic + contact + gravity energy of the active region with the tool held at its
+  // new pose (so the work the tool did this tick is already in H_before) and scale is the sum of
+  // the magnitudes of those terms. Damped dynamics only lose energy; the tolerance absorbs the
+  // explicit schemes' O((omega T)^2) per-step error, so this catches divergence, not drift.
+  double energy_rel_tol = 0.25;
+  double energy_abs_tol = 1e-9;
+  // A slow divergence gains a little every tick. The gains H_after - H_before are also summed in
+  // State::energy_excess = max(0, decay * excess + gain), decay = exp(-dt / energy_memory_s),
+  // and a tick also fails when that sum passes the same tolerance. A stable damped scheme's
+  // gains average out below zero; an unstable one's compound.
+  double energy_memory_s = 1.0;
+  int32_t cg_max_iterations = 200;
+  double cg_tolerance = 1e-8;  // relative residual
+};
+
+struct StepOptions {
+  double dt_s = 1e-3;  // T, the tick (the haptic servo period)
+  Integrator integrator = Integrator::kExplicitEuler;
+  double lambda = 1.0;  // eq. 4.6; 1 = plain backward difference
+  LengthRate length_rate = LengthRate::kAuto;
+
+  // Local simulation (thesis 5.5.2): atoms within local_radius of a tool (or of a grasped atom)
+  // move; full = every free atom moves (model generation, reference runs). The effective radius
+  // is at least the MIO radius, so every contact atom is simulated.
+  bool full = false;
+  double local_radius = 2.25;  // r_l, model units (thesis 6.2)
+  // Beyond the thesis's window: an atom outside it keeps moving while it is unsettled — speed
+  // above settle_speed, or elastic force above settle_distance times the sum of its elements'
+  // k (it would still move more than settle_distance) — for at most settle_time_s after it
+  // last was in the window; then it is immobilised (v = 0). With wake_neighbours, a frozen atom
+  // next to the active region that became unsettled (e.g. the tissue around a released pluck)
+  // joins the active set too. settle_time_s = 0 and wake_neighbours = false is the thesis.
+  double settle_time_s = 1.0;
+  double settle_speed = 1e-3;     // model units / s
+  double settle_distance = 1e-3;  // model units
+  bool wake_neighbours = true;
+  double hash_cell = 0;        // spatial-hash cell edge, model units; 0 = local_radius
+
+  // Field forces (thesis eq. 4.2), off unless the scene asks.
+  bool gravity = false;
+  double gravity_accel[3] = {0, 0, -9.81};  // model units / s^2
+  double air_damping = 0;  // 1/s: f = -air_damping * m * v (the thesis writes -m x1', i.e. 1/s)
+
+  double min_distance_fraction = 0.05;  // thesis contact law guard, fraction of r
+
+  // Device limits: what leaves the step is clamped (the atoms still feel the unclamped force).
+  double max_device_force = 10;         // force units (PHANToM-class: ~8.5 N peak)
+  double max_device_force_rate = 1e4;   // force units / s
+
+  StabilityOptions stability;
+};
+
+struct ToolReport {
+  double force[3] = {0, 0, 0};      // device force after the finite check and the clamps
+  double force_raw[3] = {0, 0, 0};  // -sum of forces the tool applied to atoms (tick average)
+  int32_t contacts = 0;             // atoms inside the MIO at the tick's start
+  int32_t grasp_atom = -1;          // tweezers: grasped atom after this tick, -1 = none
+  int32_t cut_elements = 0;         // scalpel: elements this tick's sweep crossed (pending edit)
+  bool input_held = false;          // the input was invalid; the last valid pose was used
+};
+
+struct StepReport {
+  std::array<ToolReport, kMaxTools> tools{};
+  int32_t num_tools = 0;
+  int32_t active_atoms = 0;
+  int32_t active_elems = 0;
+  int32_t substeps = 0;               // of the accepted attempt
+  int32_t attempts = 0;               // 1 unless a check failed and the tick was retried
+  Integrator integrator_used = Integrator::kExplicitEuler;
+  double predicted_dt_s = 0;          // stable step predicted for the configured integrator
+  bool fallback = false;              // the accepted attempt used implicit Euler as a fallback
+  bool unrecovered = false;           // every attempt failed; active region restored at rest
+  int32_t cg_iterations = 0;          // implicit Euler: total over substeps
+  double energy_before = 0, energy_after = 0;  // active region, with the tools at their new pose
+  int64_t new_warnings = 0;           // warnings counted during this tick
+  int32_t pending_cuts = 0;           // elements awaiting ApplyPendingEdits
+  // Stage times, ns (steady clock).
+  int64_t tools_ns = 0;       // tool validation, grasp, cut detection
+  int64_t active_set_ns = 0;  // hash queries, active atoms and elements, hash update
+  int64_t forces_ns = 0;      // external and element forces (all evaluations)
+  int64_t integrate_ns = 0;   // state updates, implicit assembly and CG
+  int64_t checks_ns = 0;      // prediction, backup, energy, rollback, device force
+  int64_t total_ns = 0;
+};
+
+// Advances the state by options.dt_s (the options the Workspace was made with):
+//  1. tools: validate input, tweezers grasp/release, scalpel sweep -> pending cuts (Edit API);
+//  2. active set: atoms within r_l of a tool through the spatial hash (or all, when full);
+//  3. element forces (eqs. 4.3-4.9) on elements with an active endpoint, contact (5.5.1);
+//  4. integrate the active free atoms, substepped or implicit as predicted, checked for
+//     finiteness and energy, rolled back and retried on failure;
+//  5. device force = -sum of tool forces on atoms; zeroed if non-finite, clamped.
+// Preconditions: state and workspace were made for this model (same topology_version,
+// IDMS_CHECK). Single-threaded; never throws. Cost: local mode O(atoms and elements near the
+// tools), independent of model size; full mode O(model). The first Step after MakeWorkspace,
+// or after the State was replaced (snapshot restore), refiles the spatial hash from the State:
+// O(atoms) once — call ResyncWorkspace before a real-time loop starts to keep that out of it.
+// Allocates nothing with the explicit integrators. Implicit Euler (also as the fallback)
+// allocates only when its active system outgrows every earlier one: never in full mode, and in
+// local mode only past 2048 active atoms (counted in warnings.implicit_grew).
+// Deterministic: the same model, state and input give the same state bits, whatever the
+// Workspace's history (lists are kept in atom order), except implicit Euler, whose CG warm
+// start lives in the Workspace (same bits for the same Workspace history; otherwise the same
+// to the CG tolerance).
+StepReport Step(const Model& model, State& state, Workspace& workspace, const ToolInput& input);
+
+// Energy of the whole model (kinetic + elastic, gravity if enabled in the workspace), for tests
+// and tools; O(atoms + elements). Does not allocate.
+double ModelEnergy(const Model& model, const State& state, const Workspace& workspace);
+
+const char* IntegratorName(Integrator integrator);
+
+}  // namespace idms

@@ -1,0 +1,63 @@
+// Tools: the master interaction object (MIO, thesis 5.5.1) a device drives — sphere fingertip,
+// tweezers (6.1.3) and scalpel (3.2.6) — the per-tick device input, and the contact geometry.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "idms/sim/state.h"
+
+namespace idms {
+
+enum class ToolKind : uint8_t {
+  kNone,      // slot unused
+  kSphere,    // fingertip MIO: penalty contact with external atoms
+  kTweezers,  // a sphere that grasps the nearest contact atom while closed
+  kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
+};
+
+enum class ContactLaw : uint8_t {
+  kThesis,  // thesis 5.5.1 as written: f = k (r - |d|) / |d| along d^ (note the extra 1/|d|)
+  kLinear,  // plain penetration: f = k (r - |d|) along d^
+};
+
+// One device's sample for one tick, in the model frame (after registration, thesis 5.3).
+// Non-finite or negative values are not an error: the step holds the last valid pose and counts
+// a warning (validate at the boundary; this is the last line of defence).
+struct ToolCommand {
+  ToolKind kind = ToolKind::kNone;
+  double pos[3] = {0, 0, 0};  // device endpoint = MIO centre (sphere, tweezers) or blade base
+  double radius = 1.5;        // sphere/tweezers: MIO radius r, model units (thesis 6.1: 1.5)
+  double stiffness = 400;     // sphere/tweezers: MIO k, force / length (thesis 6.1: 400)
+  ContactLaw law = ContactLaw::kThesis;
+  bool closed = false;              // tweezers: closed this tick
+  double blade[3] = {0, 0, -1};     // scalpel: the blade runs from pos to pos + blade, model units
+};
+
+struct ToolInput {
+  std::array<ToolCommand, kMaxTools> tools{};
+  int32_t num_tools = 0;  // slots [0, num_tools) are read
+};
+
+// Force of a sphere MIO on an atom at offset d = p_atom - centre (thesis 5.5.1), with the
+// normal stiffness -d|f|/d|d| the stability prediction and implicit Euler use. |d| is clamped
+// below at min_distance_fraction * r for the thesis law (whose 1/|d| would otherwise diverge);
+// at |d| = 0 the direction is +z. Zero force outside the sphere. Does not allocate.
+struct ContactForce {
+  double f[3] = {0, 0, 0};  // on the atom, force units
+  double stiffness = 0;     // normal stiffness, force / length
+  double energy = 0;        // penalty potential, force * length (0 at |d| >= r)
+  bool touching = false;
+};
+ContactForce SphereContact(ContactLaw law, double k, double r, double min_distance_fraction,
+                           const double d[3]);
+
+// True when segment pq crosses triangle abc (Moller-Trumbore; grazing/parallel = no).
+bool SegmentCrossesTriangle(const double p[3], const double q[3], const double a[3],
+                            const double b[3], const double c[3]);
+
+// True when segment pq crosses the quad a0 b0 b1 a1 that a blade sweeps moving from a0b0 to a1b1.
+bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3], const double b0[3],
+                         const double a1[3], const double b1[3]);
+
+}  // namespace idms

@@ -1,0 +1,117 @@
+// Workspace: the step's scratch, sized once by MakeWorkspace, plus the options it was sized for.
+// Not simulation state (a fresh Workspace steps a State to the same bits), except the scalpel's
+// pending cuts and implicit Euler's CG warm start.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "idms/sim/spatial_hash.h"
+#include "idms/sim/state.h"
+#include "idms/sim/step.h"
+#include "idms/sim/tool.h"
+
+namespace idms {
+
+struct Model;
+
+// A tool slot as this tick uses it: validated input plus what State remembers (grasp).
+struct ActiveTool {
+  ToolKind kind = ToolKind::kNone;  // kNone: ignored this tick (unused slot or never valid)
+  ContactLaw law = ContactLaw::kThesis;
+  double c[3] = {0, 0, 0};          // MIO centre / blade base, model units
+  double blade_tip[3] = {0, 0, 0};  // scalpel
+  double r = 0, k = 0;              // MIO radius and stiffness
+  bool closed = false;              // tweezers: closed this tick (held when the input was bad)
+  int32_t grasp_atom = -1;
+  double grasp_leq = 0, grasp_k = 0;
+  double eval_force[3] = {0, 0, 0};  // sum of this tool's forces on atoms, current evaluation
+  double tick_force[3] = {0, 0, 0};  // the same, weighted over the tick's evaluations
+  int32_t contacts = 0;
+};
+
+// Linearised backward Euler on the active set: a row-major CSR matrix (viewed by Eigen through
+// Eigen::Map, so no Eigen-owned storage) and the CG vectors, all indexed by active slot.
+struct ImplicitBuffers {
+  std::vector<int32_t> outer;  // (3 * capacity_atoms + 1)
+  std::vector<int32_t> inner;  // (capacity_nnz)
+  std::vector<Real> values;    // (capacity_nnz)
+  std::vector<Real> rhs, dv, r, z, p, q, inv_diag;  // (3 * capacity_atoms)
+  std::vector<Real> diag_blocks;                     // (9 * capacity_atoms)
+  std::vector<Real> atom_dv_guess;  // (num_atoms x 3): last solution per atom, CG warm start
+};
+
+struct Workspace {
+  // Why the options live here and not in a Step argument: the buffers below are sized for them
+  // (hash cell from the local radius, RK4 and implicit scratch only when they can be used), so
+  // keeping both in one object makes a mismatch impossible and keeps Step's signature the one
+  // DESIGN.md gives. Changing options = MakeWorkspace again (O(N), allocates).
+  StepOptions options;
+
+  // What the workspace was made for (checked by Step).
+  int32_t num_atoms = 0;
+  uint64_t topology_version = 0;
+  // State::tick this workspace expects next; -1 = refile the hash from the State at the first
+  // Step (so a State edited before its first step, e.g. in a test, is picked up).
+  int64_t synced_tick = -1;
+
+  // Derived from the model and options.
+  bool any_damping = false;    // some element has b > 0; else the viscous filter is skipped
+  bool use_rk4 = false, use_implicit = false;  // which scratch exists
+  double local_radius = 0;     // effective r_l (local mode)
+  double cut_reach = 0;        // model units: half the longest element allowed for cut search
+  std::vector<double> atom_omega2;  // (num_atoms), 1/s^2: Gershgorin bound without tools
+  std::vector<double> atom_damp;    // (num_atoms), 1/s: Gershgorin damping bound without tools
+
+  SpatialHash hash;  // local mode only; files every atom at its State position
+
+  // Per-atom scratch. Invariant between steps: marks 0, slots -1, extra_k 0.
+  std::vector<uint8_t> atom_mark;    // (num_atoms), 1 = active this tick, 2 = checked by the wake pass
+  std::vector<uint8_t> atom_cand;    // (num_atoms), 1 = contact candidate this tick
+  std::vector<int32_t> atom_slot;    // (num_atoms), index into the active list or -1
+  std::vector<double> atom_extra_k;  // (num_atoms), tool stiffness on the atom this tick
+  std::vector<Real> atom_force;      // (num_atoms x 3), force units; valid for active atoms
+
+  // Lists of this tick (buffers of full size; counts say how much is used).
+  std::vector<int32_t> active;      // (num_atoms) active free atoms
+  int32_t num_active = 0;
+  std::vector<int32_t> candidates;  // (num_atoms) external atoms that may touch a tool
+  int32_t num_candidates = 0;
+  std::vector<int32_t> boundary;    // (num_atoms) inactive free atoms checked by the wake pass
+  int32_t num_boundary = 0;
+  std::vector<int32_t> elems;       // (num_elems) elements with an active endpoint, not cut
+  int32_t num_elems = 0;
+  std::vector<uint8_t> elem_mark;   // (num_elems)
+  std::vector<uint8_t> elem_cut;    // (num_elems), 1 = pending cut: no force until removed
+  std::vector<int32_t> pending_cuts;  // (num_elems)
+  int32_t num_pending_cuts = 0;
+
+  // Rollback copy of the active region, by active slot / active element index.
+  std::vector<Real> backup_pos, backup_vel;  // (num_atoms x 3)
+  std::vector<Real> backup_elem_len, backup_elem_rate;  // (num_elems)
+  std::vector<int64_t> backup_elem_stamp;               // (num_elems)
+
+  // RK4 scratch by active slot (only when use_rk4).
+  std::vector<Real> rk_x0, rk_v0, rk_dx, rk_dv;  // (num_atoms x 3)
+
+  ImplicitBuffers implicit;  // only when use_implicit
+
+  // Surface adjacency for the Edit API: triangles of atom i are
+  // atom_tri[atom_tri_adr[i] .. + atom_tri_num[i]) (holes allowed after removals).
+  std::vector<int32_t> atom_tri_adr, atom_tri_num, atom_tri;
+
+  std::array<ActiveTool, kMaxTools> tools{};
+  int32_t num_tools = 0;
+};
+
+// Sizes everything for `model` and `options` (validated: IDMS_CHECK on nonsense such as
+// dt <= 0). Builds the spatial hash from the rest positions. O(atoms + elements), allocates.
+Workspace MakeWorkspace(const Model& model, const StepOptions& options);
+
+// Refiles the spatial hash from `state` and clears per-tick scratch. Step calls it itself (and
+// counts warnings.workspace_resync) when the state is not the one it stepped last, e.g. after
+// restoring a snapshot. O(atoms), does not allocate.
+void ResyncWorkspace(const Model& model, const State& state, Workspace& workspace);
+
+}  // namespace idms

@@ -1,0 +1,335 @@
+// Step: the DSM tick of thesis figs. 4-1 and 5-7 as a pipeline of timed stages, with the
+// stability control of thesis 4.2 (predict, substep or fall back, check, roll back, retry) and
+// the device-force safety net.
+#include "idms/sim/step.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "idms/sim/check.h"
+#include "idms/sim/integrate.h"
+#include "idms/sim/model.h"
+#include "idms/sim/tool.h"
+#include "idms/sim/workspace.h"
+#include "step_internal.h"
+
+namespace idms {
+
+double StableDt(Integrator integrator, const AtomBound& bound, LengthRate rate, double lambda) {
+  const bool filtered = rate == LengthRate::kFiltered;
+  switch (integrator) {
+    case Integrator::kExplicitEuler: {
+      if (!filtered) return EulerStableDt(bound);
+      if (bound.c <= 0) return bound.omega2 > 0 ? 0.0 : std::numeric_limits<double>::infinity();
+      return lambda * bound.c / (bound.omega2 + bound.c * bound.c);
+    }
+    case Integrator::kSymplecticEuler:
+      return (filtered ? lambda : 1.0) * SymplecticStableDt(bound);
+    case Integrator::kRk4: {
+      const double fastest = std::max(std::sqrt(std::max(bound.omega2, 0.0)), bound.c);
+      return fastest > 0 ? 2.5 / fastest : std::numeric_limits<double>::infinity();
+    }
+    case Integrator::kImplicitEuler:
+      break;
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+const char* IntegratorName(Integrator integrator) {
+  switch (integrator) {
+    case Integrator::kExplicitEuler:
+      return "euler";
+    case Integrator::kSymplecticEuler:
+      return "symplectic";
+    case Integrator::kRk4:
+      return "rk4";
+    case Integrator::kImplicitEuler:
+      return "implicit";
+  }
+  return "?";
+}
+
+namespace {
+
+using internal::NowNs;
+
+struct Plan {
+  Integrator integrator = Integrator::kExplicitEuler;
+  int32_t substeps = 1;
+  bool fallback = false;
+};
+
+// Tool stiffness felt by each atom this tick (contact normal stiffness, grasp k), and contacts.
+void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    const ActiveTool& at = ws.tools[t];
+    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    for (int32_t i = 0; i < ws.num_candidates; ++i) {
+      const int32_t a = ws.candidates[i];
+      const Real* p = &s.atom_pos[3 * a];
+      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
+      const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+      if (!cf.touching) continue;
+      ++report->tools[t].contacts;
+      if (a != at.grasp_atom) ws.atom_extra_k[a] += cf.stiffness;
+    }
+    if (at.grasp_atom >= 0) ws.atom_extra_k[at.grasp_atom] += at.grasp_k;
+  }
+}
+
+// Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
+double PredictStableDt(const Model& m, const Workspace& ws, Integrator integrator) {
+  double dt = std::numeric_limits<double>::infinity();
+  const LengthRate rate = internal::UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
+                          ws.atom_damp[a] + ws.options.air_damping};
+    dt = std::min(dt, StableDt(integrator, bound, rate, ws.options.lambda));
+  }
+  return dt;
+}
+
+// The attempts of this tick, in order: the configured scheme with the predicted substeps, then
+// the implicit fallback (or more substeps when no fallback is allowed).
+int32_t MakePlans(const Model& m, State& s, Workspace& ws, StepReport* report, Plan plans[3]) {
+  const StabilityOptions& st = ws.options.stability;
+  const Integrator configured = ws.options.integrator;
+  if (configured == Integrator::kImplicitEuler) {
+    plans[0] = {configured, 1, false};
+    plans[1] = {configured, 4, false};
+    return 2;
+  }
+  int32_t n = 1;
+  if (st.predict) {
+    report->predicted_dt_s = PredictStableDt(m, ws, configured);
+    const double ratio = ws.options.dt_s / (st.safety * report->predicted_dt_s);
+    n = ratio <= 1 ? 1 : ratio <= st.max_substeps ? static_cast<int32_t>(std::ceil(ratio)) : st.max_substeps + 1;
+  }
+  if (n > st.max_substeps) {
+    if (st.implicit_fallback) {
+      plans[0] = {Integrator::kImplicitEuler, 1, true};
+      plans[1] = {Integrator::kImplicitEuler, 4, true};
+      return 2;
+    }
+    ++s.warnings.substep_limit;
+    plans[0] = {configured, st.max_substeps, false};
+    return 1;
+  }
+  plans[0] = {configured, n, false};
+  if (st.implicit_fallback) {
+    plans[1] = {Integrator::kImplicitEuler, 1, true};
+    plans[2] = {Integrator::kImplicitEuler, 4, true};
+    return 3;
+  }
+  if (2 * n > st.max_substeps) return 1;
+  plans[1] = {configured, 2 * n, false};
+  return 2;
+}
+
+// Non-finite atoms or filter states found at a tick's start (a State that came in broken) are
+// reset to rest, so that one bad value cannot poison every later tick.
+void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
+  bool repaired = false;
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    Real* p = &s.atom_pos[3 * a];
+    Real* v = &s.atom_vel[3 * a];
+    bool ok = true;
+    for (int c = 0; c < 3; ++c) ok = ok && std::isfinite(p[c]) && std::isfinite(v[c]);
+    if (ok) continue;
+    for (int c = 0; c < 3; ++c) p[c] = static_cast<Real>(m.atom_pos_eq[3 * a + c]), v[c] = 0;
+    if (!ws.options.full) UpdateSpatialHash(ws.hash, a, p);
+    repaired = true;
+  }
+  for (int32_t i = 0; i < ws.num_elems; ++i) {
+    const int32_t e = ws.elems[i];
+    if (std::isfinite(s.elem_len[e]) && std::isfinite(s.elem_rate[e])) continue;
+    s.elem_len[e] = s.elem_rate[e] = 0;
+    s.elem_stamp[e] = std::numeric_limits<int64_t>::min();
+    repaired = true;
+  }
+  if (repaired) ++s.warnings.state_repaired;
+}
+
+// Rollback copy of the active region: atoms by slot, elements by list index.
+void Backup(const State& s, Workspace& ws) {
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    for (int c = 0; c < 3; ++c) ws.backup_pos[3 * i + c] = s.atom_pos[3 * a + c], ws.backup_vel[3 * i + c] = s.atom_vel[3 * a + c];
+  }
+  for (int32_t i = 0; i < ws.num_elems; ++i) {
+    const int32_t e = ws.elems[i];
+    ws.backup_elem_len[i] = s.elem_len[e];
+    ws.backup_elem_rate[i] = s.elem_rate[e];
+    ws.backup_elem_stamp[i] = s.elem_stamp[e];
+  }
+}
+
+void Restore(State& s, const Workspace& ws, int64_t clock) {
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    for (int c = 0; c < 3; ++c) s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
+  }
+  for (int32_t i = 0; i < ws.num_elems; ++i) {
+    const int32_t e = ws.elems[i];
+    s.elem_len[e] = ws.backup_elem_len[i];
+    s.elem_rate[e] = ws.backup_elem_rate[i];
+    s.elem_stamp[e] = ws.backup_elem_stamp[i];
+  }
+  s.substep_clock = clock;
+}
+
+// Every attempt failed: back to the tick's start, at rest, filters restarted; no device force.
+void Freeze(State& s, Workspace& ws, int64_t clock) {
+  Restore(s, ws, clock);
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    s.atom_vel[3 * a] = s.atom_vel[3 * a + 1] = s.atom_vel[3 * a + 2] = 0;
+  }
+  for (int32_t i = 0; i < ws.num_elems; ++i) s.elem_stamp[ws.elems[i]] = std::numeric_limits<int64_t>::min();
+  for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+  ++s.warnings.unrecovered;
+}
+
+// Stage 5: device force = -sum of the tool's forces on atoms; zeroed when non-finite, magnitude
+// clamped, and its growth rate-limited (drops pass at once: releasing is always safe, and the
+// thesis's tweezers force "instantly falls to zero", 6.1.3).
+void DeviceForces(State& s, const Workspace& ws, StepReport* report) {
+  const StepOptions& o = ws.options;
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    ToolReport& tr = report->tools[t];
+    ToolState& ts = s.tools[t];
+    double f[3] = {0, 0, 0};
+    if (ws.tools[t].kind != ToolKind::kNone) {
+      for (int c = 0; c < 3; ++c) f[c] = -ws.tools[t].tick_force[c];
+    }
+    std::copy(f, f + 3, tr.force_raw);
+    double mag = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+    if (!std::isfinite(mag)) {
+      ++s.warnings.device_force_nonfinite;
+      f[0] = f[1] = f[2] = mag = 0;
+    }
+    const double prev = std::sqrt(ts.force_out[0] * ts.force_out[0] + ts.force_out[1] * ts.force_out[1] +
+                                  ts.force_out[2] * ts.force_out[2]);
+    double limit = o.max_device_force;
+    if (prev + o.max_device_force_rate * o.dt_s < limit) limit = prev + o.max_device_force_rate * o.dt_s;
+    if (mag > limit) {
+      ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
+      for (int c = 0; c < 3; ++c) f[c] *= limit / mag;
+    }
+    std::copy(f, f + 3, ts.force_out);
+    std::copy(f, f + 3, tr.force);
+  }
+}
+
+}  // namespace
+
+StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input) {
+  using namespace internal;
+  StepReport report;
+  const int64_t t_start = NowNs();
+  IDMS_CHECK(ws.num_atoms == m.num_atoms && ws.topology_version == m.topology_version);
+  IDMS_CHECK(static_cast<int32_t>(s.atom_pos.size()) == 3 * m.num_atoms &&
+             static_cast<int32_t>(s.elem_len.size()) == m.num_elems);
+  const int64_t warnings_before = TotalWarnings(s.warnings);
+  if (s.tick != ws.synced_tick) {
+    if (ws.synced_tick >= 0) ++s.warnings.workspace_resync;
+    ResyncWorkspace(m, s, ws);
+  }
+
+  // 1. Tools: validated input, scalpel sweeps -> pending cuts.
+  int64_t t0 = NowNs();
+  ResolveTools(m, s, ws, input, &report);
+  report.tools_ns = NowNs() - t0;
+
+  // 2. Active set (haptic window), then the tweezers, which need its contact candidates.
+  t0 = NowNs();
+  BuildActiveSet(m, s, ws);
+  report.active_set_ns = NowNs() - t0;
+  t0 = NowNs();
+  UpdateGrasps(m, s, ws, &report);
+  report.tools_ns += NowNs() - t0;
+
+  // 3. Stability plan, rollback copy, energy before (tools at their new pose).
+  t0 = NowNs();
+  RepairActiveRegion(m, s, ws);
+  ToolStiffness(s, ws, &report);
+  Plan plans[3];
+  const int32_t num_plans = MakePlans(m, s, ws, &report, plans);
+  Backup(s, ws);
+  const int64_t clock = s.substep_clock;
+  const Energy before = ActiveEnergy(m, s, ws);
+  const double h_before = before.h;
+  const StabilityOptions& st = ws.options.stability;
+  const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
+  const double excess_decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
+  double excess = s.energy_excess * excess_decay;
+  report.checks_ns = NowNs() - t0;
+
+  // 4. Integrate; check finiteness and energy; roll back and retry down the plan list.
+  StageTimes times;
+  bool accepted = false;
+  for (int32_t k = 0; k < num_plans && !accepted; ++k) {
+    if (k > 0) {
+      t0 = NowNs();
+      Restore(s, ws, clock);
+      ++s.warnings.rollback;
+      report.checks_ns += NowNs() - t0;
+    }
+    IDMS_CHECK(plans[k].integrator != Integrator::kRk4 || ws.use_rk4);
+    report.cg_iterations = RunIntegrator(m, s, ws, plans[k].integrator, plans[k].substeps, &times);
+    t0 = NowNs();
+    report.energy_after = ActiveEnergy(m, s, ws).h;
+    if (st.energy_check) {
+      const double gain = report.energy_after - h_before;
+      excess = std::max(0.0, s.energy_excess * excess_decay + gain);
+      accepted = gain <= tolerance && excess <= tolerance;  // false for NaN
+    } else {
+      accepted = std::isfinite(report.energy_after);
+    }
+    report.attempts = k + 1;
+    report.substeps = plans[k].substeps;
+    report.integrator_used = plans[k].integrator;
+    report.fallback = plans[k].fallback;
+    report.checks_ns += NowNs() - t0;
+  }
+  t0 = NowNs();
+  s.energy_excess = accepted && std::isfinite(excess) ? excess : s.energy_excess * excess_decay;
+  if (!accepted) {
+    Freeze(s, ws, clock);
+    report.unrecovered = true;
+    report.fallback = false;
+    report.energy_after = ActiveEnergy(m, s, ws).h;
+  }
+  if (report.fallback) ++s.warnings.implicit_fallback;
+  report.energy_before = h_before;
+  report.forces_ns = times.forces_ns;
+  report.integrate_ns = times.integrate_ns;
+
+  // 5. Device force.
+  DeviceForces(s, ws, &report);
+  report.checks_ns += NowNs() - t0;
+
+  // Refile the atoms that moved (local mode: nothing else can have moved).
+  t0 = NowNs();
+  if (!ws.options.full) {
+    for (int32_t i = 0; i < ws.num_active; ++i) UpdateSpatialHash(ws.hash, ws.active[i], &s.atom_pos[3 * ws.active[i]]);
+  }
+  WakeNeighbours(m, s, ws);
+  report.active_atoms = ws.num_active;
+  report.active_elems = ws.num_elems;
+  report.pending_cuts = ws.num_pending_cuts;
+  ClearTickScratch(ws);
+  report.active_set_ns += NowNs() - t0;
+
+  ++s.tick;
+  s.time_s += ws.options.dt_s;
+  ws.synced_tick = s.tick;
+  report.new_warnings = TotalWarnings(s.warnings) - warnings_before;
+  report.total_ns = NowNs() - t_start;
+  return report;
+}
+
+}  // namespace idms

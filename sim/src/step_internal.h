@@ -1,0 +1,84 @@
+// The stages of Step (step.cc) as the other sim/src files implement them; nobody else includes it.
+#pragma once
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+
+#include "idms/sim/model.h"
+#include "idms/sim/state.h"
+#include "idms/sim/step.h"
+#include "idms/sim/workspace.h"
+
+namespace idms::internal {
+
+inline int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// Below this length an element has no direction (eq. 4.5 would divide by ~0).
+inline constexpr Real kMinLength = sizeof(Real) == 4 ? Real(1e-6) : Real(1e-12);
+
+inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+struct StageTimes {
+  int64_t forces_ns = 0;
+  int64_t integrate_ns = 0;
+};
+
+// tool.cc — stage 1: validates the input into ws.tools (holding the last valid pose on bad
+// input), and flags the elements each scalpel's sweep crossed as pending cuts.
+void ResolveTools(const Model& model, State& state, Workspace& ws, const ToolInput& input, StepReport* report);
+
+// tool.cc — tweezers: grasp the nearest free contact atom on closing, release on opening.
+// Needs the contact candidates, so it runs after BuildActiveSet.
+void UpdateGrasps(const Model& model, State& state, Workspace& ws, StepReport* report);
+
+// active_set.cc — stage 2: active atoms (ws.active, copied to State), contact candidates, and
+// the active element list; immobilises atoms that left the window and settled.
+void BuildActiveSet(const Model& model, State& state, Workspace& ws);
+
+// active_set.cc — after integration: frozen free atoms next to the active region that are no
+// longer settled are listed in State::active_atoms, so the next tick moves them.
+void WakeNeighbours(const Model& model, State& state, Workspace& ws);
+
+// active_set.cc — clears the per-tick marks of the lists (the between-steps invariant).
+void ClearTickScratch(Workspace& ws);
+
+// forces.cc — stage 3: ws.atom_force for the active atoms at the State's current (x, v):
+// gravity, air, tool contact and grasp (thesis 4.2, 5.5.1), then element forces (eqs. 4.3-4.9).
+// `filtered` uses and advances the eq. 4.6 filter with step T. Each tool's sum of forces on atoms
+// lands in ws.tools[t].eval_force.
+void EvaluateForces(const Model& model, State& state, Workspace& ws, bool filtered, Real T);
+
+// forces.cc — energy of the active region (see StabilityOptions::energy_rel_tol).
+struct Energy {
+  double h = 0;      // NaN when any active atom is non-finite
+  double scale = 0;  // sum of the magnitudes of the terms of h
+  // Rounding noise of h: lengths computed from absolute positions carry ~eps * |p| of error,
+  // which in float at |p| ~ 10^2 exceeds the abs tolerance; this keeps the check from firing
+  // on rounding.
+  double noise = 0;
+};
+Energy ActiveEnergy(const Model& model, const State& state, const Workspace& ws);
+
+// integrate.cc — stage 4: `substeps` substeps of `integrator` over dt; accumulates the tools'
+// tick_force (evaluation-weighted average of eval_force). Returns CG iterations (implicit).
+int32_t RunIntegrator(const Model& model, State& state, Workspace& ws, Integrator integrator, int32_t substeps,
+                      StageTimes* times);
+
+// implicit.cc — one linearised backward-Euler substep of length T on the active set.
+// Returns the CG iterations; counts cg_not_converged / implicit_grew in state.warnings.
+int32_t ImplicitEulerSubstep(const Model& model, State& state, Workspace& ws, Real T, StageTimes* times);
+
+// implicit.cc — sizes the implicit buffers (MakeWorkspace).
+void SizeImplicitBuffers(const Model& model, Workspace& ws);
+
+// True when the resolved eq. 4.6 mode for `integrator` is the filter.
+inline bool UsesFilter(const StepOptions& options, Integrator integrator) {
+  const bool euler = integrator == Integrator::kExplicitEuler || integrator == Integrator::kSymplecticEuler;
+  return euler && options.length_rate != LengthRate::kAnalytic;
+}
+
+}  // namespace idms::internal

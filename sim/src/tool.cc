@@ -1,0 +1,212 @@
+// Tools: the sphere MIO contact law (thesis 5.5.1), tweezers grasping (6.1.3), scalpel sweeps
+// (3.2.6), and the validation of the device input that feeds them.
+#include "idms/sim/tool.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "idms/sim/model.h"
+#include "idms/sim/workspace.h"
+#include "step_internal.h"
+
+namespace idms {
+namespace {
+
+inline void Sub(const double* a, const double* b, double* out) {
+  out[0] = a[0] - b[0], out[1] = a[1] - b[1], out[2] = a[2] - b[2];
+}
+inline double Dot(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline void Cross(const double* a, const double* b, double* out) {
+  out[0] = a[1] * b[2] - a[2] * b[1];
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+}  // namespace
+
+ContactForce SphereContact(ContactLaw law, double k, double r, double min_distance_fraction, const double d[3]) {
+  ContactForce out;
+  const double dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  if (!(dist2 < r * r)) return out;  // outside, or non-finite
+  const double dist = std::sqrt(dist2);
+  // d^, and +z when the atom sits on the centre.
+  double n[3] = {0, 0, 1};
+  if (dist > 1e-12 * r) n[0] = d[0] / dist, n[1] = d[1] / dist, n[2] = d[2] / dist;
+  double mag = 0;
+  if (law == ContactLaw::kThesis) {
+    // Thesis 5.5.1: f = k (r - |d|) / |d| * d / |d|; |d| clamped at d_min so f stays finite.
+    const double dmin = min_distance_fraction * r;
+    const double de = std::max(dist, dmin);
+    mag = k * (r - de) / de;
+    out.stiffness = k * r / (de * de);
+    // Potential: integral of the magnitude from |d| to r, continued linearly below d_min.
+    out.energy = k * (r * std::log(r / de) - (r - de)) + (dist < dmin ? mag * (dmin - dist) : 0.0);
+  } else {
+    mag = k * (r - dist);
+    out.stiffness = k;
+    out.energy = 0.5 * k * (r - dist) * (r - dist);
+  }
+  out.f[0] = mag * n[0], out.f[1] = mag * n[1], out.f[2] = mag * n[2];
+  out.touching = true;
+  return out;
+}
+
+bool SegmentCrossesTriangle(const double p[3], const double q[3], const double a[3], const double b[3],
+                            const double c[3]) {
+  double dir[3], e1[3], e2[3], h[3], s[3], qv[3];
+  Sub(q, p, dir);
+  Sub(b, a, e1);
+  Sub(c, a, e2);
+  Cross(dir, e2, h);
+  const double det = Dot(e1, h);
+  // Parallel or degenerate (a blade that did not move sweeps no area): no crossing.
+  const double scale = std::sqrt(Dot(dir, dir) * Dot(e1, e1) * Dot(e2, e2));
+  if (!(std::fabs(det) > 1e-12 * scale)) return false;
+  const double inv = 1.0 / det;
+  Sub(p, a, s);
+  const double u = inv * Dot(s, h);
+  if (u < 0 || u > 1) return false;
+  Cross(s, e1, qv);
+  const double v = inv * Dot(dir, qv);
+  if (v < 0 || u + v > 1) return false;
+  const double t = inv * Dot(e2, qv);
+  return t >= 0 && t <= 1;
+}
+
+bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3], const double b0[3],
+                         const double a1[3], const double b1[3]) {
+  return SegmentCrossesTriangle(p, q, a0, b0, b1) || SegmentCrossesTriangle(p, q, a0, b1, a1);
+}
+
+namespace internal {
+namespace {
+
+bool ValidCommand(const ToolCommand& c) {
+  if (!Finite3(c.pos)) return false;
+  if (c.kind == ToolKind::kScalpel) return Finite3(c.blade);
+  return std::isfinite(c.radius) && c.radius > 0 && std::isfinite(c.stiffness) && c.stiffness >= 0;
+}
+
+// Elements crossing the quad a blade swept from (a0, b0) to (a1, b1) become pending cuts.
+// Candidates: elements of atoms near the sweep (hash) or, in full mode, every element.
+int32_t DetectCuts(const Model& m, const State& s, Workspace& ws, const double* a0, const double* b0,
+                   const double* a1, const double* b1) {
+  int32_t cut = 0;
+  auto test = [&](int32_t e) {
+    if (ws.elem_cut[e]) return;
+    double p[3], q[3];
+    for (int c = 0; c < 3; ++c) {
+      p[c] = s.atom_pos[3 * m.elem_atoms[2 * e] + c];
+      q[c] = s.atom_pos[3 * m.elem_atoms[2 * e + 1] + c];
+    }
+    if (!SegmentCrossesSweep(p, q, a0, b0, a1, b1)) return;
+    ws.elem_cut[e] = 1;
+    ws.pending_cuts[ws.num_pending_cuts++] = e;
+    ++cut;
+  };
+  if (ws.options.full) {
+    for (int32_t e = 0; e < m.num_elems; ++e) test(e);
+    return cut;
+  }
+  // Each element is tested once: elem_mark + the (still unused) ws.elems list undo the marks.
+  double lo[3], hi[3];
+  for (int c = 0; c < 3; ++c) {
+    lo[c] = std::min({a0[c], b0[c], a1[c], b1[c]}) - ws.cut_reach;
+    hi[c] = std::max({a0[c], b0[c], a1[c], b1[c]}) + ws.cut_reach;
+  }
+  int32_t num_seen = 0;
+  ForEachAtomInBox(ws.hash, lo, hi, [&](int32_t a) {
+    const int32_t adr = m.atom_elem_adr[a];
+    for (int32_t j = 0; j < m.atom_elem_num[a]; ++j) {
+      const int32_t e = m.atom_elem[adr + j];
+      if (ws.elem_mark[e]) continue;
+      ws.elem_mark[e] = 1;
+      ws.elems[num_seen++] = e;
+      test(e);
+    }
+  });
+  for (int32_t i = 0; i < num_seen; ++i) ws.elem_mark[ws.elems[i]] = 0;
+  return cut;
+}
+
+}  // namespace
+
+void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& input, StepReport* report) {
+  const int32_t num_tools = std::clamp(input.num_tools, 0, kMaxTools);
+  ws.num_tools = num_tools;
+  report->num_tools = num_tools;
+  for (int32_t t = 0; t < kMaxTools; ++t) {
+    ToolState& ts = s.tools[t];
+    ActiveTool& at = ws.tools[t];
+    at = ActiveTool{};
+    const ToolCommand* cmd = t < num_tools ? &input.tools[t] : nullptr;
+    // An unused slot forgets its tool (and lets go of anything it held).
+    if (cmd == nullptr || cmd->kind == ToolKind::kNone) {
+      ts = ToolState{};
+      continue;
+    }
+    // Valid input becomes the held pose; invalid input falls back to it (or to nothing).
+    const bool had_scalpel = ts.has_pos && ts.kind == static_cast<uint8_t>(ToolKind::kScalpel);
+    const double prev_base[3] = {ts.pos[0], ts.pos[1], ts.pos[2]};
+    const double prev_tip[3] = {ts.blade_tip[0], ts.blade_tip[1], ts.blade_tip[2]};
+    if (ValidCommand(*cmd)) {
+      for (int c = 0; c < 3; ++c) ts.pos[c] = cmd->pos[c], ts.blade_tip[c] = cmd->pos[c] + cmd->blade[c];
+      ts.radius = cmd->radius;
+      ts.stiffness = cmd->stiffness;
+      if (ts.kind != static_cast<uint8_t>(cmd->kind)) ts.grasp_atom = -1;
+      ts.kind = static_cast<uint8_t>(cmd->kind);
+      ts.has_pos = 1;
+    } else {
+      ++s.warnings.bad_tool_input;
+      report->tools[t].input_held = true;
+      if (!ts.has_pos || ts.kind != static_cast<uint8_t>(cmd->kind)) continue;
+    }
+    at.kind = cmd->kind;
+    at.law = cmd->law;
+    at.closed = report->tools[t].input_held ? ts.closed != 0 : cmd->closed;
+    for (int c = 0; c < 3; ++c) at.c[c] = ts.pos[c], at.blade_tip[c] = ts.blade_tip[c];
+    at.r = ts.radius;
+    at.k = ts.stiffness;
+    at.grasp_atom = ts.grasp_atom;
+    at.grasp_leq = ts.grasp_leq;
+    at.grasp_k = ts.grasp_k;
+    // Scalpel: the quad swept since the last tick (thesis 3.2.6: slicing removes elements).
+    if (at.kind == ToolKind::kScalpel && had_scalpel) {
+      report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.c, at.blade_tip);
+    }
+  }
+}
+
+void UpdateGrasps(const Model& m, State& s, Workspace& ws, StepReport* report) {
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    ActiveTool& at = ws.tools[t];
+    ToolState& ts = s.tools[t];
+    if (at.kind != ToolKind::kTweezers) continue;
+    const bool closed = at.closed;
+    // Opening deletes the grasp element (thesis 6.1.3).
+    if (!closed) {
+      ts.grasp_atom = at.grasp_atom = -1;
+    } else if (!ts.closed && at.grasp_atom < 0) {
+      // Closing while in contact: the nearest free contact atom to the MIO centre.
+      int32_t best = -1;
+      double best_d2 = at.r * at.r;
+      for (int32_t i = 0; i < ws.num_candidates; ++i) {
+        const int32_t a = ws.candidates[i];
+        if (m.atom_fixed[a]) continue;
+        double d2 = 0;
+        for (int c = 0; c < 3; ++c) d2 += (s.atom_pos[3 * a + c] - at.c[c]) * (s.atom_pos[3 * a + c] - at.c[c]);
+        if (d2 < best_d2) best_d2 = d2, best = a;
+      }
+      if (best >= 0) {
+        ts.grasp_atom = at.grasp_atom = best;
+        ts.grasp_leq = at.grasp_leq = std::sqrt(best_d2);
+        ts.grasp_k = at.grasp_k = at.k;
+      }
+    }
+    ts.closed = closed;
+    report->tools[t].grasp_atom = at.grasp_atom;
+  }
+}
+
+}  // namespace internal
+}  // namespace idms

@@ -1,0 +1,248 @@
+// idms-sim run: an offline scripted interaction (thesis chapter 6) on a model, a CSV row per
+// tick, an optional force/position plot and a JSON summary.
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "command.h"
+#include "idms/sim/edit.h"
+#include "idms/sim/interaction_script.h"
+#include "idms/sim/model_io.h"
+#include "idms/sim/step.h"
+#include "idms/sim/workspace.h"
+#include "plot.h"
+
+namespace idms::tool {
+namespace {
+
+struct RunArgs {
+  std::string model, script = "palpate", integrator = "euler", tool, csv, plot, fit_plot;
+  double dt = 1e-3, local_radius = 2.25, lambda = 1.0;
+  bool full = false, json = false;
+};
+
+// "sphere:r=1.5,k=400,law=thesis" or "tweezers:..." -> ToolCommand.
+bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
+  const size_t colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon);
+  if (kind == "sphere") {
+    tool->kind = ToolKind::kSphere;
+  } else if (kind == "tweezers") {
+    tool->kind = ToolKind::kTweezers;
+  } else {
+    *error = "--tool '" + spec + "': expected sphere:... or tweezers:...";
+    return false;
+  }
+  std::stringstream in(colon == std::string::npos ? "" : spec.substr(colon + 1));
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    const size_t eq = item.find('=');
+    const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
+    char* end = nullptr;
+    const double number = std::strtod(value.c_str(), &end);
+    const bool numeric = !value.empty() && *end == '\0' && std::isfinite(number) && number > 0;
+    if (key == "r" && numeric) {
+      tool->radius = number;
+    } else if (key == "k" && numeric) {
+      tool->stiffness = number;
+    } else if (key == "law" && (value == "thesis" || value == "linear")) {
+      tool->law = value == "thesis" ? ContactLaw::kThesis : ContactLaw::kLinear;
+    } else {
+      *error = "--tool '" + spec + "': bad item '" + item + "' (expected r=POSITIVE, k=POSITIVE, law=thesis|linear)";
+      return false;
+    }
+  }
+  return true;
+}
+
+bool ParseIntegrator(const std::string& name, Integrator* out) {
+  static constexpr std::pair<const char*, Integrator> kNames[] = {{"euler", Integrator::kExplicitEuler},
+                                                                  {"symplectic", Integrator::kSymplecticEuler},
+                                                                  {"rk4", Integrator::kRk4},
+                                                                  {"implicit", Integrator::kImplicitEuler}};
+  for (const auto& [n, i] : kNames) {
+    if (name == n) return *out = i, true;
+  }
+  return false;
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+// The thesis's figures 6-2 to 6-8: position (top) and force (bottom) histories.
+void Plot(const RunArgs& a, const std::string& title) {
+  PlotSpec spec;
+  spec.title = title;
+  spec.x_label = "t (s)";
+  spec.y_label = "MIO position (model units) / force (N)";
+  spec.width_px = 1000, spec.height_px = 700;
+  spec.key = "outside right";
+  const char* columns[][2] = {{"x", "x"}, {"y", "y"}, {"z", "z"}, {"fx", "f_x"}, {"fy", "f_y"}, {"fz", "f_z"}};
+  for (const auto& c : columns) {
+    spec.series.push_back({.title = c[1], .csv_path = a.csv, .x_column = "t", .y_column = c[0],
+                           .style = "lines", .options = c[0][0] == 'f' ? "lw 2" : "dt 2"});
+  }
+  std::string error;
+  if (!PlotPng(spec, a.plot, &error)) Fail("run", "--plot: " + error);
+}
+
+// Thesis figure 6-3: f_z against z while the MIO presses in, and its least-squares line.
+struct StiffnessFit {
+  double slope = 0, intercept = 0, r2 = 0;  // f_z = slope * z + intercept (slope < 0 when pressing)
+  int64_t points = 0;
+};
+
+StiffnessFit FitStiffness(const std::vector<std::array<double, 2>>& zf) {
+  StiffnessFit fit;
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0;
+  for (const auto& [z, f] : zf) sx += z, sy += f, sxx += z * z, sxy += z * f, syy += f * f;
+  const double n = static_cast<double>(zf.size());
+  const double den = n * sxx - sx * sx;
+  if (zf.size() < 2 || den == 0) return fit;
+  fit.points = static_cast<int64_t>(zf.size());
+  fit.slope = (n * sxy - sx * sy) / den;
+  fit.intercept = (sy - fit.slope * sx) / n;
+  const double ss_tot = syy - sy * sy / n;
+  double ss_res = 0;
+  for (const auto& [z, f] : zf) ss_res += std::pow(f - (fit.slope * z + fit.intercept), 2);
+  fit.r2 = ss_tot > 0 ? 1 - ss_res / ss_tot : 1;
+  return fit;
+}
+
+void PlotFit(const RunArgs& a, const std::vector<std::array<double, 2>>& zf, const StiffnessFit& fit) {
+  PlotSpec spec;
+  spec.title = "Interaction stiffness normal to the surface (thesis fig. 6-3): k = " + std::to_string(-fit.slope) +
+               " N/unit, R^2 = " + std::to_string(fit.r2);
+  spec.x_label = "MIO z (model units)";
+  spec.y_label = "f_z (N)";
+  spec.key = "top right";
+  spec.series.push_back({.title = "measured", .points = zf, .style = "points", .options = "pt 7 ps 0.3"});
+  const double z0 = zf.front()[0], z1 = zf.back()[0];
+  spec.series.push_back({.title = "least-squares fit",
+                         .points = {{z0, fit.slope * z0 + fit.intercept}, {z1, fit.slope * z1 + fit.intercept}},
+                         .style = "lines", .options = "lw 2"});
+  std::string error;
+  if (!PlotPng(spec, a.fit_plot, &error)) Fail("run", "--fit-plot: " + error);
+}
+
+void Run(const RunArgs& a) {
+  // Model, script, tool, integrator.
+  Model model;
+  LoadError load_error;
+  std::string fem, plg;
+  ModelPaths(a.model, &fem, &plg);
+  if (!LoadModel(fem, plg, {}, &model, &load_error)) Fail("run", load_error.ToString());
+  Script script;
+  if (!ParseScriptName(a.script, &script)) Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast or pluck");
+  ToolCommand tool;
+  tool.kind = script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
+  std::string error;
+  if (!a.tool.empty() && !ParseTool(a.tool, &tool, &error)) Fail("run", error);
+  StepOptions options;
+  if (!ParseIntegrator(a.integrator, &options.integrator)) Fail("run", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
+  if (!(a.dt > 0 && a.dt <= 0.1)) Fail("run", "--dt: expected 0 < dt <= 0.1 s");
+  options.dt_s = a.dt;
+  options.full = a.full;
+  options.local_radius = a.local_radius;
+  options.lambda = a.lambda;
+
+  // Step through the script, a CSV row per tick.
+  State state = MakeState(model);
+  Workspace workspace = MakeWorkspace(model, options);
+  const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
+  const int64_t ticks = std::llround(ScriptDuration(script) / a.dt);
+  std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
+  if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
+  if (csv) std::fputs("t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us\n", csv);
+  ToolInput input;
+  input.num_tools = 1;
+  std::vector<double> compute_us;
+  compute_us.reserve(ticks);
+  double max_force = 0, max_fz = 0, onset_z = NAN, last_z = INFINITY;
+  std::vector<std::array<double, 2>> loading;  // (z, f_z) while pressing in, in contact
+  int64_t fallbacks = 0;
+  for (int64_t n = 0; n < ticks; ++n) {
+    const ScriptSample sample = SampleScript(script, geometry, (n + 1) * a.dt);
+    tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
+    tool.closed = sample.closed;
+    input.tools[0] = tool;
+    const auto start = std::chrono::steady_clock::now();
+    const StepReport report = Step(model, state, workspace, input);
+    if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
+    const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - start).count();
+    compute_us.push_back(us);
+    const double* f = report.tools[0].force;
+    max_force = std::max(max_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+    max_fz = std::max(max_fz, f[2]);
+    if (std::isnan(onset_z) && std::abs(f[2]) > 1e-3) onset_z = tool.pos[2];
+    if (f[2] > 1e-3 && tool.pos[2] < last_z - 1e-12) loading.push_back({tool.pos[2], f[2]});
+    last_z = tool.pos[2];
+    fallbacks += report.fallback;
+    if (csv) {
+      std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f\n", state.time_s, tool.pos[0], tool.pos[1],
+                   tool.pos[2], f[0], f[1], f[2], report.active_atoms, report.substeps, us);
+    }
+  }
+  if (csv) std::fclose(csv);
+  if (!a.plot.empty()) {
+    if (a.csv.empty()) Fail("run", "--plot needs --csv (the plot is drawn from it)");
+    Plot(a, model.name + ": " + a.script + " (" + a.integrator + ", dt " + std::to_string(a.dt) + " s)");
+  }
+
+  // Summary.
+  const StiffnessFit fit = FitStiffness(loading);
+  if (!a.fit_plot.empty()) {
+    if (fit.points < 2) Fail("run", "--fit-plot: the tool never pressed into the surface");
+    PlotFit(a, loading, fit);
+  }
+  const nlohmann::json summary = {
+      {"stiffness_fit", {{"k", -fit.slope}, {"intercept", fit.intercept}, {"r2", fit.r2}, {"points", fit.points}}},
+      {"ticks", ticks},
+      {"max_force", max_force},
+      {"max_fz", max_fz},
+      {"onset_z", std::isnan(onset_z) ? nlohmann::json(nullptr) : nlohmann::json(onset_z)},
+      {"warnings", TotalWarnings(state.warnings)},
+      {"fallbacks", fallbacks},
+      {"compute_us", {{"p50", Percentile(compute_us, 0.5)}, {"p99", Percentile(compute_us, 0.99)},
+                      {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};
+  if (a.json) {
+    PrintJson(summary);
+  } else {
+    std::printf("%s on %s: %lld ticks, max |f| %.4g N, max f_z %.4g N, onset z %.4g, %lld warnings, %lld fallbacks, "
+                "compute p50 %.2f us p99 %.2f us\n",
+                a.script.c_str(), model.name.c_str(), static_cast<long long>(ticks), max_force, max_fz, onset_z,
+                static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
+                summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
+  }
+}
+
+void Setup(CLI::App& app) {
+  auto* cmd = app.add_subcommand("run", "Run a scripted thesis interaction offline (thesis ch. 6)");
+  static RunArgs a;
+  cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
+  cmd->add_option("--script", a.script, "palpate | stroke-slow | stroke-fast | pluck")->capture_default_str();
+  cmd->add_option("--integrator", a.integrator, "euler | symplectic | rk4 | implicit")->capture_default_str();
+  cmd->add_option("--dt", a.dt, "Time step T, s")->capture_default_str();
+  auto* radius = cmd->add_option("--local-radius", a.local_radius, "Haptic window radius r_l")->capture_default_str();
+  cmd->add_flag("--full", a.full, "Simulate every atom (local simulation off)")->excludes(radius);
+  cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
+  cmd->add_option("--tool", a.tool, "sphere:r=1.5,k=400[,law=thesis|linear] or tweezers:... (pluck)");
+  cmd->add_option("--csv", a.csv, "Write t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us per tick");
+  cmd->add_option("--plot", a.plot, "Write a PNG of the position and force histories (needs --csv)");
+  cmd->add_option("--fit-plot", a.fit_plot, "Write a PNG of f_z against z while pressing, with its fit (fig. 6-3)");
+  cmd->add_flag("--json", a.json, "Print the summary as one JSON object");
+  cmd->callback([] { Run(a); });
+}
+
+IDMS_SIM_COMMAND(40, Setup);
+
+}  // namespace
+}  // namespace idms::tool

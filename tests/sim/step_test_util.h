@@ -1,0 +1,60 @@
+// Helpers shared by the step, tool and stability tests: tiny hand-built models, tool inputs,
+// and a hash of a State's bits for determinism checks.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "idms/sim/model.h"
+#include "idms/sim/state.h"
+#include "idms/sim/tool.h"
+
+namespace idms::test {
+
+// Atom 0 fixed at the origin, atom 1 free at (leq, 0, 0), one element between them.
+inline Model OneSpring(double k, double b, double mass, double leq = 1.0) {
+  Model m;
+  m.name = "spring";
+  m.atom_pos_eq = {0, 0, 0, leq, 0, 0};
+  m.atom_mass = {mass, mass};
+  m.atom_fixed = {1, 0};
+  m.atom_external = {0, 1};
+  m.elem_atoms = {0, 1};
+  m.elem_k = {k};
+  m.elem_b = {b};
+  FinalizeModel(m);
+  return m;
+}
+
+inline ToolInput SphereAt(double x, double y, double z, double r = 1.5, double k = 400,
+                          ContactLaw law = ContactLaw::kThesis) {
+  ToolInput in;
+  in.num_tools = 1;
+  ToolCommand& c = in.tools[0];
+  c.kind = ToolKind::kSphere;
+  c.pos[0] = x, c.pos[1] = y, c.pos[2] = z;
+  c.radius = r;
+  c.stiffness = k;
+  c.law = law;
+  return in;
+}
+
+// FNV-1a over the bits of everything a step evolves.
+inline uint64_t HashState(const State& s) {
+  uint64_t h = 1469598103934665603ull;
+  auto mix = [&h](const void* data, size_t bytes) {
+    const unsigned char* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < bytes; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  };
+  mix(s.atom_pos.data(), s.atom_pos.size() * sizeof(Real));
+  mix(s.atom_vel.data(), s.atom_vel.size() * sizeof(Real));
+  mix(s.elem_len.data(), s.elem_len.size() * sizeof(Real));
+  mix(s.elem_rate.data(), s.elem_rate.size() * sizeof(Real));
+  mix(s.elem_stamp.data(), s.elem_stamp.size() * sizeof(int64_t));
+  mix(&s.tick, sizeof(s.tick));
+  mix(&s.time_s, sizeof(s.time_s));
+  for (const ToolState& t : s.tools) mix(t.force_out, sizeof(t.force_out)), mix(&t.grasp_atom, sizeof(t.grasp_atom));
+  return h;
+}
+
+}  // namespace idms::test
