@@ -1,0 +1,142 @@
+// Scene files: the shipped scenes load; syntax errors and bad values are reported with
+// FILE:LINE:COL and the field; defaults fill what a scene leaves out.
+#include "idms/protocol/scene.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+namespace idms {
+namespace {
+
+constexpr const char* kMinimal = R"(model: "hex_4x5_home"
+tools {
+  kind: KIND_SPHERE
+  radius: 1.5
+  stiffness: 400
+}
+)";
+
+std::string LoadError(const std::string& text) {
+  v1::Scene scene;
+  scene.set_model("untouched");
+  std::string error;
+  EXPECT_FALSE(LoadSceneText(text, "test.scene", &scene, &error));
+  EXPECT_EQ(scene.model(), "untouched") << "scene changed on failure";
+  return error;
+}
+
+TEST(Scene, ShippedScenesLoad) {
+  const std::filesystem::path dir = std::filesystem::path(IDMS_SOURCE_DIR) / "models";
+  for (const char* name : {"palpate", "stroke-slow", "stroke-fast", "pluck"}) {
+    v1::Scene scene;
+    std::string error;
+    ASSERT_TRUE(LoadScene((dir / (std::string(name) + ".scene")).string(), &scene, &error)) << error;
+    EXPECT_EQ(scene.model(), "hex_4x5_home");
+    ASSERT_EQ(scene.tools_size(), 1);
+    EXPECT_EQ(scene.tools(0).radius(), 1.5);
+    EXPECT_EQ(scene.tools(0).stiffness(), 400);
+    EXPECT_EQ(scene.tools(0).local_radius(), 2.25);
+    EXPECT_EQ(scene.dt_s(), 0.001);
+    EXPECT_EQ(scene.tools(0).kind(), std::string(name) == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
+  }
+}
+
+TEST(Scene, DefaultsFillUnsetFields) {
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(kMinimal, "minimal.scene", &scene, &error)) << error;
+  EXPECT_EQ(scene.dt_s(), 0.001);
+  EXPECT_EQ(scene.stream_rate_hz(), 60);
+  EXPECT_EQ(scene.quant_step(), 1e-4);
+  EXPECT_EQ(scene.keyframe_interval_s(), 5);
+  EXPECT_EQ(scene.sample_batch(), 20u);
+  EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_EXPLICIT_EULER);
+  EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_LINEAR);
+  EXPECT_EQ(scene.tools(0).local_radius(), 2.25);
+  EXPECT_EQ(scene.device().scale(), 1);
+  EXPECT_EQ(scene.device().max_force(), 10);
+  EXPECT_EQ(scene.device().max_rate_hz(), 1000);
+  EXPECT_FALSE(scene.recording());
+}
+
+TEST(Scene, SyntaxErrorsHaveLineAndColumn) {
+  EXPECT_EQ(LoadError("model: \"x\"\ntools {\n  radius: 1.5\n  colour: 3\n}\n"),
+            "test.scene:4:3: Message type \"idms.v1.Tool\" has no field named \"colour\".");
+  const std::string e1 = LoadError("model: \"x\"\ntools {\n  radius: abc\n}\n");
+  EXPECT_EQ(e1.rfind("test.scene:3:11: ", 0), 0u) << e1;
+  const std::string e2 = LoadError("model: \"x\"\ntools {\n  kind: KIND_CUBE\n}\n");
+  EXPECT_EQ(e2.rfind("test.scene:3:9: ", 0), 0u) << e2;
+  const std::string e5 = LoadError("model: \"x\"\ntools {\n\tkind: KIND_CUBE }\n");
+  EXPECT_EQ(e5.rfind("test.scene:3:15: ", 0), 0u) << e5;
+  EXPECT_NE(e2.find("KIND_CUBE"), std::string::npos) << e2;
+  const std::string e3 = LoadError("model: \"x\"\ntools {\n  radius: 1\n");
+  EXPECT_EQ(e3.rfind("test.scene:4:", 0), 0u) << e3;
+  const std::string e4 = LoadError("model: \"x\"\nmodel: \"y\"\n");
+  EXPECT_EQ(e4.rfind("test.scene:2:", 0), 0u) << e4;
+}
+
+TEST(Scene, BadValuesNameTheFieldAndWhere) {
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: -1\n"
+                      "  stiffness: 400\n}\n"),
+            "test.scene:4:3: tools[0].radius: must be in (0, inf), got -1");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "dt_s: 0\n"), "test.scene:7:1: dt_s: must be in (0, 0.1], got 0");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "device {\n  max_force: -2\n}\n"),
+            "test.scene:8:3: device.max_force: must be in (0, inf), got -2");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "stream_rate_hz: 5000\n"),
+            "test.scene:7:1: stream_rate_hz: must be in (0, 1000], got 5000");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "gravity { z: nan }\n"), "test.scene:7:1: gravity: must be finite");
+  // A missing field is located at its parent.
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n}\n"),
+            "test.scene:2:1: tools[0].stiffness: required (force / length, > 0)");
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  radius: 1\n  stiffness: 1\n}\n"),
+            "test.scene:2:1: tools[0].kind: set kind: KIND_SPHERE, KIND_TWEEZERS or KIND_SCALPEL");
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 2\n"
+                      "  stiffness: 1\n  local_radius: 1\n}\n"),
+            "test.scene:6:3: tools[0].local_radius: must be >= radius (2) so that contact atoms "
+            "are simulated, got 1");
+  // Whole-scene problems have no position.
+  EXPECT_EQ(LoadError("tools {\n  kind: KIND_SPHERE\n  radius: 1\n  stiffness: 1\n}\n"),
+            "test.scene: model: set model (a library NAME or NAME@VERSION) or model_file "
+            "(a .fem/.plg prefix)");
+  EXPECT_EQ(LoadError("model: \"hex\"\n"), "test.scene: tools: at least one tool is required");
+  EXPECT_EQ(LoadError("model: \"../etc\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n"
+                      "  stiffness: 1\n}\n")
+                .rfind("test.scene:1:1: model: expected NAME or NAME@VERSION", 0),
+            0u);
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "model_file: \"models/hex\"\n"),
+            "test.scene:7:1: model_file: set only one of model and model_file");
+}
+
+TEST(Scene, ModelNamesWithVersions) {
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(kMinimal, "s", &scene, &error)) << error;
+  scene.set_model("hex_4x5_home@3");
+  EXPECT_TRUE(ValidateScene(scene, &error)) << error;
+  scene.set_model("hex@");
+  EXPECT_FALSE(ValidateScene(scene, &error));
+  EXPECT_EQ(error.rfind("model: ", 0), 0u) << error;
+  scene.set_model("a b");
+  EXPECT_FALSE(ValidateScene(scene, &error));
+}
+
+TEST(Scene, MissingFileIsAnError) {
+  v1::Scene scene;
+  std::string error;
+  EXPECT_FALSE(LoadScene("/nonexistent/x.scene", &scene, &error));
+  EXPECT_NE(error.find("/nonexistent/x.scene: cannot open"), std::string::npos) << error;
+}
+
+TEST(Scene, ParseWithoutValidation) {
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(ParseSceneText("dt_s: -1\n", "s", &scene, &error)) << error;
+  EXPECT_EQ(scene.dt_s(), -1);
+  EXPECT_FALSE(ValidateScene(scene, &error));
+  EXPECT_NE(error.find("model"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace idms
