@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs dependencies, builds, and runs the demo of what exists today: the thesis's hex
-# fragment (figure 3-1) is generated, validated and compared with the shipped model library.
+# fragment (figure 3-1) is generated, validated and compared with the shipped model library,
+# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,3 +24,11 @@ done
 echo "== 4. a malformed model is rejected with FILE:LINE:COL"
 sed 's/^0.5 0 0 0.002 1001 2001$/0.5 0 nan 0.002 1001 2001/' models/hex_4x5_home.fem > "$out/broken.fem"
 "$bin/idms-sim" validate "$out/broken.fem" || true
+echo "== 5. the thesis's interactions offline (figures 6-2, 6-3, 6-5, 6-6, 6-8)"
+for script in palpate stroke-slow stroke-fast pluck; do
+  "$bin/idms-sim" run --model models/hex_4x5_home --script "$script" --csv "$out/$script.csv" --plot "$out/$script.png"
+done
+"$bin/idms-sim" run --model models/hex_4x5_home --script palpate --fit-plot "$out/palpate-fit.png" --json
+echo "== 6. the haptic window's stability (thesis 4.2) at the nominal parameters"
+"$bin/idms-sim" stability --k 15 --b 0.45 --m 0.002 --dt 0.001
+echo "plots: $out/*.png"

@@ -16,8 +16,8 @@ namespace {
 // forces, not depths: these were chosen so the hex fragment with k = 15, b = 0.2, m = 0.002 and
 // a thesis-law MIO (k = 400, r = 1.5) peaks near its figures (palpation f_z ~ 1.7 N,
 // slow stroke f_z ~ 1.3 N); docs/thesis-comparison.md shows the result.
-constexpr double kPalpateDepth = 0.045;
-constexpr double kStrokeDepth = 0.1;
+constexpr double kPalpateDepth = 0.063;
+constexpr double kStrokeDepth = 0.11;
 constexpr double kPluckDepth = 0.02;
 constexpr double kHover = 1.0;  // start and end this far above first contact
 constexpr double kLift = 0.06;  // pluck: lift this far above first contact while holding

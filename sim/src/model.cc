@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "idms/sim/check.h"
+#include "idms/sim/integrate.h"
 #include "idms/sim/stability.h"
 
 namespace idms {
@@ -106,8 +107,9 @@ ModelSummary Summarize(const Model& m) {
   for (int32_t i = 0; i < m.num_atoms; ++i) {
     if (m.atom_fixed[i]) continue;
     const AtomBound bound = GershgorinBound(m, i);
-    dt_euler = std::min(dt_euler, EulerStableDt(bound));
-    dt_symplectic = std::min(dt_symplectic, SymplecticStableDt(bound));
+    // The thesis's scheme: explicit Euler with the eq. 4.6 backward-difference rate (lambda = 1).
+    dt_euler = std::min(dt_euler, StableDt(Integrator::kExplicitEuler, bound, LengthRate::kFiltered, 1.0));
+    dt_symplectic = std::min(dt_symplectic, StableDt(Integrator::kSymplecticEuler, bound, LengthRate::kAnalytic, 1.0));
   }
   s.stable_dt_euler = dt_euler;
   s.stable_dt_symplectic = dt_symplectic;
