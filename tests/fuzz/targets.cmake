@@ -6,5 +6,7 @@ set(IDMS_FUZZ_LIBS_plg_fuzz idms_sim)
 set(IDMS_FUZZ_LIBS_obj_fuzz idms_sim)
 list(APPEND IDMS_FUZZ_TARGETS envelope_fuzz)
 set(IDMS_FUZZ_LIBS_envelope_fuzz idms_protocol)
+list(APPEND IDMS_FUZZ_TARGETS mcap_fuzz)
+set(IDMS_FUZZ_LIBS_mcap_fuzz idms_protocol)
 # Seconds each target runs inside the test suite (a longer run: scripts/fuzz.sh).
 set(IDMS_FUZZ_SECONDS 20)
