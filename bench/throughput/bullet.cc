@@ -1,6 +1,5 @@
 // Bullet's btSoftBody stepped on the same atom/element network as the idms throughput bench.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -50,12 +49,12 @@ double RunBulletSoftBody(int64_t atoms, double seconds, int reps, int64_t* links
   std::vector<double> rates;
   for (int rep = 0; rep < reps; ++rep) {
     int64_t steps = 0;
-    const auto start = std::chrono::steady_clock::now();
+    const double start = ThreadCpuSeconds();
     double elapsed = 0;
     while (elapsed < seconds) {
       world.stepSimulation(1e-3, 0, 1e-3);
       ++steps;
-      elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      elapsed = ThreadCpuSeconds() - start;
     }
     rates.push_back(static_cast<double>(body->m_links.size()) * steps / elapsed);
   }

@@ -4,18 +4,29 @@
 
 #include <cstdint>
 
+// How a run is set up.
+struct ThroughputVariant {
+  bool reorder = true;  // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
+  bool fused = true;    // full mode's fused pass (false: the general path, ws.full.enabled = false)
+};
+
 struct ThroughputResult {
   int64_t atoms = 0, elements = 0;
-  double elem_updates_per_s = 0;  // median over repetitions
-  double bytes_per_elem = 0;      // the least the step must move per element (arrays streamed once)
+  double elem_updates_per_s = 0;  // median over repetitions, thread CPU time
+  double bytes_per_elem = 0;      // what the fused pass streams per element and step (see runner.cc)
   double ns_per_step = 0;
+  bool identity = false;          // the fused pass read its element arrays without an index
 };
 
 // Steps a full (local simulation off) slab of about `atoms` atoms with symplectic Euler for at
-// least `seconds` per repetition, `reps` times; returns the median rate.
-ThroughputResult RunThroughputDouble(int64_t atoms, double seconds, int reps);
-ThroughputResult RunThroughputFloat(int64_t atoms, double seconds, int reps);
+// least `seconds` of CPU time per repetition, `reps` times; returns the median rate.
+ThroughputResult RunThroughputDouble(int64_t atoms, double seconds, int reps, ThroughputVariant variant);
+ThroughputResult RunThroughputFloat(int64_t atoms, double seconds, int reps, ThroughputVariant variant);
 
 // Bullet's btSoftBody on the same network (nodes = atoms, links = elements, one position-solver
 // iteration); elements per second. Returns 0 when the bench was built without Bullet.
 double RunBulletSoftBody(int64_t atoms, double seconds, int reps, int64_t* links);
+
+// Seconds of CPU time this thread has used (the machine is shared: a descheduled run would
+// otherwise count someone else's time).
+double ThreadCpuSeconds();

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 
+#include "idms/sim/check.h"
 #include "idms/sim/model.h"
 #include "idms/sim/tool.h"
 #include "idms/sim/workspace.h"
@@ -10,15 +11,17 @@
 
 namespace idms {
 namespace internal {
-namespace {
 
-// Eq. 4.2: gravity m g and air resistance -c m v on every active atom; clears the accumulator.
-void FieldForces(const Model& m, const State& s, Workspace& ws) {
+// Eq. 4.2: gravity m g and air resistance -c m v on every active atom, and the caller's
+// external forces when given; clears the accumulator (atom a's force at force[stride * a]).
+void FieldForces(const Model& m, const State& s, Workspace& ws, Real* force, int stride) {
   const StepOptions& o = ws.options;
   const bool gravity = o.gravity, air = o.air_damping > 0;
+  const Real* external = ws.atom_force_external.empty() ? nullptr : ws.atom_force_external.data();
+  if (external) IDMS_CHECK(static_cast<int32_t>(ws.atom_force_external.size()) == 3 * m.num_atoms);
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
-    Real* f = &ws.atom_force[3 * a];
+    Real* f = force + stride * a;
     f[0] = f[1] = f[2] = 0;
     if (gravity) {
       for (int c = 0; c < 3; ++c) f[c] += static_cast<Real>(m.atom_mass[a] * o.gravity_accel[c]);
@@ -27,12 +30,15 @@ void FieldForces(const Model& m, const State& s, Workspace& ws) {
       const Real ca = static_cast<Real>(o.air_damping * m.atom_mass[a]);
       for (int c = 0; c < 3; ++c) f[c] -= ca * s.atom_vel[3 * a + c];
     }
+    if (external) {
+      for (int c = 0; c < 3; ++c) f[c] += external[3 * a + c];
+    }
   }
 }
 
 // Thesis 5.5.1 for each sphere/tweezers MIO over the contact candidates, and the tweezers' grasp
 // element (6.1.3). The reaction, -sum, is the device force; fixed atoms push back but do not move.
-void ToolForces(const State& s, Workspace& ws) {
+void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
   const double frac = ws.options.min_distance_fraction;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     ActiveTool& at = ws.tools[t];
@@ -47,7 +53,7 @@ void ToolForces(const State& s, Workspace& ws) {
       if (!cf.touching) continue;
       for (int c = 0; c < 3; ++c) at.eval_force[c] += cf.f[c];
       if (ws.atom_mark[a]) {
-        for (int c = 0; c < 3; ++c) ws.atom_force[3 * a + c] += static_cast<Real>(cf.f[c]);
+        for (int c = 0; c < 3; ++c) force[stride * a + c] += static_cast<Real>(cf.f[c]);
       }
     }
     if (at.grasp_atom < 0) continue;
@@ -59,15 +65,17 @@ void ToolForces(const State& s, Workspace& ws) {
     const double mag = at.grasp_k * (l - at.grasp_leq) / l;
     for (int c = 0; c < 3; ++c) {
       at.eval_force[c] += mag * sv[c];
-      if (ws.atom_mark[at.grasp_atom]) ws.atom_force[3 * at.grasp_atom + c] += static_cast<Real>(mag * sv[c]);
+      if (ws.atom_mark[at.grasp_atom]) force[stride * at.grasp_atom + c] += static_cast<Real>(mag * sv[c]);
     }
   }
 }
 
+namespace {
+
 // An element whose atoms coincide has no direction (eq. 4.5 divides by 0). A zero-length element
 // (l_eq = 0) then exerts nothing, which is its limit; otherwise it pushes its atoms apart with
 // k l_eq along its rest direction, so coincident atoms separate the way the model was built.
-// The viscous term is dropped for that tick.
+// The viscous term is dropped for that tick (the eq. 4.6 filter still advances).
 void DegenerateElement(const Model& m, Workspace& ws, int32_t e, Real push) {
   if (push <= 0) return;
   const int32_t a0 = m.elem_atoms[2 * e], a1 = m.elem_atoms[2 * e + 1];
@@ -98,6 +106,20 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
                sz = pos[3 * a1 + 2] - pos[3 * a0 + 2];
     const Real l = std::sqrt(sx * sx + sy * sy + sz * sz);
     const Real k = static_cast<Real>(m.elem_k[e]), leq = static_cast<Real>(m.elem_leq[e]);
+    [[maybe_unused]] Real rate = 0;
+    if constexpr (kDamped && kFiltered) {
+      // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}; a stale filter (the
+      // element was not updated in the previous substep) restarts from rest. It advances even
+      // for a degenerate element below, so every listed element is updated every substep
+      // (what the full-mode fused pass relies on to keep one stamp for all of them).
+      const bool fresh = s.elem_stamp[e] == clock - 1;
+      const Real prev_len = fresh ? s.elem_len[e] : l;
+      const Real prev_rate = fresh ? s.elem_rate[e] : Real(0);
+      rate = lambda * (l - prev_len) * inv_t + (Real(1) - lambda) * prev_rate;
+      s.elem_len[e] = l;
+      s.elem_rate[e] = rate;
+      s.elem_stamp[e] = clock;
+    }
     if (l <= kMinLength) [[unlikely]] {
       DegenerateElement(m, ws, e, k * leq);
       continue;
@@ -106,18 +128,7 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
     // eq. 4.7: k (l - l_eq) s^, written as a multiple of s.
     Real mag = k * (Real(1) - leq * inv_l);
     if constexpr (kDamped) {
-      Real rate;
-      if constexpr (kFiltered) {
-        // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}; a stale filter (the
-        // element was not updated in the previous substep) restarts from rest.
-        const bool fresh = s.elem_stamp[e] == clock - 1;
-        const Real prev_len = fresh ? s.elem_len[e] : l;
-        const Real prev_rate = fresh ? s.elem_rate[e] : Real(0);
-        rate = lambda * (l - prev_len) * inv_t + (Real(1) - lambda) * prev_rate;
-        s.elem_len[e] = l;
-        s.elem_rate[e] = rate;
-        s.elem_stamp[e] = clock;
-      } else {
+      if constexpr (!kFiltered) {
         // l' = s^ . (v1 - v0): exact, and a function of (x, v) as RK4 and the Jacobian need.
         rate = ((vel[3 * a1] - vel[3 * a0]) * sx + (vel[3 * a1 + 1] - vel[3 * a0 + 1]) * sy +
                 (vel[3 * a1 + 2] - vel[3 * a0 + 2]) * sz) * inv_l;
@@ -135,8 +146,8 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
 }  // namespace
 
 void EvaluateForces(const Model& m, State& s, Workspace& ws, bool filtered, Real T) {
-  FieldForces(m, s, ws);
-  ToolForces(s, ws);
+  FieldForces(m, s, ws, ws.atom_force.data(), 3);
+  ToolForces(s, ws, ws.atom_force.data(), 3);
   const Real lambda = static_cast<Real>(ws.options.lambda);
   if (!ws.any_damping) {
     ElementForces<false, false>(m, s, ws, T, lambda);

@@ -22,7 +22,17 @@ State MakeState(const Model& model) {
   return s;
 }
 
+void FoldStampFloor(const Model& model, State& s) {
+  if (s.elem_stamp_floor == kNoStamp) return;
+  for (int32_t e = 0; e < model.num_elems; ++e) {
+    const bool free_end = !model.atom_fixed[model.elem_atoms[2 * e]] || !model.atom_fixed[model.elem_atoms[2 * e + 1]];
+    if (free_end && s.elem_stamp[e] < s.elem_stamp_floor) s.elem_stamp[e] = s.elem_stamp_floor;
+  }
+  s.elem_stamp_floor = kNoStamp;
+}
+
 void SyncFilterToPositions(const Model& model, State& s) {
+  s.elem_stamp_floor = kNoStamp;
   for (int32_t e = 0; e < model.num_elems; ++e) {
     const Real* p0 = &s.atom_pos[3 * model.elem_atoms[2 * e]];
     const Real* p1 = &s.atom_pos[3 * model.elem_atoms[2 * e + 1]];

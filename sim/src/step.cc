@@ -80,6 +80,7 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
 
 // Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
 double PredictStableDt(const Model& m, const Workspace& ws, Integrator integrator) {
+  if (ws.full.live) return internal::FullPredictStableDt(m, ws, integrator);
   double dt = std::numeric_limits<double>::infinity();
   const LengthRate rate = internal::UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   for (int32_t i = 0; i < ws.num_active; ++i) {
@@ -128,6 +129,11 @@ int32_t MakePlans(const Model& m, State& s, Workspace& ws, StepReport* report, P
   return 2;
 }
 
+// Whether this tick's attempts can change the eq. 4.6 filter state: only the configured scheme
+// reads it (the implicit fallback uses the analytic rate), and only when some b > 0. When not,
+// the filter arrays need no rollback copy (leave out what the scene does not need).
+bool FilterInUse(const Workspace& ws) { return ws.any_damping && internal::UsesFilter(ws.options, ws.options.integrator); }
+
 // Non-finite atoms or filter states found at a tick's start (a State that came in broken) are
 // reset to rest, so that one bad value cannot poison every later tick.
 void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
@@ -143,7 +149,9 @@ void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
     if (!ws.options.full) UpdateSpatialHash(ws.hash, a, p);
     repaired = true;
   }
-  for (int32_t i = 0; i < ws.num_elems; ++i) {
+  // The filter state only where the configured scheme reads it (an unused one stays as it is).
+  const bool filter = FilterInUse(ws);
+  for (int32_t i = 0; filter && i < ws.num_elems; ++i) {
     const int32_t e = ws.elems[i];
     if (std::isfinite(s.elem_len[e]) && std::isfinite(s.elem_rate[e])) continue;
     s.elem_len[e] = s.elem_rate[e] = 0;
@@ -159,7 +167,8 @@ void Backup(const State& s, Workspace& ws) {
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c) ws.backup_pos[3 * i + c] = s.atom_pos[3 * a + c], ws.backup_vel[3 * i + c] = s.atom_vel[3 * a + c];
   }
-  for (int32_t i = 0; i < ws.num_elems; ++i) {
+  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
+  for (int32_t i = 0; i < num_elems; ++i) {
     const int32_t e = ws.elems[i];
     ws.backup_elem_len[i] = s.elem_len[e];
     ws.backup_elem_rate[i] = s.elem_rate[e];
@@ -172,7 +181,8 @@ void Restore(State& s, const Workspace& ws, int64_t clock) {
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c) s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
   }
-  for (int32_t i = 0; i < ws.num_elems; ++i) {
+  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
+  for (int32_t i = 0; i < num_elems; ++i) {
     const int32_t e = ws.elems[i];
     s.elem_len[e] = ws.backup_elem_len[i];
     s.elem_rate[e] = ws.backup_elem_rate[i];
@@ -188,7 +198,8 @@ void Freeze(State& s, Workspace& ws, int64_t clock) {
     const int32_t a = ws.active[i];
     s.atom_vel[3 * a] = s.atom_vel[3 * a + 1] = s.atom_vel[3 * a + 2] = 0;
   }
-  for (int32_t i = 0; i < ws.num_elems; ++i) s.elem_stamp[ws.elems[i]] = std::numeric_limits<int64_t>::min();
+  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
+  for (int32_t i = 0; i < num_elems; ++i) s.elem_stamp[ws.elems[i]] = std::numeric_limits<int64_t>::min();
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
   ++s.warnings.unrecovered;
 }
@@ -224,6 +235,103 @@ void DeviceForces(State& s, const Workspace& ws, StepReport* report) {
   }
 }
 
+// Without the energy check a tick is accepted when every active atom is finite.
+bool ActiveFinite(const State& s, const Workspace& ws) {
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    for (int c = 0; c < 3; ++c) {
+      if (!std::isfinite(s.atom_pos[3 * a + c]) || !std::isfinite(s.atom_vel[3 * a + c])) return false;
+    }
+  }
+  return true;
+}
+
+// Stages 3-4 of the general path: stability plan, rollback copy, energy before (tools at their
+// new pose); integrate, check finiteness and energy, roll back and retry down the plan list;
+// every attempt failing freezes the active region.
+void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, internal::StageTimes* times) {
+  using namespace internal;
+  int64_t t0 = NowNs();
+  RepairActiveRegion(m, s, ws);
+  ToolStiffness(s, ws, report);
+  Plan plans[3];
+  const int32_t num_plans = MakePlans(m, s, ws, report, plans);
+  Backup(s, ws);
+  const int64_t clock = s.substep_clock;
+  const StabilityOptions& st = ws.options.stability;
+  // The energies cost two passes over the active region: only when the check is on.
+  const Energy before = st.energy_check ? ActiveEnergy(m, s, ws) : Energy{};
+  const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
+  const double excess_decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
+  double excess = s.energy_excess * excess_decay;
+  report->checks_ns += NowNs() - t0;
+
+  bool accepted = false;
+  for (int32_t k = 0; k < num_plans && !accepted; ++k) {
+    if (k > 0) {
+      t0 = NowNs();
+      Restore(s, ws, clock);
+      ++s.warnings.rollback;
+      report->checks_ns += NowNs() - t0;
+    }
+    IDMS_CHECK(plans[k].integrator != Integrator::kRk4 || ws.use_rk4);
+    report->cg_iterations = RunIntegrator(m, s, ws, plans[k].integrator, plans[k].substeps, times);
+    t0 = NowNs();
+    if (st.energy_check) {
+      report->energy_after = ActiveEnergy(m, s, ws).h;
+      const double gain = report->energy_after - before.h;
+      excess = std::max(0.0, s.energy_excess * excess_decay + gain);
+      accepted = gain <= tolerance && excess <= tolerance;  // false for NaN
+    } else {
+      accepted = ActiveFinite(s, ws);
+    }
+    report->attempts = k + 1;
+    report->substeps = plans[k].substeps;
+    report->integrator_used = plans[k].integrator;
+    report->fallback = plans[k].fallback;
+    report->checks_ns += NowNs() - t0;
+  }
+  t0 = NowNs();
+  s.energy_excess = accepted && std::isfinite(excess) ? excess : s.energy_excess * excess_decay;
+  if (!accepted) {
+    Freeze(s, ws, clock);
+    report->unrecovered = true;
+    report->fallback = false;
+    if (st.energy_check) report->energy_after = ActiveEnergy(m, s, ws).h;
+  }
+  report->energy_before = before.h;
+  report->checks_ns += NowNs() - t0;
+}
+
+// Stages 3-4 through full mode's fused pass: the plan's first attempt, when it is the configured
+// explicit scheme, with the rollback copy written on the way. False = not taken, or stopped at a
+// non-finite value with the State restored: the caller then runs GeneralTick, so this undoes
+// what GeneralTick does again (tool stiffness, contacts, a substep-limit warning).
+bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, internal::StageTimes* times) {
+  using namespace internal;
+  int64_t t0 = NowNs();
+  ToolStiffness(s, ws, report);
+  const int64_t substep_limit = s.warnings.substep_limit;
+  Plan plans[3];
+  MakePlans(m, s, ws, report, plans);
+  report->checks_ns += NowNs() - t0;
+  const Plan& plan = plans[0];
+  if (plan.integrator == ws.options.integrator && RunFused(m, s, ws, plan.integrator, plan.substeps, times)) {
+    t0 = NowNs();
+    s.energy_excess *= std::exp(-ws.options.dt_s / ws.options.stability.energy_memory_s);
+    report->attempts = 1;
+    report->substeps = plan.substeps;
+    report->integrator_used = plan.integrator;
+    report->checks_ns += NowNs() - t0;
+    return true;
+  }
+  ClearExtraK(ws);
+  for (ToolReport& tr : report->tools) tr.contacts = 0;
+  s.warnings.substep_limit = substep_limit;
+  report->predicted_dt_s = 0;
+  return false;
+}
+
 }  // namespace
 
 StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input) {
@@ -244,71 +352,37 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   ResolveTools(m, s, ws, input, &report);
   report.tools_ns = NowNs() - t0;
 
-  // 2. Active set (haptic window), then the tweezers, which need its contact candidates.
+  // 2. Active set (haptic window), then the tweezers, which need its contact candidates. Full
+  // mode's fused pass keeps its lists from tick to tick; every other tick builds them, after
+  // folding the fused pass's element stamp back into the State.
   t0 = NowNs();
-  BuildActiveSet(m, s, ws);
+  bool fused = FusedEligible(m, ws);
+  if (fused) {
+    EnsureFullLive(m, s, ws);
+  } else {
+    EndFullLive(ws);
+    FoldStampFloor(m, s);
+    BuildActiveSet(m, s, ws);
+  }
   report.active_set_ns = NowNs() - t0;
   t0 = NowNs();
   UpdateGrasps(m, s, ws, &report);
   report.tools_ns += NowNs() - t0;
 
-  // 3. Stability plan, rollback copy, energy before (tools at their new pose).
-  t0 = NowNs();
-  RepairActiveRegion(m, s, ws);
-  ToolStiffness(s, ws, &report);
-  Plan plans[3];
-  const int32_t num_plans = MakePlans(m, s, ws, &report, plans);
-  Backup(s, ws);
-  const int64_t clock = s.substep_clock;
-  const Energy before = ActiveEnergy(m, s, ws);
-  const double h_before = before.h;
-  const StabilityOptions& st = ws.options.stability;
-  const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
-  const double excess_decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
-  double excess = s.energy_excess * excess_decay;
-  report.checks_ns = NowNs() - t0;
-
-  // 4. Integrate; check finiteness and energy; roll back and retry down the plan list.
+  // 3-4. Plan, integrate, check, roll back and retry: fused when it can, else (or when the
+  // fused attempt met a non-finite value) the general path.
   StageTimes times;
-  bool accepted = false;
-  for (int32_t k = 0; k < num_plans && !accepted; ++k) {
-    if (k > 0) {
-      t0 = NowNs();
-      Restore(s, ws, clock);
-      ++s.warnings.rollback;
-      report.checks_ns += NowNs() - t0;
-    }
-    IDMS_CHECK(plans[k].integrator != Integrator::kRk4 || ws.use_rk4);
-    report.cg_iterations = RunIntegrator(m, s, ws, plans[k].integrator, plans[k].substeps, &times);
-    t0 = NowNs();
-    report.energy_after = ActiveEnergy(m, s, ws).h;
-    if (st.energy_check) {
-      const double gain = report.energy_after - h_before;
-      excess = std::max(0.0, s.energy_excess * excess_decay + gain);
-      accepted = gain <= tolerance && excess <= tolerance;  // false for NaN
-    } else {
-      accepted = std::isfinite(report.energy_after);
-    }
-    report.attempts = k + 1;
-    report.substeps = plans[k].substeps;
-    report.integrator_used = plans[k].integrator;
-    report.fallback = plans[k].fallback;
-    report.checks_ns += NowNs() - t0;
+  if (fused && !FusedTick(m, s, ws, &report, &times)) {
+    fused = false;
+    FoldStampFloor(m, s);
   }
-  t0 = NowNs();
-  s.energy_excess = accepted && std::isfinite(excess) ? excess : s.energy_excess * excess_decay;
-  if (!accepted) {
-    Freeze(s, ws, clock);
-    report.unrecovered = true;
-    report.fallback = false;
-    report.energy_after = ActiveEnergy(m, s, ws).h;
-  }
+  if (!fused) GeneralTick(m, s, ws, &report, &times);
   if (report.fallback) ++s.warnings.implicit_fallback;
-  report.energy_before = h_before;
   report.forces_ns = times.forces_ns;
   report.integrate_ns = times.integrate_ns;
 
   // 5. Device force.
+  t0 = NowNs();
   DeviceForces(s, ws, &report);
   report.checks_ns += NowNs() - t0;
 
@@ -321,7 +395,12 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   report.active_atoms = ws.num_active;
   report.active_elems = ws.num_elems;
   report.pending_cuts = ws.num_pending_cuts;
-  ClearTickScratch(ws);
+  if (fused) {
+    ClearExtraK(ws);  // the lists stay live for the next tick
+  } else {
+    EndFullLive(ws);
+    ClearTickScratch(ws);
+  }
   report.active_set_ns += NowNs() - t0;
 
   ++s.tick;

@@ -52,6 +52,13 @@ void ClearTickScratch(Workspace& ws);
 // lands in ws.tools[t].eval_force.
 void EvaluateForces(const Model& model, State& state, Workspace& ws, bool filtered, Real T);
 
+// forces.cc — the parts of EvaluateForces the full-mode fused pass calls on its own, into an
+// accumulator holding atom a's force at force[stride * a] (ws.atom_force: stride 3): eq. 4.2
+// field forces (and the caller's external forces) written over the active atoms' entries; tool
+// contact and grasp forces added to them.
+void FieldForces(const Model& model, const State& state, Workspace& ws, Real* force, int stride);
+void ToolForces(const State& state, Workspace& ws, Real* force, int stride);
+
 // forces.cc — energy of the active region (see StabilityOptions::energy_rel_tol).
 struct Energy {
   double h = 0;      // NaN when any active atom is non-finite
@@ -74,6 +81,29 @@ int32_t ImplicitEulerSubstep(const Model& model, State& state, Workspace& ws, Re
 
 // implicit.cc — sizes the implicit buffers (MakeWorkspace).
 void SizeImplicitBuffers(const Model& model, Workspace& ws);
+
+// full_step.cc — the full-mode fused pass (Workspace::FullPass).
+// True when this tick can take it: full mode, explicit or symplectic Euler, no energy check
+// (the check needs the energy of the whole model before and after: two more passes), no cut
+// pending, and a model with elements. Evaluated after ResolveTools.
+bool FusedEligible(const Model& model, const Workspace& ws);
+// Makes the full-mode lists live (BuildActiveSet once, then the pass's arrays), or rebuilds
+// them after a topology edit. O(atoms + elements) when it rebuilds, else O(1); no allocation.
+void EnsureFullLive(const Model& model, State& state, Workspace& ws);
+// Restores the between-steps invariant of the marks before a general-path tick.
+void EndFullLive(Workspace& ws);
+// Sizes FullPass (MakeWorkspace, full mode).
+void SizeFullPass(const Model& model, Workspace& ws);
+// The stable step of `integrator` over the free atoms with the tools' stiffness this tick, from
+// the cached tool-free minimum plus the atoms a tool stiffens: the value PredictStableDt gives.
+double FullPredictStableDt(const Model& model, const Workspace& ws, Integrator integrator);
+// `substeps` fused substeps of `integrator` (the plan's first attempt). Writes the rollback copy
+// on the way; returns false, with the State back at the tick's start, when an input or a result
+// was not finite (the general path then repairs, retries and falls back as usual).
+bool RunFused(const Model& model, State& state, Workspace& ws, Integrator integrator, int32_t substeps,
+              StageTimes* times);
+// Zeroes atom_extra_k where ToolStiffness may have set it (candidates and grasped atoms).
+void ClearExtraK(Workspace& ws);
 
 // True when the resolved eq. 4.6 mode for `integrator` is the filter.
 inline bool UsesFilter(const StepOptions& options, Integrator integrator) {

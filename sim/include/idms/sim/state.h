@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace idms {
@@ -70,6 +71,11 @@ struct State {
   std::vector<Real> elem_len;      // (num_elems), model units: l at the last update (l_{n-1})
   std::vector<Real> elem_rate;     // (num_elems), model units / s: filtered length rate
   std::vector<int64_t> elem_stamp;  // (num_elems): substep_clock at the last update
+  // Every element with a free endpoint was updated at this substep or later: its stamp is
+  // max(elem_stamp[e], elem_stamp_floor). The full-mode fused pass updates all of them and moves
+  // this floor instead of writing 16 bytes per element per substep; the other paths fold it back
+  // into elem_stamp first (FoldStampFloor). kNoStamp = none.
+  int64_t elem_stamp_floor = std::numeric_limits<int64_t>::min();
 
   // Local simulation (thesis 5.5.2): the atoms integrated last tick, in order. The buffer has
   // num_atoms entries; the first num_active are meaningful. atom_linger counts the ticks an atom
@@ -84,6 +90,12 @@ struct State {
   double energy_excess = 0;
   WarningCounters warnings;
 };
+
+inline constexpr int64_t kNoStamp = std::numeric_limits<int64_t>::min();
+
+// Folds elem_stamp_floor into elem_stamp (O(elements) when a floor is set, else nothing). The
+// floor covers the elements with a free endpoint: those the fused pass updates.
+void FoldStampFloor(const Model& model, State& state);
 
 // A model at rest: p = p_eq, v = 0, element lengths at their current (rest) value. Allocates.
 State MakeState(const Model& model);

@@ -35,7 +35,10 @@ struct StabilityOptions {
   double safety = 0.9;      // substep length = safety * predicted stable step
   int32_t max_substeps = 8;
   bool implicit_fallback = true;  // beyond max_substeps, or after a failed check: implicit Euler
-  bool energy_check = true;       // reject a tick whose active-region energy grows (see below)
+  // Reject a tick whose active-region energy grows (see below). Off: a tick is rejected only when
+  // an active atom is not finite, the two energy passes are skipped, and full mode can take the
+  // fused pass (Step).
+  bool energy_check = true;
   // A tick fails when H_after > H_before + energy_rel_tol * scale + energy_abs_tol, where H is
   // kinetic + elastic + contact + gravity energy of the active region with the tool held at its
   // new pose (so the work the tool did this tick is already in H_before) and scale is the sum of
@@ -110,13 +113,15 @@ struct StepReport {
   bool fallback = false;              // the accepted attempt used implicit Euler as a fallback
   bool unrecovered = false;           // every attempt failed; active region restored at rest
   int32_t cg_iterations = 0;          // implicit Euler: total over substeps
-  double energy_before = 0, energy_after = 0;  // active region, with the tools at their new pose
+  // Active region, with the tools at their new pose; 0 when stability.energy_check is off.
+  double energy_before = 0, energy_after = 0;
   int64_t new_warnings = 0;           // warnings counted during this tick
   int32_t pending_cuts = 0;           // elements awaiting ApplyPendingEdits
   // Stage times, ns (steady clock).
   int64_t tools_ns = 0;       // tool validation, grasp, cut detection
   int64_t active_set_ns = 0;  // hash queries, active atoms and elements, hash update
-  int64_t forces_ns = 0;      // external and element forces (all evaluations)
+  int64_t forces_ns = 0;      // external and element forces (all evaluations); full mode's fused
+                              // pass counts its whole sweep here, integration included
   int64_t integrate_ns = 0;   // state updates, implicit assembly and CG
   int64_t checks_ns = 0;      // prediction, backup, energy, rollback, device force
   int64_t total_ns = 0;
@@ -134,6 +139,11 @@ struct StepReport {
 // tools), independent of model size; full mode O(model). The first Step after MakeWorkspace,
 // or after the State was replaced (snapshot restore), refiles the spatial hash from the State:
 // O(atoms) once — call ResyncWorkspace before a real-time loop starts to keep that out of it.
+// Full mode with explicit or symplectic Euler and no energy check takes a fused pass
+// (Workspace::FullPass): forces, sums and integration in one sweep, the same bits as the general
+// path at a fraction of its memory traffic; it keeps the full-mode lists from tick to tick and
+// rebuilds them (O(atoms + elements)) after a topology edit or a tick that took the general
+// path. Renumbering the model once (reorder.h) lets it stream its arrays without an index.
 // Allocates nothing with the explicit integrators. Implicit Euler (also as the fallback)
 // allocates only when its active system outgrows every earlier one: never in full mode, and in
 // local mode only past 2048 active atoms (counted in warnings.implicit_grew).

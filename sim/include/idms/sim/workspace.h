@@ -42,6 +42,37 @@ struct ImplicitBuffers {
   std::vector<Real> atom_dv_guess;  // (num_atoms x 3): last solution per atom, CG warm start
 };
 
+// Full mode's fused pass (full_step.cc): element forces, accumulation and integration in one
+// sweep over the elements in the order the general path visits them (grouped by their lowest
+// free endpoint), so each free atom is integrated as soon as its last element is done and every
+// per-atom sum is formed in the same order: the same bits as the general path. Built from the
+// live lists (see `live`) without allocating; arrays are in walk order unless noted.
+struct FullPass {
+  // Off = every full-mode tick takes the general path (tests and benches compare the two).
+  bool enabled = true;
+  // May use the AVX2 build of its vectorised phase where the CPU has AVX2 (the same bits; off
+  // lets a test cover the baseline x86-64 code on any machine).
+  bool avx2 = true;
+  // The lists below, and ws.active / candidates / elems with their marks, hold the full-mode
+  // sets across ticks (the between-steps invariant of the marks is suspended while live).
+  bool live = false;
+  uint64_t topology_version = 0;  // model version the arrays were built for
+  bool identity = false;          // ws.elems[w] == w: element arrays need no indirection
+  // `force` of every free atom is 0 (the fused pass leaves it so for the next tick).
+  bool force_zero = false;
+  std::vector<int32_t> group_end;  // (num_atoms) by active slot: one past its last element
+  std::vector<int32_t> other;      // (num_elems) endpoint that is not the group's atom; ~id if fixed
+  std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
+  std::vector<Real> atom_mass;                 // (num_atoms) by active slot
+  // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
+  std::vector<Real> force;
+  std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
+  // Stable step of the configured integrator without tools (the minimum over free atoms), and
+  // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
+  double dt_free = 0;
+  int32_t dt_free_count = 0;
+};
+
 struct Workspace {
   // Why the options live here and not in a Step argument: the buffers below are sized for them
   // (hash cell from the local radius, RK4 and implicit scratch only when they can be used), so
@@ -66,12 +97,22 @@ struct Workspace {
 
   SpatialHash hash;  // local mode only; files every atom at its State position
 
-  // Per-atom scratch. Invariant between steps: marks 0, slots -1, extra_k 0.
+  // Per-atom scratch. Invariant between steps: marks 0, slots -1, extra_k 0 (except while
+  // full.live: then marks and slots describe every free atom).
   std::vector<uint8_t> atom_mark;    // (num_atoms), 1 = active this tick, 2 = checked by the wake pass
   std::vector<uint8_t> atom_cand;    // (num_atoms), 1 = contact candidate this tick
   std::vector<int32_t> atom_slot;    // (num_atoms), index into the active list or -1
   std::vector<double> atom_extra_k;  // (num_atoms), tool stiffness on the atom this tick
   std::vector<Real> atom_force;      // (num_atoms x 3), force units; valid for active atoms
+
+  // Optional input, not scratch: forces from outside the DSM (e.g. draping's attraction to a
+  // form, thesis 5.6.1), added to every active atom at every force evaluation of the next Step,
+  // held constant over its substeps and stages. Empty (the default, never allocated by
+  // MakeWorkspace) = none, at the cost of one branch per evaluation. When set it must hold
+  // num_atoms x 3 values (IDMS_CHECK). The energy check, stability prediction and implicit
+  // Jacobian do not see these forces: a caller doing work through them turns
+  // stability.energy_check off and keeps the tick short against their stiffness.
+  std::vector<Real> atom_force_external;  // (num_atoms x 3) or empty, force units
 
   // Lists of this tick (buffers of full size; counts say how much is used).
   std::vector<int32_t> active;      // (num_atoms) active free atoms
@@ -96,6 +137,8 @@ struct Workspace {
   std::vector<Real> rk_x0, rk_v0, rk_dx, rk_dv;  // (num_atoms x 3)
 
   ImplicitBuffers implicit;  // only when use_implicit
+
+  FullPass full;  // sized only in full mode
 
   // Surface adjacency for the Edit API: triangles of atom i are
   // atom_tri[atom_tri_adr[i] .. + atom_tri_num[i]) (holes allowed after removals).

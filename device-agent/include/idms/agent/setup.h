@@ -1,0 +1,24 @@
+// From a scene (idms.v1.Scene) to what the loop runs: step options, the tool, the registration.
+// The boundary where scene values become sim types; everything here was validated by LoadScene.
+#pragma once
+
+#include <string>
+
+#include "idms/agent/registration.h"
+#include "idms/protocol/idms.pb.h"
+#include "idms/sim/step.h"
+#include "idms/sim/tool.h"
+
+namespace idms::agent {
+
+// The scene used when --scene is not given: the thesis's settings for the named script
+// (sphere MIO r 1.5, k 400, linear law, r_l 2.25, explicit Euler at 1 ms; tweezers for pluck),
+// with defaults applied.
+v1::Scene DefaultScene(const std::string& script);
+
+// Maps a validated scene with defaults applied. Tool 0 is the one the device drives; a scene
+// with more tools is refused (one device per agent). False with a message naming the field.
+bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,
+                 std::string* error);
+
+}  // namespace idms::agent

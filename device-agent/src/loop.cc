@@ -1,0 +1,268 @@
+// The loop thread: absolute-deadline ticks of device read, DSM step and device write, with
+// samples and surface snapshots handed to the I/O thread through lock-free rings.
+#include "idms/agent/loop.h"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#include <sys/prctl.h>
+#include <time.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "idms/protocol/mesh_codec.h"
+#include "idms/sim/edit.h"
+
+namespace idms::agent {
+namespace {
+
+timespec ToTimespec(int64_t ns) {
+  timespec ts;
+  ts.tv_sec = static_cast<time_t>(ns / 1000000000);
+  ts.tv_nsec = static_cast<long>(ns % 1000000000);
+  return ts;
+}
+
+uint32_t ToMicros(int64_t ns) { return ns <= 0 ? 0u : static_cast<uint32_t>(std::min<int64_t>(ns / 1000, UINT32_MAX)); }
+
+// Touches a stack region once so page faults happen before the first tick, not during one.
+[[gnu::noinline]] void PrefaultStack() {
+  volatile unsigned char buf[256 * 1024];
+  for (size_t i = 0; i < sizeof(buf); i += 4096) buf[i] = 0;
+}
+
+}  // namespace
+
+int64_t MonotonicNs() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
+RealtimeReport SetUpRealtime(int priority) {
+  RealtimeReport r;
+  // Timer slack 1 ns: wake-ups are not coalesced with other timers.
+  r.timer_slack = prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL) == 0;
+  // Lock every page now and later, so a tick never waits for a page fault.
+  r.mlock = mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
+  if (!r.mlock) r.mlock_errno = errno;
+  // First-in-first-out real-time priority for this thread only.
+  sched_param param{};
+  param.sched_priority = priority;
+  r.fifo_errno = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+  r.fifo = r.fifo_errno == 0;
+  return r;
+}
+
+Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool, const Registration& registration,
+           Device& device, const LoopOptions& options)
+    : model_(std::move(model)),
+      step_options_(step_options),
+      registration_(registration),
+      device_(device),
+      options_(options),
+      samples_(options.sample_ring),
+      mesh_full_(options.mesh_pool + 1),
+      mesh_free_(options.mesh_pool + 1),
+      commands_(64) {
+  // Simulation buffers, and their rest copies for Reset.
+  state_ = MakeState(model_);
+  workspace_ = MakeWorkspace(model_, step_options_);
+  // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5).
+  ResyncWorkspace(model_, state_, workspace_);
+  rest_model_ = model_;
+  rest_state_ = state_;
+  rest_workspace_ = workspace_;
+  input_.tools[0] = tool;
+  input_.num_tools = 0;
+  // Timing.
+  period_ns_ = std::max<int64_t>(1, std::llround(1e9 / options_.rate_hz));
+  mesh_interval_s_ = 1.0 / options_.mesh_rate_hz;
+  // The surface pool: every buffer sized for the whole surface and topology.
+  slots_.resize(options_.mesh_pool);
+  for (size_t i = 0; i < slots_.size(); ++i) {
+    slots_[i].pos.assign(3 * static_cast<size_t>(model_.num_external), 0.0);
+    slots_[i].tri_verts.assign(3 * static_cast<size_t>(model_.num_tris), 0);
+    mesh_free_.push(static_cast<int32_t>(i));
+  }
+}
+
+void Loop::Run() {
+  // Real-time setup, said plainly when refused.
+  if (options_.realtime) {
+    rt_report_ = SetUpRealtime(options_.fifo_priority);
+    realtime_.store(rt_report_.fifo && rt_report_.mlock, std::memory_order_relaxed);
+    if (!rt_report_.fifo) {
+      std::fprintf(stderr, "idms-agent: NOT real-time: SCHED_FIFO refused (%s); the loop runs at normal priority\n",
+                   std::strerror(rt_report_.fifo_errno));
+    }
+    if (!rt_report_.mlock) {
+      std::fprintf(stderr, "idms-agent: NOT real-time: mlockall refused (%s); page faults may delay ticks\n",
+                   std::strerror(rt_report_.mlock_errno));
+    }
+    if (rt_report_.fifo && rt_report_.mlock) {
+      std::fprintf(stderr, "idms-agent: real-time: SCHED_FIFO priority %d, memory locked\n", options_.fifo_priority);
+    }
+  } else {
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+    std::fprintf(stderr, "idms-agent: NOT real-time: disabled by --no-realtime\n");
+  }
+  PrefaultStack();
+
+  // Ticks on absolute deadlines.
+  int64_t next_ns = MonotonicNs();
+  while (!stop_.load(std::memory_order_relaxed) && !device_.finished() &&
+         (options_.max_ticks == 0 || state_.tick < options_.max_ticks)) {
+    const timespec ts = ToTimespec(next_ns);
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    }
+    Tick(MonotonicNs(), next_ns + period_ns_);
+    next_ns += period_ns_;
+    // Behind schedule: skip the missed wake-ups rather than run them back to back.
+    const int64_t now_ns = MonotonicNs();
+    if (now_ns >= next_ns) next_ns += ((now_ns - next_ns) / period_ns_ + 1) * period_ns_;
+  }
+
+  // Let the device go, then publish the final surface (waiting for a buffer is fine now).
+  device_.Release();
+  const int64_t give_up_ns = MonotonicNs() + 2000000000;
+  while (!PublishMesh(true) && MonotonicNs() < give_up_ns) {
+    const timespec pause = ToTimespec(1000000);
+    nanosleep(&pause, nullptr);
+  }
+  finished_.store(true, std::memory_order_release);
+}
+
+void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
+  ApplyCommands();
+  const int64_t tick = state_.tick;
+
+  // Device read, mapped into the model frame; a device without a pose leaves the tool out.
+  DeviceReading reading;
+  device_.Read(tick, state_.time_s, &reading);
+  ToolCommand& tool = input_.tools[0];
+  if (reading.valid) {
+    registration_.DeviceToModel(reading.pos, tool.pos);
+    has_pose_ = true;
+  }
+  // A tweezers command holds until the device's own button changes.
+  if (tweezers_override_ >= 0 && reading.closed != override_button_) tweezers_override_ = -1;
+  last_button_ = reading.closed;
+  tool.closed = tweezers_override_ < 0 ? reading.closed : tweezers_override_ == 1;
+  input_.num_tools = has_pose_ ? 1 : 0;
+
+  // The DSM step; cuts found by a scalpel are applied between steps.
+  const StepReport report = Step(model_, state_, workspace_, input_);
+  if (report.pending_cuts > 0) ApplyPendingEdits(model_, state_, workspace_);
+
+  // Device write: zero without a fresh pose; the guard is the last line of defence.
+  const ToolReport& out = report.tools[0];
+  double f_model[3] = {0, 0, 0};
+  if (reading.valid && input_.num_tools > 0)
+    f_model[0] = out.force[0], f_model[1] = out.force[1], f_model[2] = out.force[2];
+  double f_device[3];
+  registration_.ForceToDevice(f_model, f_device);
+  const int fault = SanitizeDeviceForce(f_device, registration_.max_force);
+  device_.Write(tick, f_device);
+  const int64_t written_ns = MonotonicNs();
+  registration_.ForceToModel(f_device, f_model);  // what the device was actually told
+  if (fault != 0) counters_.force_faults.fetch_add(1, std::memory_order_relaxed);
+
+  // Surface snapshot at the stream rate.
+  if (state_.time_s >= next_mesh_time_s_ - 1e-9) {
+    if (!PublishMesh(false)) counters_.mesh_skipped.fetch_add(1, std::memory_order_relaxed);
+    while (next_mesh_time_s_ <= state_.time_s + 1e-9) next_mesh_time_s_ += mesh_interval_s_;
+  }
+
+  // Timing, histograms and the sample.
+  TickSample s;
+  s.tick = static_cast<uint64_t>(tick);
+  s.time_s = state_.time_s;
+  for (int i = 0; i < 3; ++i) s.tool_pos[i] = tool.pos[i], s.force[i] = f_model[i];
+  s.compute_us = ToMicros(written_ns - wake_ns);
+  s.period_us = prev_wake_ns_ < 0 ? 0 : ToMicros(wake_ns - prev_wake_ns_);
+  s.substeps = static_cast<uint32_t>(std::max(report.substeps, 0));
+  s.warnings = static_cast<uint32_t>(std::max<int64_t>(report.new_warnings, 0) + fault);
+  s.num_contacts = static_cast<uint32_t>(std::max(out.contacts, 0));
+  s.contact = out.contacts > 0;
+  s.grasp = out.grasp_atom >= 0;
+  s.overrun = MonotonicNs() > deadline_ns;
+  compute_hist_.Add(s.compute_us);
+  if (prev_wake_ns_ >= 0) period_hist_.Add(s.period_us);
+  prev_wake_ns_ = wake_ns;
+  if (s.overrun) counters_.overruns.fetch_add(1, std::memory_order_relaxed);
+  if (!samples_.push(s)) counters_.samples_lost.fetch_add(1, std::memory_order_relaxed);
+  counters_.ticks.store(static_cast<uint64_t>(state_.tick), std::memory_order_relaxed);
+}
+
+void Loop::ApplyCommands() {
+  LoopCommand command;
+  while (commands_.pop(command)) {
+    counters_.commands.fetch_add(1, std::memory_order_relaxed);
+    if (command.tool != 0) continue;  // one device drives tool 0; other slots are not simulated
+    switch (command.kind) {
+      case LoopCommand::kTweezersClose:
+        tweezers_override_ = 1, override_button_ = last_button_;
+        break;
+      case LoopCommand::kTweezersOpen:
+        tweezers_override_ = 0, override_button_ = last_button_;
+        break;
+      case LoopCommand::kTweezersDevice:
+        tweezers_override_ = -1;
+        break;
+      case LoopCommand::kReset:
+        Reset();
+        break;
+    }
+  }
+}
+
+bool Loop::PublishMesh(bool final_frame) {
+  int32_t index = -1;
+  if (!mesh_free_.pop(index)) return false;
+  MeshSlot& slot = slots_[static_cast<size_t>(index)];
+  // Positions of the external atoms, in plg vertex order.
+  GatherSurface(model_, state_.atom_pos, slot.pos);
+  // Triangles only when the topology changed since the last published frame.
+  slot.num_tris = -1;
+  if (model_.topology_version != published_topology_) {
+    slot.num_tris = model_.num_tris;
+    for (size_t i = 0; i < 3 * static_cast<size_t>(model_.num_tris); ++i) {
+      slot.tri_verts[i] = model_.atom_external_id[static_cast<size_t>(model_.tri_atoms[i])];
+    }
+    published_topology_ = model_.topology_version;
+  }
+  slot.tick = static_cast<uint64_t>(state_.tick);
+  slot.time_s = state_.time_s;
+  slot.topology_version = model_.topology_version;
+  slot.final_frame = final_frame;
+  mesh_full_.push(index);
+  return true;
+}
+
+void Loop::Reset() {
+  // Back to rest, keeping the tick count and time (samples stay consecutive).
+  const int64_t tick = state_.tick;
+  const double time_s = state_.time_s;
+  if (model_.topology_version != rest_model_.topology_version) {
+    // Cuts happened: restore the model and its workspace too, under a new topology version.
+    const uint64_t version = model_.topology_version + 1;
+    model_ = rest_model_;
+    workspace_ = rest_workspace_;
+    model_.topology_version = version;
+    workspace_.topology_version = version;
+    rest_model_.topology_version = version;
+    rest_workspace_.topology_version = version;
+  }
+  state_ = rest_state_;
+  state_.tick = tick;
+  state_.time_s = time_s;
+  ResyncWorkspace(model_, state_, workspace_);
+  tweezers_override_ = -1;
+}
+
+}  // namespace idms::agent

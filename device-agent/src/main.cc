@@ -1,0 +1,288 @@
+// idms-agent: runs the 1 kHz DSM loop next to a haptic device and reports the session to an
+// idms-server. Threads: the loop (loop.h) and this one, which runs the uplink (uplink.h).
+#include <pthread.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+#include "idms/agent/device.h"
+#include "idms/agent/loop.h"
+#include "idms/agent/model_source.h"
+#include "idms/agent/setup.h"
+#include "idms/agent/uplink.h"
+#include "idms/protocol/scene.h"
+#include "idms/sim/model_io.h"
+#include "text_internal.h"
+
+namespace idms::agent {
+namespace {
+
+constexpr int kExitConfig = 1;   // bad arguments, scene, model or device
+constexpr int kExitRefused = 2;  // the server refused the token or the session
+
+struct Args {
+  std::string server, token, model, model_file, device, scene_file, summary_json, dump_final, cache_dir;
+  std::string rotation, offset;
+  double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5;
+  int64_t backlog = 120000;
+  bool no_realtime = false;
+};
+
+int Fail(const std::string& message) {
+  std::fprintf(stderr, "idms-agent: error: %s\n", message.c_str());
+  return kExitConfig;
+}
+
+// "ws://HOST:PORT[/PATH]" -> host, port, target.
+bool ParseServer(const std::string& url, UplinkOptions* o, std::string* error) {
+  const std::string scheme = "ws://";
+  if (url.rfind("wss://", 0) == 0) {
+    *error = "--server " + url + ": wss:// (TLS) is not supported by the agent yet; use ws://";
+    return false;
+  }
+  if (url.rfind(scheme, 0) != 0) {
+    *error = "--server '" + url + "': expected ws://HOST:PORT or none";
+    return false;
+  }
+  const std::string rest = url.substr(scheme.size());
+  const size_t slash = rest.find('/');
+  const std::string authority = rest.substr(0, slash);
+  const size_t colon = authority.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == authority.size()) {
+    *error = "--server '" + url + "': expected ws://HOST:PORT (the port is required)";
+    return false;
+  }
+  o->host = authority.substr(0, colon);
+  o->port = authority.substr(colon + 1);
+  if (slash != std::string::npos && slash + 1 < rest.size()) o->target = rest.substr(slash);
+  return true;
+}
+
+void PrintSummary(const LatencySummary& period, const LatencySummary& compute, const Loop& loop, const UplinkStats& up,
+                  bool offline) {
+  std::fprintf(stderr,
+               "idms-agent: %llu ticks, %llu overruns%s\n"
+               "  period  us: p50 %u  p99 %u  p99.9 %u  max %u\n"
+               "  compute us: p50 %u  p99 %u  p99.9 %u  max %u\n",
+               static_cast<unsigned long long>(loop.counters().ticks.load()),
+               static_cast<unsigned long long>(loop.counters().overruns.load()),
+               loop.realtime() ? " (real-time)" : " (not real-time)", period.p50_us, period.p99_us, period.p999_us,
+               period.max_us, compute.p50_us, compute.p99_us, compute.p999_us, compute.max_us);
+  if (!offline) {
+    std::fprintf(stderr,
+                 "  uplink: %llu samples sent (%llu resent, %llu dropped, %llu unsent), %llu mesh frames "
+                 "(%llu keyframes), %llu reconnects%s\n",
+                 static_cast<unsigned long long>(up.samples_sent), static_cast<unsigned long long>(up.samples_resent),
+                 static_cast<unsigned long long>(up.samples_dropped),
+                 static_cast<unsigned long long>(up.samples_unsent), static_cast<unsigned long long>(up.mesh_frames),
+                 static_cast<unsigned long long>(up.keyframes), static_cast<unsigned long long>(up.reconnects),
+                 up.ended_cleanly ? ", session closed cleanly" : "");
+  }
+}
+
+nlohmann::json LatencyJson(const LatencySummary& s) {
+  return {{"p50", s.p50_us}, {"p99", s.p99_us}, {"p999", s.p999_us}, {"max", s.max_us}};
+}
+
+bool WriteSummary(const std::string& path, const LatencySummary& period, const LatencySummary& compute,
+                  const Loop& loop, const Device& device, const UplinkStats& up) {
+  const LoopCounters& c = loop.counters();
+  const nlohmann::json j = {
+      {"ticks", c.ticks.load()},
+      {"overruns", c.overruns.load()},
+      {"period_us", LatencyJson(period)},
+      {"compute_us", LatencyJson(compute)},
+      {"samples_sent", up.samples_sent},
+      {"samples_dropped", up.samples_dropped + c.samples_lost.load()},
+      {"reconnects", up.reconnects},
+      {"realtime", loop.realtime()},
+      {"samples_resent", up.samples_resent},
+      {"samples_unsent", up.samples_unsent},
+      {"mesh_frames", up.mesh_frames},
+      {"keyframes", up.keyframes},
+      {"mesh_skipped", c.mesh_skipped.load()},
+      {"force_faults", c.force_faults.load()},
+      {"commands", up.commands},
+      {"warnings", TotalWarnings(loop.state().warnings)},
+      {"device", device.name()},
+      {"device_stats",
+       {{"received", device.stats().received},
+        {"lost", device.stats().lost},
+        {"stale", device.stats().stale},
+        {"invalid", device.stats().invalid},
+        {"timeouts", device.stats().timeouts},
+        {"sent", device.stats().sent}}},
+      {"model", loop.model().name},
+      {"atoms", loop.model().num_atoms},
+      {"session_id", up.session_id},
+      {"ended_cleanly", up.ended_cleanly},
+      {"error", up.fatal_error},
+  };
+  std::ofstream out(path);
+  out << j.dump(2) << "\n";
+  return static_cast<bool>(out);
+}
+
+// The final surface (plg vertex order), full precision, for tests to compare with the mirror.
+bool DumpFinal(const std::string& path, const Loop& loop) {
+  const Model& m = loop.model();
+  const State& s = loop.state();
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) return false;
+  std::fprintf(f, "# idms-agent final surface: %d vertices, tick %lld, time %.17g s\n", m.num_external,
+               static_cast<long long>(s.tick), s.time_s);
+  for (int32_t atom : m.external_atoms) {
+    const double* p = &s.atom_pos[3 * static_cast<size_t>(atom)];
+    std::fprintf(f, "%.17g %.17g %.17g\n", p[0], p[1], p[2]);
+  }
+  return std::fclose(f) == 0;
+}
+
+int Main(int argc, char** argv) {
+  // Command line.
+  Args a;
+  CLI::App app{"idms-agent: the 1 kHz DSM loop next to a haptic device, reporting to an idms-server"};
+  app.add_option("--server", a.server, "ws://HOST:PORT of the idms-server, or 'none' to run offline")->required();
+  app.add_option("--token", a.token, "Agent token (sent as Authorization: Bearer)");
+  auto* model_opt = app.add_option("--model", a.model, "Library model NAME[@VERSION], downloaded from the server");
+  auto* file_opt = app.add_option("--model-file", a.model_file, "Local model: PREFIX of PREFIX.fem + PREFIX.plg");
+  model_opt->excludes(file_opt);
+  app.add_option("--device", a.device,
+                 "scripted:palpate|stroke-slow|stroke-fast|pluck, human:SCRIPT[,mass=,k=,zeta=], "
+                 "udp:PORT[,bind=,timeout_ms=], replay:FILE.mcap")
+      ->required();
+  app.add_option("--scene", a.scene_file,
+                 "Scene file (idms.v1.Scene text); default: the thesis settings for the script");
+  app.add_option("--duration", a.duration_s, "Seconds to run; 0 = until SIGINT/SIGTERM")->check(CLI::NonNegativeNumber);
+  app.add_option("--rate", a.rate_hz, "Loop rate, Hz (default: the scene's device.max_rate_hz, 1000)")
+      ->check(CLI::Range(1.0, 10000.0));
+  app.add_option("--summary-json", a.summary_json, "Write the run's figures here at exit");
+  app.add_option("--dump-final", a.dump_final, "Write the final surface positions here at exit (text)");
+  app.add_option("--cache-dir", a.cache_dir, "Model cache directory (default $IDMS_CACHE_DIR, $XDG_CACHE_HOME/idms)");
+  app.add_option("--backlog", a.backlog, "Samples kept for resending after a reconnect")
+      ->check(CLI::Range(int64_t{1}, int64_t{100000000}));
+  app.add_option("--flush-timeout", a.flush_timeout_s, "Seconds allowed at exit to deliver the rest")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--scale", a.scale, "Registration: model units per device unit (overrides the scene)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--rotation", a.rotation,
+                 "Registration: quat:W,X,Y,Z | axis-angle:X,Y,Z,DEG | rpy:R,P,Y (overrides the scene)");
+  app.add_option("--offset", a.offset, "Registration: X,Y,Z model units (overrides the scene)");
+  app.add_option("--max-force", a.max_force, "Device force clamp, device units (overrides the scene)")
+      ->check(CLI::PositiveNumber);
+  app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO and mlockall");
+  CLI11_PARSE(app, argc, argv);
+
+  const bool offline = a.server == "none";
+  UplinkOptions up;
+  std::string error;
+  if (!offline && !ParseServer(a.server, &up, &error)) return Fail(error);
+  if (!offline && a.token.empty()) return Fail("--token is required with a server (or use --server none)");
+
+  // Scene: the file, or the thesis defaults for the device's script; the command line wins.
+  v1::Scene scene;
+  if (!a.scene_file.empty()) {
+    if (!LoadScene(a.scene_file, &scene, &error)) return Fail(error);
+  } else {
+    std::string script = "palpate";
+    DeviceScriptName(a.device, &script);
+    scene = DefaultScene(script);
+  }
+  if (!a.model.empty()) scene.set_model(a.model), scene.clear_model_file();
+  if (!a.model_file.empty()) scene.set_model_file(a.model_file), scene.clear_model();
+  StepOptions step;
+  ToolCommand tool;
+  Registration registration;
+  if (!SceneToLoop(scene, &step, &tool, &registration, &error)) return Fail(error);
+  if (a.scale > 0) registration.scale = a.scale;
+  if (!a.rotation.empty() && !ParseRotation(a.rotation, registration.rot, &error)) return Fail("--rotation " + error);
+  if (!a.offset.empty() && !ParseVec3(a.offset, registration.offset, &error)) return Fail("--offset " + error);
+  if (a.max_force > 0) registration.max_force = a.max_force;
+
+  // Model: the library (through the cache) or a local pair.
+  std::string fem_path, plg_path;
+  if (!scene.model().empty()) {
+    if (offline) return Fail("--model needs a server to download from; use --model-file with --server none");
+    ModelFetchOptions fetch;
+    fetch.host = up.host, fetch.port = up.port, fetch.token = a.token;
+    fetch.cache_dir = a.cache_dir.empty() ? DefaultCacheDir() : a.cache_dir;
+    bool refused = false;
+    if (!FetchModel(scene.model(), fetch, &fem_path, &plg_path, &error, &refused)) {
+      Fail(error);
+      return refused ? kExitRefused : kExitConfig;
+    }
+  } else if (!scene.model_file().empty()) {
+    ModelPaths(scene.model_file(), &fem_path, &plg_path);
+  } else {
+    return Fail("no model: give --model NAME[@VERSION] or --model-file PREFIX (or name one in the scene)");
+  }
+  Model model;
+  LoadError load_error;
+  if (!LoadModel(fem_path, plg_path, ReadOptions{}, &model, &load_error)) return Fail(load_error.ToString());
+
+  // Device.
+  LoopOptions lo;
+  lo.rate_hz = a.rate_hz > 0 ? a.rate_hz : scene.device().max_rate_hz();
+  lo.mesh_rate_hz = scene.stream_rate_hz();
+  lo.max_ticks = a.duration_s > 0 ? std::max<int64_t>(1, std::llround(a.duration_s * lo.rate_hz)) : 0;
+  lo.realtime = !a.no_realtime;
+  DeviceContext dc;
+  dc.model = &model;
+  dc.registration = registration;
+  dc.mio_radius = tool.radius;
+  dc.dt_s = step.dt_s;
+  std::unique_ptr<Device> device = MakeDevice(a.device, dc, &error);
+  if (!device) return Fail(error);
+  if (std::abs(lo.rate_hz * step.dt_s - 1) > 1e-9) {
+    std::fprintf(stderr, "idms-agent: note: %.0f Hz with dt %.6g s runs the simulation at %.3gx real time\n",
+                 lo.rate_hz, step.dt_s, lo.rate_hz * step.dt_s);
+  }
+
+  // The loop and the uplink (the uplink's signal handlers exist before the loop starts).
+  Loop loop(std::move(model), step, tool, registration, *device, lo);
+  up.offline = offline;
+  up.token = a.token;
+  char host[256] = "?";
+  gethostname(host, sizeof(host) - 1);
+  up.identity = Cat({"idms-agent ", host}) + " pid " + std::to_string(getpid()) + " " + device->name();
+  up.scene = scene;
+  up.backlog_samples = a.backlog;
+  up.flush_timeout_s = a.flush_timeout_s;
+  Uplink uplink(loop, up);
+  std::signal(SIGPIPE, SIG_IGN);
+
+  // The loop thread starts with SIGINT/SIGTERM blocked: they are this thread's to handle.
+  sigset_t block, old;
+  sigemptyset(&block);
+  sigaddset(&block, SIGINT);
+  sigaddset(&block, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &block, &old);
+  std::thread loop_thread([&loop] { loop.Run(); });
+  pthread_sigmask(SIG_SETMASK, &old, nullptr);
+  const bool ok = uplink.Run();
+  loop_thread.join();
+
+  // Figures, files, exit status.
+  const LatencySummary period = loop.period_histogram().Summary();
+  const LatencySummary compute = loop.compute_histogram().Summary();
+  PrintSummary(period, compute, loop, uplink.stats(), offline);
+  if (!a.summary_json.empty() && !WriteSummary(a.summary_json, period, compute, loop, *device, uplink.stats())) {
+    std::fprintf(stderr, "idms-agent: error: cannot write %s\n", a.summary_json.c_str());
+  }
+  if (!a.dump_final.empty() && !DumpFinal(a.dump_final, loop)) {
+    std::fprintf(stderr, "idms-agent: error: cannot write %s\n", a.dump_final.c_str());
+  }
+  return ok ? 0 : kExitRefused;
+}
+
+}  // namespace
+}  // namespace idms::agent
+
+int main(int argc, char** argv) { return idms::agent::Main(argc, argv); }

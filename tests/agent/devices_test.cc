@@ -1,0 +1,162 @@
+// Device specs and the simulated hand: a closed loop that stays stable in contact.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "idms/agent/device.h"
+#include "idms/agent/loop.h"
+#include "idms/agent/setup.h"
+#include "idms/protocol/recording.h"
+#include "idms/sim/interaction_script.h"
+#include "idms/sim/model_io.h"
+
+namespace idms::test {
+namespace {
+
+Model Hex() {
+  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
+  Model model;
+  LoadError error;
+  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", ReadOptions{}, &model, &error));
+  return model;
+}
+
+TEST(Devices, BadSpecsAreExplained) {
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  std::string error;
+  EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast or pluck"), std::string::npos) << error;
+  EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
+  EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
+  EXPECT_FALSE(agent::MakeDevice("udp:99999", context, &error));
+  EXPECT_NE(error.find("1..65535"), std::string::npos) << error;
+  EXPECT_FALSE(agent::MakeDevice("replay:/nonexistent/session.mcap", context, &error));
+  EXPECT_NE(error.find("/nonexistent/session.mcap"), std::string::npos) << error;
+  EXPECT_FALSE(agent::MakeDevice("phantom", context, &error));
+  EXPECT_NE(error.find("expected scripted:SCRIPT"), std::string::npos) << error;
+}
+
+TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
+  // The scripted trajectory lives in the model frame; the device reports it in device
+  // coordinates, so the loop's registration maps it back onto the surface.
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  std::string error;
+  ASSERT_TRUE(agent::ParseRotation("rpy:10,20,30", context.registration.rot, &error));
+  context.registration.scale = 2;
+  context.registration.offset[2] = 5;
+  auto device = agent::MakeDevice("scripted:stroke-slow", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::DeviceReading r;
+  device->Read(0, 4.0, &r);
+  double p_model[3];
+  context.registration.DeviceToModel(r.pos, p_model);
+  const ScriptSample s = SampleScript(Script::kStrokeSlow, MakeScriptGeometry(model, 1.5), 4.0);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(p_model[i], s.pos[i], 1e-12);
+}
+
+TEST(Devices, HumanHandIsStableInContact) {
+  // Pressing with a soft hand: the tissue pushes it back (it lags the script), and nothing grows.
+  const Model model = Hex();
+  const v1::Scene scene = agent::DefaultScene("palpate");
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  std::string error;
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error));
+  agent::DeviceContext context;
+  context.model = &model;
+  context.registration = reg;
+  auto device = agent::MakeDevice("human:palpate", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *device, options);
+  const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
+  double max_force = 0, max_lag = 0, lag_at_press = 0;
+  for (int i = 0; i < 5500; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (loop.samples().pop(s)) {
+      max_force = std::max(max_force, std::hypot(s.force[0], s.force[1], s.force[2]));
+      const ScriptSample target = SampleScript(Script::kPalpate, g, s.time_s);
+      const double lag = s.tool_pos[2] - target.pos[2];
+      max_lag = std::max(max_lag, std::abs(lag));
+      if (s.tick == 2800) lag_at_press = lag;
+    }
+    int32_t index;
+    while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_GT(max_force, 0.1);
+  EXPECT_LT(max_force, 8.0);
+  EXPECT_GT(lag_at_press, 0.0) << "the tissue pushes the hand above its target";
+  EXPECT_LT(max_lag, 0.5);
+  EXPECT_EQ(TotalWarnings(loop.state().warnings), 0);
+}
+
+// Writes a recording with `n` ticks of palpation at 1 kHz on /device, 20 samples per frame.
+std::string WriteRecording(const Model& model, int n) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("idms-replay-test-" + std::to_string(::getpid()) + ".mcap")).string();
+  RecordingWriter writer;
+  std::string error;
+  EXPECT_TRUE(writer.Open(path, RecordingWriterOptions{}, &error)) << error;
+  const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
+  v1::Envelope envelope;
+  v1::DeviceSamples* batch = envelope.mutable_device_samples();
+  for (int i = 0; i < n; ++i) {
+    const ScriptSample s = SampleScript(Script::kPalpate, g, 1e-3 * (i + 1000));
+    v1::DeviceSample* d = batch->add_samples();
+    d->set_tick(static_cast<uint64_t>(i));
+    d->set_time_s(1e-3 * (i + 1));
+    d->mutable_tool_pos()->set_x(s.pos[0]);
+    d->mutable_tool_pos()->set_y(s.pos[1]);
+    d->mutable_tool_pos()->set_z(s.pos[2]);
+    if (batch->samples_size() == 20 || i + 1 == n) {
+      EXPECT_TRUE(writer.Write(envelope, 1000000ull * static_cast<uint64_t>(i), 0, &error)) << error;
+      batch->Clear();
+    }
+  }
+  EXPECT_TRUE(writer.Close(&error)) << error;
+  return path;
+}
+
+TEST(Devices, ReplayPlaysTheRecordedTrajectoryThenStopsTheLoop) {
+  const Model model = Hex();
+  const std::string path = WriteRecording(model, 300);
+  agent::DeviceContext context;
+  context.model = &model;
+  std::string error;
+  auto device = agent::MakeDevice("replay:" + path, context, &error);
+  ASSERT_TRUE(device) << error;
+  // Recorded sample i (time (i + 1) ms) is played at loop time i ms: the recording starts at 0.
+  const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
+  agent::DeviceReading r;
+  device->Read(0, 0.1234, &r);
+  const ScriptSample expected = SampleScript(Script::kPalpate, g, 1e-3 * (123 + 1000));
+  for (int i = 0; i < 3; ++i) EXPECT_DOUBLE_EQ(r.pos[i], expected.pos[i]);
+  EXPECT_FALSE(device->finished());
+  // The loop ends when the recording does.
+  auto fresh = agent::MakeDevice("replay:" + path, context, &error);
+  const v1::Scene scene = agent::DefaultScene("palpate");
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error));
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *fresh, options);
+  loop.Run();
+  EXPECT_TRUE(fresh->finished());
+  EXPECT_NEAR(static_cast<double>(loop.counters().ticks.load()), 300, 1);
+  std::filesystem::remove(path);
+}
+
+}  // namespace
+}  // namespace idms::test

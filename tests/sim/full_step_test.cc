@@ -1,0 +1,290 @@
+// Tests of full mode's fused pass (full_step.cc): the same bits as the general path over many
+// ticks in every configuration it takes (integrators, rate modes, field forces, tools, substeps,
+// edits, a switch from local mode), the same repair and fallback on non-finite values, and no
+// allocation.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "alloc_counter.h"
+#include "idms/sim/edit.h"
+#include "idms/sim/generate.h"
+#include "idms/sim/model.h"
+#include "idms/sim/step.h"
+#include "idms/sim/workspace.h"
+#include "step_test_util.h"
+
+namespace idms {
+namespace {
+
+using test::HashState;
+
+// The hash of a State with the fused pass's stamp floor folded in (the general path's layout).
+uint64_t FoldedHash(const Model& model, const State& s) {
+  State copy = s;
+  FoldStampFloor(model, copy);
+  return HashState(copy);
+}
+
+Model Slab(double b = 0.2) {
+  SlabOptions so;
+  so.rows = 9, so.cols = 10;
+  so.b = so.home_b = b;
+  return GenerateSlab(so);
+}
+
+// A deformed start, so every element carries force from the first tick.
+State Deformed(const Model& model) {
+  State s = MakeState(model);
+  for (int32_t a = 0; a < model.num_atoms; ++a) {
+    if (!model.atom_fixed[a]) s.atom_pos[3 * a + 2] += static_cast<Real>(0.05 * std::sin(0.37 * a));
+  }
+  return s;
+}
+
+StepOptions FullNoCheck(Integrator integrator) {
+  StepOptions o;
+  o.full = true;
+  o.integrator = integrator;
+  o.stability.energy_check = false;
+  return o;
+}
+
+// A sphere pressing down over the slab's middle, then a tweezers grasp that lifts and lets go.
+ToolInput Tools(int tick) {
+  const double t = tick * 1e-3;
+  ToolInput in = test::SphereAt(4.5, 3.5, 1.8 - 0.6 * std::min(t, 0.5));
+  in.num_tools = 2;
+  ToolCommand& tw = in.tools[1];
+  tw.kind = ToolKind::kTweezers;
+  tw.pos[0] = 2.0, tw.pos[1] = 1.732, tw.pos[2] = t < 0.15 ? 1.6 - t : 1.45 + 0.5 * (t - 0.15);
+  tw.closed = t > 0.12 && t < 0.3;
+  return in;
+}
+
+struct Run {
+  uint64_t hash = 0;
+  int64_t warnings = 0;
+  double force_bits = 0;  // sum of device forces, compared exactly
+};
+
+// Steps the same model and start twice, fused and general, and returns both.
+std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOptions& o, int ticks, bool tools) {
+  Run runs[2];
+  for (int fused = 0; fused < 2; ++fused) {
+    State s = start;
+    Workspace ws = MakeWorkspace(model, o);
+    ws.full.enabled = fused == 1;
+    for (int i = 0; i < ticks; ++i) {
+      const StepReport r = Step(model, s, ws, tools ? Tools(i) : ToolInput{});
+      for (int t = 0; t < r.num_tools; ++t) runs[fused].force_bits += r.tools[t].force[0] + r.tools[t].force[1] + r.tools[t].force[2];
+    }
+    runs[fused].hash = FoldedHash(model, s);
+    runs[fused].warnings = TotalWarnings(s.warnings);
+  }
+  return {runs[0], runs[1]};
+}
+
+struct Case {
+  std::string name;
+  Integrator integrator;
+  double b;
+  LengthRate rate;
+  double lambda;
+  bool predict;
+  bool field;
+  bool tools;
+};
+
+class FusedEqualsGeneral : public ::testing::TestWithParam<Case> {};
+
+TEST_P(FusedEqualsGeneral, SameBitsOverManyTicks) {
+  const Case& c = GetParam();
+  const Model model = Slab(c.b);
+  StepOptions o = FullNoCheck(c.integrator);
+  o.length_rate = c.rate;
+  o.lambda = c.lambda;
+  o.stability.predict = c.predict;
+  if (c.field) o.gravity = true, o.air_damping = 3;
+  const auto [general, fused] = RunBoth(model, Deformed(model), o, 400, c.tools);
+  EXPECT_EQ(fused.hash, general.hash);
+  EXPECT_EQ(fused.warnings, general.warnings);
+  EXPECT_EQ(fused.force_bits, general.force_bits);
+  EXPECT_EQ(general.warnings, 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Configurations, FusedEqualsGeneral,
+    ::testing::Values(Case{"euler_filtered", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, false},
+                      Case{"symplectic_filtered", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, false, false, false},
+                      Case{"symplectic_lambda", Integrator::kSymplecticEuler, 0.2, LengthRate::kFiltered, 0.5, true, false, false},
+                      Case{"euler_analytic", Integrator::kExplicitEuler, 0.2, LengthRate::kAnalytic, 1.0, true, false, false},
+                      Case{"symplectic_undamped", Integrator::kSymplecticEuler, 0.0, LengthRate::kAuto, 1.0, true, false, false},
+                      Case{"symplectic_field", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, true, true, false},
+                      Case{"euler_tools", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, true},
+                      Case{"symplectic_everything", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true}),
+    [](const auto& param_info) { return param_info.param.name; });
+
+TEST(FusedPass, SubstepsFromThePredictionMatchToo) {
+  // Stiff elements: the prediction asks for several substeps each tick.
+  SlabOptions so;
+  so.rows = 7, so.cols = 8;
+  so.k = so.home_k = 400;
+  const Model model = GenerateSlab(so);
+  StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  Workspace probe = MakeWorkspace(model, o);
+  State s = Deformed(model);
+  ASSERT_GT(Step(model, s, probe, ToolInput{}).substeps, 1);
+  const auto [general, fused] = RunBoth(model, Deformed(model), o, 200, true);
+  EXPECT_EQ(fused.hash, general.hash);
+  EXPECT_EQ(fused.force_bits, general.force_bits);
+}
+
+TEST(FusedPass, IsTakenAndReportsTheWholeModel) {
+  const Model model = Slab();
+  State s = Deformed(model);
+  Workspace ws = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  StepReport r;
+  for (int i = 0; i < 3; ++i) r = Step(model, s, ws, ToolInput{});
+  EXPECT_TRUE(ws.full.live);
+  EXPECT_GT(s.elem_stamp_floor, kNoStamp);
+  int32_t free_atoms = 0;
+  for (uint8_t f : model.atom_fixed) free_atoms += !f;
+  EXPECT_EQ(r.active_atoms, free_atoms);
+  EXPECT_EQ(r.active_elems, model.num_elems);
+  // The energy check needs the general path.
+  StepOptions checked = FullNoCheck(Integrator::kSymplecticEuler);
+  checked.stability.energy_check = true;
+  Workspace wc = MakeWorkspace(model, checked);
+  Step(model, s, wc, ToolInput{});
+  EXPECT_FALSE(wc.full.live);
+  EXPECT_EQ(s.elem_stamp_floor, kNoStamp);
+}
+
+TEST(FusedPass, SwitchingFromLocalModeMatches) {
+  // Local ticks leave some filters fresh and others stale; the first fused tick reads the stamps.
+  const Model model = Slab();
+  StepOptions local;
+  State s = Deformed(model);
+  Workspace wl = MakeWorkspace(model, local);
+  for (int i = 0; i < 100; ++i) Step(model, s, wl, Tools(i));
+  const auto [general, fused] = RunBoth(model, s, FullNoCheck(Integrator::kExplicitEuler), 100, true);
+  EXPECT_EQ(fused.hash, general.hash);
+  EXPECT_EQ(fused.force_bits, general.force_bits);
+}
+
+TEST(FusedPass, AlternatingWithTheGeneralPathMatches) {
+  // Every third tick takes the general path (its lists are rebuilt, the stamp floor folded).
+  const Model model = Slab();
+  const StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  State a = Deformed(model), b = Deformed(model);
+  Workspace wa = MakeWorkspace(model, o), wb = MakeWorkspace(model, o);
+  wa.full.enabled = false;
+  for (int i = 0; i < 300; ++i) {
+    wb.full.enabled = i % 3 != 0;
+    Step(model, a, wa, Tools(i));
+    Step(model, b, wb, Tools(i));
+  }
+  EXPECT_EQ(FoldedHash(model, a), FoldedHash(model, b));
+}
+
+TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) {
+  const Model model = Slab();
+  const StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  const Real nan = std::numeric_limits<Real>::quiet_NaN();
+  uint64_t hashes[2];
+  int64_t repaired[2];
+  for (int fused = 0; fused < 2; ++fused) {
+    State s = Deformed(model);
+    Workspace ws = MakeWorkspace(model, o);
+    ws.full.enabled = fused == 1;
+    for (int i = 0; i < 50; ++i) Step(model, s, ws, ToolInput{});
+    s.atom_vel[3 * 40 + 1] = nan;      // a free atom mid-model
+    s.elem_rate[model.num_elems / 2] = nan;
+    for (int i = 0; i < 50; ++i) Step(model, s, ws, ToolInput{});
+    hashes[fused] = FoldedHash(model, s);
+    repaired[fused] = s.warnings.state_repaired;
+    for (Real p : s.atom_pos) ASSERT_TRUE(std::isfinite(p));
+  }
+  EXPECT_EQ(hashes[1], hashes[0]);
+  EXPECT_EQ(repaired[1], repaired[0]);
+  EXPECT_GE(repaired[0], 1);
+}
+
+TEST(FusedPass, DivergenceFallsBackLikeTheGeneralPath) {
+  // Undamped explicit Euler diverges: with the prediction off nothing substeps, so the state
+  // grows until a result is not finite; both paths must then roll back and fall back alike.
+  const Model model = Slab(0.0);
+  StepOptions o = FullNoCheck(Integrator::kExplicitEuler);
+  o.stability.predict = false;
+  o.dt_s = 5e-3;
+  const auto [general, fused] = RunBoth(model, Deformed(model), o, 3000, false);
+  EXPECT_EQ(fused.hash, general.hash);
+  EXPECT_EQ(fused.warnings, general.warnings);
+}
+
+TEST(FusedPass, ScalpelCutsAndEditsMatch) {
+  const Model base = Slab();
+  const StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  uint64_t hashes[2];
+  int32_t removed[2] = {0, 0};
+  for (int fused = 0; fused < 2; ++fused) {
+    Model model = base;
+    State s = Deformed(model);
+    Workspace ws = MakeWorkspace(model, o);
+    ws.full.enabled = fused == 1;
+    ToolInput in;
+    in.num_tools = 1;
+    in.tools[0].kind = ToolKind::kScalpel;
+    in.tools[0].blade[2] = -1.0;
+    for (int i = 0; i < 300; ++i) {
+      in.tools[0].pos[0] = 3.0, in.tools[0].pos[1] = -1.0 + 0.03 * i, in.tools[0].pos[2] = 0.5;
+      Step(model, s, ws, in);
+      removed[fused] += ApplyPendingEdits(model, s, ws).elements_removed;
+    }
+    hashes[fused] = FoldedHash(model, s);
+  }
+  EXPECT_GT(removed[0], 0);
+  EXPECT_EQ(removed[1], removed[0]);
+  EXPECT_EQ(hashes[1], hashes[0]);
+}
+
+TEST(FusedPass, SnapshotReplayGivesSameBits) {
+  const Model model = Slab();
+  State s = Deformed(model);
+  Workspace ws = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  for (int i = 0; i < 100; ++i) Step(model, s, ws, Tools(i));
+  const State snapshot = s;
+  for (int i = 100; i < 200; ++i) Step(model, s, ws, Tools(i));
+  const uint64_t straight = HashState(s);
+  s = snapshot;
+  for (int i = 100; i < 200; ++i) Step(model, s, ws, Tools(i));
+  EXPECT_EQ(HashState(s), straight);
+}
+
+TEST(FusedPass, AllocatesNothing) {
+  Model model = Slab();
+  State s = Deformed(model);
+  Workspace ws = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  Step(model, s, ws, Tools(0));
+  const int64_t before = test::AllocationCount();
+  for (int i = 1; i < 400; ++i) Step(model, s, ws, Tools(i));
+  // A cut, its edit, and the rebuild of the pass's arrays at the next tick: still no allocation.
+  ToolInput cut;
+  cut.num_tools = 1;
+  cut.tools[0].kind = ToolKind::kScalpel;
+  cut.tools[0].blade[2] = -1.0;
+  for (int i = 0; i < 60; ++i) {
+    cut.tools[0].pos[0] = 3.0, cut.tools[0].pos[1] = -1.0 + 0.1 * i, cut.tools[0].pos[2] = 0.5;
+    Step(model, s, ws, cut);
+    ApplyPendingEdits(model, s, ws);
+  }
+  for (int i = 0; i < 10; ++i) Step(model, s, ws, ToolInput{});
+  EXPECT_EQ(test::AllocationCount() - before, 0);
+  EXPECT_TRUE(ws.full.live);
+}
+
+}  // namespace
+}  // namespace idms
