@@ -75,7 +75,7 @@ namespace {
 // An element whose atoms coincide has no direction (eq. 4.5 divides by 0). A zero-length element
 // (l_eq = 0) then exerts nothing, which is its limit; otherwise it pushes its atoms apart with
 // k l_eq along its rest direction, so coincident atoms separate the way the model was built.
-// The viscous term is dropped for that tick (the eq. 4.6 filter still advances).
+// The viscous term is dropped for that tick, and the eq. 4.6 filter restarts at the next one.
 void DegenerateElement(const Model& m, Workspace& ws, int32_t e, Real push) {
   if (push <= 0) return;
   const int32_t a0 = m.elem_atoms[2 * e], a1 = m.elem_atoms[2 * e + 1];
@@ -107,20 +107,22 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
     const Real l = std::sqrt(sx * sx + sy * sy + sz * sz);
     const Real k = static_cast<Real>(m.elem_k[e]), leq = static_cast<Real>(m.elem_leq[e]);
     [[maybe_unused]] Real rate = 0;
+    const bool degenerate = l <= kMinLength;
     if constexpr (kDamped && kFiltered) {
       // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}; a stale filter (the
-      // element was not updated in the previous substep) restarts from rest. It advances even
-      // for a degenerate element below, so every listed element is updated every substep
-      // (what the full-mode fused pass relies on to keep one stamp for all of them).
-      const bool fresh = s.elem_stamp[e] == clock - 1;
+      // element was not updated in the previous substep, or was degenerate then) restarts from
+      // rest. A degenerate element's rate would be noise (it has no direction): its filter is
+      // marked to restart, and stamped like every other listed element, so that all of them are
+      // updated every substep (what the full-mode fused pass relies on to keep one stamp).
+      const bool fresh = s.elem_stamp[e] == clock - 1 && s.elem_len[e] != kFilterRestart;
       const Real prev_len = fresh ? s.elem_len[e] : l;
       const Real prev_rate = fresh ? s.elem_rate[e] : Real(0);
       rate = lambda * (l - prev_len) * inv_t + (Real(1) - lambda) * prev_rate;
-      s.elem_len[e] = l;
-      s.elem_rate[e] = rate;
+      s.elem_len[e] = degenerate ? kFilterRestart : l;
+      s.elem_rate[e] = degenerate ? Real(0) : rate;
       s.elem_stamp[e] = clock;
     }
-    if (l <= kMinLength) [[unlikely]] {
+    if (degenerate) [[unlikely]] {
       DegenerateElement(m, ws, e, k * leq);
       continue;
     }

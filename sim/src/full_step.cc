@@ -23,9 +23,14 @@ namespace {
 enum class Rate : uint8_t {
   kNone,             // no element has b > 0: no rate, no filter
   kAnalytic,         // s^ . (v1 - v0)
-  kFiltered,         // eq. 4.6, and every element was updated in the previous substep
+  kFiltered,         // eq. 4.6; every element was updated in the previous substep, none degenerate
+  kFilteredMarked,   // eq. 4.6; as kFiltered, but some carry a restart mark (kFilterRestart)
   kFilteredStamped,  // eq. 4.6, freshness read from each element's stamp (first fused substep)
 };
+
+constexpr bool IsFiltered(Rate rate) {
+  return rate == Rate::kFiltered || rate == Rate::kFilteredMarked || rate == Rate::kFilteredStamped;
+}
 
 // An atom's three components and a fourth lane, as one vector: GCC and Clang vector extensions
 // when the target has registers that wide (float: SSE or NEON; double: AVX), else four plain
@@ -168,21 +173,30 @@ constexpr int32_t kScratchPerElement = 15;
 struct Progress {
   int32_t atoms = 0;
   int32_t elems = 0;
+  int32_t marks = 0;  // filters marked to restart (degenerate elements)
   bool ok = true;
 };
 
+// Phase 2's arrays, each a restrict parameter (GCC ignores restrict on locals and members), written
+// once for the functions below.
+#define IDMS_BATCH_PARAMS                                                                                    \
+  int32_t n, Real inv_t, Real lambda, const Real *__restrict k, const Real *__restrict b,                   \
+      const Real *__restrict leq, const Real *__restrict dx, const Real *__restrict dy,                     \
+      const Real *__restrict dz, const Real *__restrict dvx, const Real *__restrict dvy,                    \
+      const Real *__restrict dvz, const Real *__restrict prev_len, const Real *__restrict prev_rate,        \
+      const Real *__restrict fresh, Real *__restrict len, Real *__restrict rate_io, Real *__restrict l_out, \
+      Real *__restrict ex, Real *__restrict ey, Real *__restrict ez
+#define IDMS_BATCH_ARGS \
+  n, inv_t, lambda, k, b, leq, dx, dy, dz, dvx, dvy, dvz, prev_len, prev_rate, fresh, len, rate_io, l_out, ex, ey, ez
+
 // Phase 2 of a batch: eqs. 4.4-4.9 for n elements in contiguous arrays, as one loop the compiler
-// vectorises (every pointer a restrict parameter; GCC ignores restrict on locals). len and rate
-// hold the eq. 4.6 state in place (kDirectIn) or receive it (inputs then come gathered, with
-// fresh = 0 restarting the filter: l_{n-1} = l, l'_{n-1} = 0).
+// vectorises. len and rate hold the eq. 4.6 state in place (kDirectIn; kFilterRestart marks a
+// filter to restart, looked for only with kFilteredMarked) or receive it (inputs then come
+// gathered, with fresh = 0 restarting the filter: l_{n-1} = l, l'_{n-1} = 0). A degenerate
+// element's new state is replaced by a restart mark in phase 3.
 template <Rate kRate, bool kDirectIn>
-[[gnu::always_inline]] inline void BatchForcesBody(int32_t n, Real inv_t, Real lambda, const Real* __restrict k, const Real* __restrict b,
-                 const Real* __restrict leq, const Real* __restrict dx, const Real* __restrict dy,
-                 const Real* __restrict dz, const Real* __restrict dvx, const Real* __restrict dvy,
-                 const Real* __restrict dvz, const Real* __restrict prev_len, const Real* __restrict prev_rate,
-                 const Real* __restrict fresh, Real* __restrict len, Real* __restrict rate_io,
-                 Real* __restrict l_out, Real* __restrict ex, Real* __restrict ey, Real* __restrict ez) {
-  constexpr bool kFilter = kRate == Rate::kFiltered || kRate == Rate::kFilteredStamped;
+[[gnu::always_inline]] inline void BatchForcesBody(IDMS_BATCH_PARAMS) {
+  constexpr bool kFilter = IsFiltered(kRate);
   for (int32_t j = 0; j < n; ++j) {
     const Real sx = dx[j], sy = dy[j], sz = dz[j];
     const Real l = std::sqrt(sx * sx + sy * sy + sz * sz);
@@ -190,7 +204,12 @@ template <Rate kRate, bool kDirectIn>
     [[maybe_unused]] Real rate = 0;
     if constexpr (kFilter) {
       Real pl, pr;
-      if constexpr (kDirectIn) {
+      if constexpr (kDirectIn && kRate == Rate::kFilteredMarked) {
+        const Real old_len = len[j], old_rate = rate_io[j];
+        const bool keep = old_len != kFilterRestart;
+        pl = keep ? old_len : l;
+        pr = keep ? old_rate : Real(0);
+      } else if constexpr (kDirectIn) {
         pl = len[j], pr = rate_io[j];
       } else {
         const Real gathered_len = prev_len[j], gathered_rate = prev_rate[j];
@@ -210,46 +229,35 @@ template <Rate kRate, bool kDirectIn>
   }
 }
 
-// Phase 2's arrays (see BatchForcesBody).
-struct BatchArgs {
-  int32_t n;
-  Real inv_t, lambda;
-  const Real *k, *b, *leq, *dx, *dy, *dz, *dvx, *dvy, *dvz, *prev_len, *prev_rate, *fresh;
-  Real *len, *rate, *l, *ex, *ey, *ez;
-};
-
-template <Rate kRate, bool kDirectIn>
-[[gnu::always_inline]] inline void BatchForcesUnpacked(const BatchArgs& a) {
-  BatchForcesBody<kRate, kDirectIn>(a.n, a.inv_t, a.lambda, a.k, a.b, a.leq, a.dx, a.dy, a.dz, a.dvx, a.dvy, a.dvz,
-                                    a.prev_len, a.prev_rate, a.fresh, a.len, a.rate, a.l, a.ex, a.ey, a.ez);
-}
-
 // Phase 2 for the baseline target (SSE2 on x86-64) and, on x86-64, a clone for AVX2 (8 floats or
 // 4 doubles per instruction) chosen once at run time: the default build runs on any x86-64 and
 // uses AVX2 where it exists. The same IEEE operations in both (no FMA: -ffp-contract=off), so the
-// same bits. Rejected: -march=native (the binary must run on any CI machine) and compiling the
-// whole file twice (inline functions it shares with other files could be linked in their AVX2
-// form and fault on an older CPU).
+// same bits. Rejected: -march=native (the binary must run on any CI machine); compiling the whole
+// file twice (inline functions it shares with other files could be linked in their AVX2 form and
+// fault on an older CPU); passing the arrays in a struct (GCC then loses their restrict and the
+// loop runs 9% slower).
 template <Rate kRate, bool kDirectIn>
-void BatchForcesBase(const BatchArgs& a) {
-  BatchForcesUnpacked<kRate, kDirectIn>(a);
+void BatchForcesBase(IDMS_BATCH_PARAMS) {
+  BatchForcesBody<kRate, kDirectIn>(IDMS_BATCH_ARGS);
 }
 
 #if defined(__x86_64__) && !defined(__AVX2__)
 template <Rate kRate, bool kDirectIn>
-[[gnu::target("avx2")]] void BatchForcesAvx2(const BatchArgs& a) {
-  BatchForcesUnpacked<kRate, kDirectIn>(a);
+[[gnu::target("avx2")]] void BatchForcesAvx2(IDMS_BATCH_PARAMS) {
+  BatchForcesBody<kRate, kDirectIn>(IDMS_BATCH_ARGS);
 }
 #endif
 
 template <Rate kRate, bool kDirectIn>
-void BatchForces([[maybe_unused]] bool allow_avx2, const BatchArgs& a) {
+void BatchForces([[maybe_unused]] bool allow_avx2, IDMS_BATCH_PARAMS) {
 #if defined(__x86_64__) && !defined(__AVX2__)
   static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2 && allow_avx2) return BatchForcesAvx2<kRate, kDirectIn>(a);
+  if (avx2 && allow_avx2) return BatchForcesAvx2<kRate, kDirectIn>(IDMS_BATCH_ARGS);
 #endif
-  BatchForcesBase<kRate, kDirectIn>(a);
+  BatchForcesBase<kRate, kDirectIn>(IDMS_BATCH_ARGS);
 }
+#undef IDMS_BATCH_PARAMS
+#undef IDMS_BATCH_ARGS
 
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
 // endpoint is atom g = active[i]; they are visited after every earlier group, so once group i is
@@ -265,9 +273,9 @@ void BatchForces([[maybe_unused]] bool allow_avx2, const BatchArgs& a) {
 template <bool kSymplectic, Rate kRate, bool kIdentity>
 class Substep {
  public:
-  static constexpr bool kFilter = kRate == Rate::kFiltered || kRate == Rate::kFilteredStamped;
+  static constexpr bool kFilter = IsFiltered(kRate);
   // Filter inputs read in place (else gathered in phase 1), outputs written in place.
-  static constexpr bool kDirectIn = kIdentity && kRate == Rate::kFiltered;
+  static constexpr bool kDirectIn = kIdentity && (kRate == Rate::kFiltered || kRate == Rate::kFilteredMarked);
   static constexpr bool kDirectOut = kIdentity;
 
   Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup)
@@ -296,7 +304,7 @@ class Substep {
         const int32_t j = w - w0;
         const int32_t raw = fp_.other[w];
         if (degenerate && b_.l[j] <= kMinLength) [[unlikely]] {
-          if (!Degenerate(w, j, g, raw, acc)) return Stop(out, slot);
+          if (!Degenerate(w, g, raw, acc)) return Stop(out, slot);
           continue;
         }
         const V4 e = Make4(b_.ex[j], b_.ey[j], b_.ez[j]);
@@ -312,6 +320,7 @@ class Substep {
       acc = Load4(force_ + 4 * g);
     }
     out.atoms = n;
+    out.marks = marks_;
     return out;
   }
 
@@ -349,11 +358,11 @@ class Substep {
         if constexpr (kFilter && !kDirectIn) {
           const int32_t e = kIdentity ? w : ws_.elems[w];
           const Real old_len = s_.elem_len[e], old_rate = s_.elem_rate[e];
-          bool fresh = true;
+          if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]] return false;
+          bool fresh = old_len != kFilterRestart;
           if constexpr (kRate == Rate::kFilteredStamped) {
             const int64_t stamp = s_.elem_stamp[e];
-            fresh = (stamp > s_.elem_stamp_floor ? stamp : s_.elem_stamp_floor) == s_.substep_clock - 1;
-            if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]] return false;
+            fresh = fresh && (stamp > s_.elem_stamp_floor ? stamp : s_.elem_stamp_floor) == s_.substep_clock - 1;
           }
           b_.prev_len[j] = old_len;
           b_.prev_rate[j] = old_rate;
@@ -365,9 +374,9 @@ class Substep {
     return true;
   }
 
-  // 2. eqs. 4.4-4.9 over the batch (BatchForces); the filter state advances (also for
-  // degenerate elements), scattered by element id when the ids are not the walk order. Returns
-  // whether any element is degenerate.
+  // 2. eqs. 4.4-4.9 over the batch (BatchForces); the filter state advances (a degenerate
+  // element's is marked to restart), scattered by element id when the ids are not the walk order.
+  // Returns whether any element is degenerate.
   bool Forces(int32_t w0, int32_t nb) {
     Real* len = kDirectOut ? s_.elem_len.data() + w0 : b_.new_len;
     Real* rate = kDirectOut ? s_.elem_rate.data() + w0 : b_.new_rate;
@@ -376,10 +385,9 @@ class Substep {
       StreamCopy(ws_.backup_elem_rate.data() + w0, rate, nb);
     }
     const Real inv_t = Real(1) / T_, lambda = static_cast<Real>(ws_.options.lambda);
-    const BatchArgs args{nb, inv_t, lambda, fp_.elem_k.data() + w0, fp_.elem_b.data() + w0, fp_.elem_leq.data() + w0,
-                         b_.dx, b_.dy, b_.dz, b_.dvx, b_.dvy, b_.dvz, b_.prev_len, b_.prev_rate, b_.fresh,
-                         len, rate, b_.l, b_.ex, b_.ey, b_.ez};
-    BatchForces<kRate, kDirectIn>(fp_.avx2, args);
+    BatchForces<kRate, kDirectIn>(fp_.avx2, nb, inv_t, lambda, fp_.elem_k.data() + w0, fp_.elem_b.data() + w0,
+                                  fp_.elem_leq.data() + w0, b_.dx, b_.dy, b_.dz, b_.dvx, b_.dvy, b_.dvz, b_.prev_len,
+                                  b_.prev_rate, b_.fresh, len, rate, b_.l, b_.ex, b_.ey, b_.ez);
     if constexpr (kFilter && !kDirectOut) {
       for (int32_t j = 0; j < nb; ++j) {
         const int32_t id = ws_.elems[w0 + j];
@@ -393,13 +401,23 @@ class Substep {
   }
 
   // A degenerate element's push (DegenerateElement in forces.cc, in g's frame). False: its filter
-  // state is not finite (the only place a non-finite state exerts no force).
-  bool Degenerate(int32_t w, int32_t j, int32_t g, int32_t raw, V4& acc) {
-    const Real rate = kDirectOut ? s_.elem_rate[w] : b_.new_rate[j];
-    if (kFilter && !std::isfinite(rate)) return false;
+  // state was not finite at the tick's start (read from the rollback copy; the general path would
+  // repair it). Elsewhere a non-finite filter state makes the result non-finite, which stops the
+  // pass anyway; gathered states were checked in phase 1.
+  bool Degenerate(int32_t w, int32_t g, int32_t raw, V4& acc) {
+    const int32_t e = kIdentity ? w : ws_.elems[w];
+    if constexpr (kFilter) {
+      if (kDirectIn && backup_) {
+        StreamFence();
+        if (!(std::isfinite(ws_.backup_elem_len[w]) && std::isfinite(ws_.backup_elem_rate[w]))) return false;
+      }
+      // Its rate would be noise: the filter restarts at the next update (forces.cc does the same).
+      s_.elem_len[e] = kFilterRestart;
+      s_.elem_rate[e] = 0;
+      ++marks_;
+    }
     const Real push = fp_.elem_k[w] * fp_.elem_leq[w];
     if (push <= 0) return true;
-    const int32_t e = kIdentity ? w : ws_.elems[w];
     const int32_t a0 = m_.elem_atoms[2 * e], a1 = m_.elem_atoms[2 * e + 1];
     Real dir[3];
     for (int c = 0; c < 3; ++c) dir[c] = static_cast<Real>((m_.atom_pos_eq[3 * a1 + c] - m_.atom_pos_eq[3 * a0 + c]) / m_.elem_leq[e]);
@@ -449,6 +467,7 @@ class Substep {
   Real* const vel_ = s_.atom_vel.data();
   Real* const force_ = ws_.full.force.data();
   const int32_t last_ = m_.num_atoms - 1;
+  int32_t marks_ = 0;
 };
 
 template <bool kSymplectic, Rate kRate, bool kIdentity>
@@ -467,6 +486,8 @@ SubstepFn PickRate(Rate rate) {
       return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity>;
     case Rate::kFiltered:
       return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity>;
+    case Rate::kFilteredMarked:
+      return RunSubstep<kSymplectic, Rate::kFilteredMarked, kIdentity>;
     case Rate::kFilteredStamped:
       break;
   }
@@ -571,6 +592,7 @@ void EnsureFullLive(const Model& m, State& s, Workspace& ws) {
 }
 
 void EndFullLive(Workspace& ws) {
+  ws.full.restart_marks = -1;
   if (!ws.full.live) return;
   ClearTickScratch(ws);
   ws.full.live = false;
@@ -635,14 +657,22 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
     }
     ws.full.force_zero = false;
-    const Rate rate = !ws.any_damping                                ? Rate::kNone
-                      : !filter                                      ? Rate::kAnalytic
-                      : s.elem_stamp_floor == s.substep_clock - 1 ? Rate::kFiltered
-                                                                     : Rate::kFilteredStamped;
+    // The filter's freshness: every element's when the last substep was this pass (then only
+    // the elements it found degenerate carry a restart mark), else from the stamps.
+    Rate rate = Rate::kFilteredStamped;
+    if (!ws.any_damping) {
+      rate = Rate::kNone;
+    } else if (!filter) {
+      rate = Rate::kAnalytic;
+    } else if (s.elem_stamp_floor == s.substep_clock - 1 && ws.full.restart_marks >= 0) {
+      rate = ws.full.restart_marks == 0 ? Rate::kFiltered : Rate::kFilteredMarked;
+    }
     const SubstepFn substep = PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.full.identity);
     const Progress p = substep(m, s, ws, T, /*backup=*/k == 0);
     times->forces_ns += NowNs() - t0;
+    ws.full.restart_marks = p.marks;
     if (!p.ok) {
+      ws.full.restart_marks = -1;
       RestoreWritten(s, ws, k == 0 ? p.atoms : ws.num_active, k == 0 ? p.elems : ws.num_elems, filter);
       s.substep_clock = clock0;
       s.elem_stamp_floor = floor0;

@@ -20,6 +20,10 @@ inline int64_t NowNs() {
 // Below this length an element has no direction (eq. 4.5 would divide by ~0).
 inline constexpr Real kMinLength = sizeof(Real) == 4 ? Real(1e-6) : Real(1e-12);
 
+// State::elem_len of an element whose eq. 4.6 filter restarts at its next update (it was
+// degenerate at the last one). Lengths are never negative.
+inline constexpr Real kFilterRestart = Real(-1);
+
 inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 struct StageTimes {

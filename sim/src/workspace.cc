@@ -130,6 +130,7 @@ void ResyncWorkspace(const Model& m, const State& s, Workspace& ws) {
   std::fill(ws.elem_mark.begin(), ws.elem_mark.end(), 0);
   ws.num_active = ws.num_candidates = ws.num_elems = ws.num_boundary = 0;
   ws.full.live = ws.full.force_zero = false;
+  ws.full.restart_marks = -1;
   ws.synced_tick = s.tick;
 }
 

@@ -220,12 +220,14 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
   };
 
   std::weak_ptr<Session> current;
+  std::vector<std::weak_ptr<Session>> sessions;  // to close at shutdown
 
   void Accept() {
     acceptor.async_accept([self = shared_from_this()](beast::error_code ec, tcp::socket socket) {
       if (ec) return;
       auto session = std::make_shared<Session>(*self, std::move(socket));
       self->current = session;
+      self->sessions.push_back(session);
       session->Start();
       self->Accept();
     });
@@ -244,7 +246,20 @@ TestEndpoint::TestEndpoint(EndpointOptions options) : impl_(std::make_shared<Imp
 }
 
 TestEndpoint::~TestEndpoint() {
-  impl_->io.stop();
+  // Close the acceptor and every socket on the io thread, so the aborted handlers run and release
+  // the sessions and the endpoint they hold.
+  asio::post(impl_->io, [impl = impl_] {
+    beast::error_code ignored;
+    impl->acceptor.close(ignored);
+    for (const std::weak_ptr<Impl::Session>& weak : impl->sessions) {
+      if (auto session = weak.lock()) {
+        auto& socket = session->ws ? beast::get_lowest_layer(*session->ws).socket() : session->stream.socket();
+        socket.close(ignored);
+      }
+    }
+    impl->sessions.clear();
+  });
+  // With nothing left to do, the io thread's run() returns.
   thread_.join();
 }
 

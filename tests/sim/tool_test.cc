@@ -102,6 +102,7 @@ StepOptions UnclampedOptions() {
   StepOptions o;
   o.max_device_force = 1e3;  // plucking pulls harder and faster than a PHANToM could
   o.max_device_force_rate = 1e7;
+  o.local_radius = 2.25;  // thesis 6.2's haptic window: 2.8 above the surface is outside it
   return o;
 }
 

@@ -68,7 +68,8 @@ struct State {
   std::vector<Real> atom_vel;  // (num_atoms x 3), model units / s; 0 for fixed and inactive atoms
 
   // Eq. 4.6 filter state per element.
-  std::vector<Real> elem_len;      // (num_elems), model units: l at the last update (l_{n-1})
+  std::vector<Real> elem_len;      // (num_elems), model units: l at the last update (l_{n-1});
+                                   // exactly -1 = restart at the next update (it was degenerate)
   std::vector<Real> elem_rate;     // (num_elems), model units / s: filtered length rate
   std::vector<int64_t> elem_stamp;  // (num_elems): substep_clock at the last update
   // Every element with a free endpoint was updated at this substep or later: its stamp is

@@ -60,6 +60,9 @@ struct FullPass {
   bool identity = false;          // ws.elems[w] == w: element arrays need no indirection
   // `force` of every free atom is 0 (the fused pass leaves it so for the next tick).
   bool force_zero = false;
+  // Elements the last fused substep found degenerate (their eq. 4.6 filters carry a restart mark);
+  // -1 = unknown (the last substep was not this pass's).
+  int32_t restart_marks = -1;
   std::vector<int32_t> group_end;  // (num_atoms) by active slot: one past its last element
   std::vector<int32_t> other;      // (num_elems) endpoint that is not the group's atom; ~id if fixed
   std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
