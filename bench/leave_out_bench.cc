@@ -180,16 +180,18 @@ int main(int argc, char** argv) {
 
   std::FILE* csv = csv_path ? std::fopen(csv_path, "w") : nullptr;
   if (csv) {
-    std::fprintf(csv, "scene,config,mean_active,tools_us,active_set_us,forces_us,integrate_us,checks_us,total_us,"
-                      "total_p50_us,total_p99_us,warnings\n");
+    std::fprintf(csv,
+                 "scene,config,mean_active,tools_us,active_set_us,forces_us,integrate_us,checks_us,total_us,"
+                 "total_p50_us,total_p99_us,warnings\n");
   }
-  std::printf("palpation, %.1f s at 1 kHz, symplectic Euler, r_l %.2f; mean us per tick by stage (StepReport, ticks\n"
-              "above the 99th percentile left out, best of %d runs); total p50 / p99 of the tick\n",
-              duration_s, kLocalRadius, quick ? 1 : 3);
+  std::printf(
+      "palpation, %.1f s at 1 kHz, symplectic Euler, r_l %.2f; mean us per tick by stage (StepReport, ticks\n"
+      "above the 99th percentile left out, best of %d runs); total p50 / p99 of the tick\n",
+      duration_s, kLocalRadius, quick ? 1 : 3);
   for (const Scene& scene : scenes) {
     std::printf("\n%s: %d atoms, %d elements\n", scene.name, scene.model.num_atoms, scene.model.num_elems);
-    std::printf("%-26s %6s | %6s %7s %6s %6s %6s | %6s %6s %6s | %6s %5s\n", "", "active", "tools", "window",
-                "forces", "integ", "checks", "mean", "p50", "p99", "+mean", "warn");
+    std::printf("%-26s %6s | %6s %7s %6s %6s %6s | %6s %6s %6s | %6s %5s\n", "", "active", "tools", "window", "forces",
+                "integ", "checks", "mean", "p50", "p99", "+mean", "warn");
     double base = 0;
     for (const Config& c : configs) {
       const StageMeans r = Run(scene.model, c.parts, duration_s, quick ? 1 : 3);
@@ -206,8 +208,9 @@ int main(int argc, char** argv) {
     }
   }
   if (csv) std::fclose(csv);
-  std::printf("\nwindow = active set (hash queries, lists, refiling, waking); checks = prediction, rollback copy,\n"
-              "energy, device force; +mean = mean tick minus the palpation-only tick. Times are steady-clock,\n"
-              "so a preempted tick on a shared machine shows in p99 and the means.\n");
+  std::printf(
+      "\nwindow = active set (hash queries, lists, refiling, waking); checks = prediction, rollback copy,\n"
+      "energy, device force; +mean = mean tick minus the palpation-only tick. Times are steady-clock,\n"
+      "so a preempted tick on a shared machine shows in p99 and the means.\n");
   return 0;
 }

@@ -33,7 +33,9 @@ struct Percentiles {
 
 Percentiles Summarize(std::vector<double> us) {
   std::sort(us.begin(), us.end());
-  auto at = [&](double q) { return us[std::min(us.size() - 1, static_cast<size_t>(q * static_cast<double>(us.size())))]; };
+  auto at = [&](double q) {
+    return us[std::min(us.size() - 1, static_cast<size_t>(q * static_cast<double>(us.size())))];
+  };
   return {at(0.5), at(0.99), us.back()};
 }
 
@@ -43,14 +45,14 @@ struct SizeResult {
   double mean_active = 0;
   int32_t max_active = 0;
   double peak_fz = 0;
-  Percentiles wall, cpu;  // tick compute: steady clock around Step / this thread's CPU time
+  Percentiles wall, cpu;     // tick compute: steady clock around Step / this thread's CPU time
   int64_t slowest_tick = 0;  // by CPU time
   StepReport slowest;        // its stage times
-  double setup_s = 0;     // generate + MakeWorkspace + ResyncWorkspace
+  double setup_s = 0;        // generate + MakeWorkspace + ResyncWorkspace
 };
 
 // One palpation (the whole script, 1 kHz) on a slab of about `atoms` atoms.
-SizeResult RunSize(int64_t atoms, double duration_s, double local_radius) {
+SizeResult RunSize(int64_t atoms, double duration_s, double local_radius, Integrator integrator) {
   SizeResult r;
   const auto t0 = std::chrono::steady_clock::now();
   const int32_t side = std::max<int32_t>(2, static_cast<int32_t>(std::lround(std::sqrt(atoms / 3.0))));
@@ -58,6 +60,7 @@ SizeResult RunSize(int64_t atoms, double duration_s, double local_radius) {
   const ScriptGeometry geometry = MakeScriptGeometry(model, 1.5);
   StepOptions options;  // the default: local window, checks on
   options.local_radius = local_radius;
+  options.integrator = integrator;
   State state = MakeState(model);
   Workspace ws = MakeWorkspace(model, options);
   // The first Step would refile the hash from the State (O(atoms)); do it before timing.
@@ -102,6 +105,7 @@ int main(int argc, char** argv) {
   double duration_s = ScriptDuration(Script::kPalpate);
   const char* csv_path = nullptr;
   double local_radius = StepOptions{}.local_radius;
+  Integrator integrator = StepOptions{}.integrator;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) {
       sizes = {1000, 10000};
@@ -109,23 +113,35 @@ int main(int argc, char** argv) {
       csv_path = argv[++i];
     } else if (!std::strcmp(argv[i], "--local-radius") && i + 1 < argc) {
       local_radius = std::atof(argv[++i]);  // a wider window: more atoms per tick, same flatness test
+    } else if (!std::strcmp(argv[i], "--integrator") && i + 1 < argc) {
+      const char* name = argv[++i];
+      bool known = false;
+      for (Integrator k :
+           {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4, Integrator::kImplicitEuler}) {
+        if (!std::strcmp(name, IntegratorName(k))) integrator = k, known = true;
+      }
+      if (!known) {
+        std::fprintf(stderr, "--integrator: expected euler, symplectic, rk4 or implicit, got '%s'\n", name);
+        return 2;
+      }
     } else {
-      std::fprintf(stderr, "usage: %s [--quick] [--local-radius R] [--csv FILE]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--quick] [--local-radius R] [--integrator NAME] [--csv FILE]\n", argv[0]);
       return 2;
     }
   }
   std::printf("palpation (%.1f s at 1 kHz, sphere r 1.5 k 400, r_l %.2f, %s, default checks)\n\n", duration_s,
-              local_radius, IntegratorName(StepOptions{}.integrator));
+              local_radius, IntegratorName(integrator));
   std::printf("%8s %8s %6s %9s | %23s | %23s | %5s %7s %6s\n", "atoms", "elements", "ticks", "active",
               "wall us p50 / p99 / max", "cpu us p50 / p99 / max", "warn", "peak fz", "setup");
   std::FILE* csv = csv_path ? std::fopen(csv_path, "w") : nullptr;
   if (csv) {
-    std::fprintf(csv, "atoms,elements,ticks,mean_active,max_active,wall_p50_us,wall_p99_us,wall_max_us,cpu_p50_us,"
-                      "cpu_p99_us,cpu_max_us,warnings,peak_fz\n");
+    std::fprintf(csv,
+                 "atoms,elements,ticks,mean_active,max_active,wall_p50_us,wall_p99_us,wall_max_us,cpu_p50_us,"
+                 "cpu_p99_us,cpu_max_us,warnings,peak_fz\n");
   }
   std::vector<SizeResult> results;
   for (long long n : sizes) {
-    const SizeResult r = RunSize(n, duration_s, local_radius);
+    const SizeResult r = RunSize(n, duration_s, local_radius, integrator);
     results.push_back(r);
     std::printf("%8d %8d %6lld %4.0f/%4d | %7.1f %7.1f %7.1f | %7.1f %7.1f %7.1f | %5lld %7.2f %5.1fs\n", r.atoms,
                 r.elements, static_cast<long long>(r.ticks), r.mean_active, r.max_active, r.wall.p50, r.wall.p99,
@@ -135,11 +151,12 @@ int main(int argc, char** argv) {
                    static_cast<long long>(r.ticks), r.mean_active, r.max_active, r.wall.p50, r.wall.p99, r.wall.max,
                    r.cpu.p50, r.cpu.p99, r.cpu.max, static_cast<long long>(r.warnings), r.peak_fz);
     }
-    std::printf("%8s slowest tick %lld (%.0f us cpu): tools %.1f, active set %.1f, forces %.1f, integrate %.1f, "
-                "checks %.1f us, %d active, %d substeps, %d attempts\n",
-                "", static_cast<long long>(r.slowest_tick), r.cpu.max, 1e-3 * r.slowest.tools_ns,
-                1e-3 * r.slowest.active_set_ns, 1e-3 * r.slowest.forces_ns, 1e-3 * r.slowest.integrate_ns,
-                1e-3 * r.slowest.checks_ns, r.slowest.active_atoms, r.slowest.substeps, r.slowest.attempts);
+    std::printf(
+        "%8s slowest tick %lld (%.0f us cpu): tools %.1f, active set %.1f, forces %.1f, integrate %.1f, "
+        "checks %.1f us, %d active, %d substeps, %d attempts\n",
+        "", static_cast<long long>(r.slowest_tick), r.cpu.max, 1e-3 * r.slowest.tools_ns,
+        1e-3 * r.slowest.active_set_ns, 1e-3 * r.slowest.forces_ns, 1e-3 * r.slowest.integrate_ns,
+        1e-3 * r.slowest.checks_ns, r.slowest.active_atoms, r.slowest.substeps, r.slowest.attempts);
     std::fflush(stdout);
   }
   if (csv) std::fclose(csv);
@@ -154,7 +171,8 @@ int main(int argc, char** argv) {
                 small->atoms, large.wall.p50 / small->wall.p50, large.wall.p99 / small->wall.p99,
                 large.cpu.p50 / small->cpu.p50, large.cpu.p99 / small->cpu.p99);
   }
-  std::printf("wall = steady clock around Step (what a 1 kHz loop sees, preemption included); cpu = this thread's\n"
-              "CPU time in Step (the machine is shared); active = mean / max atoms in the window.\n");
+  std::printf(
+      "wall = steady clock around Step (what a 1 kHz loop sees, preemption included); cpu = this thread's\n"
+      "CPU time in Step (the machine is shared); active = mean / max atoms in the window.\n");
   return 0;
 }

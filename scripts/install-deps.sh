@@ -6,7 +6,7 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   clang libclang-rt-14-dev
   libeigen3-dev libboost-dev libboost-program-options-dev
-  libprotobuf-dev protobuf-compiler libzstd-dev zlib1g-dev
+  libprotobuf-dev protobuf-compiler libzstd-dev zlib1g-dev libssl-dev
   libosmesa6-dev libpng-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev

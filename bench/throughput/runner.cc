@@ -1,5 +1,7 @@
 // Full-model step throughput for one precision; see runner.h. Compiled once per precision:
 // RUNNER_NAME is RunThroughputDouble or RunThroughputFloat.
+#include "runner.h"
+
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -8,7 +10,6 @@
 #include "idms/sim/reorder.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
-#include "runner.h"
 
 namespace {
 
@@ -52,7 +53,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   for (int32_t i = 0; i < model.num_atoms; ++i) {
     if (!model.atom_fixed[i]) state.atom_pos[3 * i + 2] += static_cast<Real>(0.01 * std::sin(0.37 * i));
   }
-  const ToolInput input;  // no tools: the element network alone
+  const ToolInput input;                                             // no tools: the element network alone
   for (int k = 0; k < 3; ++k) Step(model, state, workspace, input);  // builds the fused pass's lists
 
   std::vector<double> rates;

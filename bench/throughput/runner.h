@@ -15,7 +15,7 @@ struct ThroughputResult {
   double elem_updates_per_s = 0;  // median over repetitions, thread CPU time
   double bytes_per_elem = 0;      // what the fused pass streams per element and step (see runner.cc)
   double ns_per_step = 0;
-  bool identity = false;          // the fused pass read its element arrays without an index
+  bool identity = false;  // the fused pass read its element arrays without an index
 };
 
 // Steps a full (local simulation off) slab of about `atoms` atoms with symplectic Euler for at

@@ -55,7 +55,8 @@ inline void Store3(Real* p, V4 v) { std::memcpy(p, &v, 3 * sizeof(Real)); }
 // Atom a's xyz from a (num_atoms x 3) array; the 4th lane reads the next atom's x, except for the
 // last atom, whose array ends there.
 inline V4 LoadAtom(const Real* base, int32_t a, int32_t last) {
-  if (a != last) [[likely]] return Load4(base + 3 * a);
+  if (a != last) [[likely]]
+    return Load4(base + 3 * a);
   return Make4(base[3 * a], base[3 * a + 1], base[3 * a + 2]);
 }
 #else
@@ -148,12 +149,12 @@ struct Batch {
   Real *dx, *dy, *dz;     // (kBatch) s' = p_other - p_g, by component (so phase 2 vectorises)
   Real *dvx, *dvy, *dvz;  // (kBatch) v_other - v_g (analytic rate)
   Real *ex, *ey, *ez;     // (kBatch) the element's force on g (eq. 4.9, g's frame)
-  Real* l;          // (kBatch) eq. 4.4
-  Real* prev_len;   // (kBatch) eq. 4.6 inputs when they are gathered
-  Real* prev_rate;  // (kBatch)
-  Real* fresh;      // (kBatch) 1 = continue the filter, 0 = restart it
-  Real* new_len;    // (kBatch) eq. 4.6 outputs when they are scattered
-  Real* new_rate;   // (kBatch)
+  Real* l;                // (kBatch) eq. 4.4
+  Real* prev_len;         // (kBatch) eq. 4.6 inputs when they are gathered
+  Real* prev_rate;        // (kBatch)
+  Real* fresh;            // (kBatch) 1 = continue the filter, 0 = restart it
+  Real* new_len;          // (kBatch) eq. 4.6 outputs when they are scattered
+  Real* new_rate;         // (kBatch)
 };
 
 Batch BatchViews(FullPass& fp) {
@@ -179,13 +180,12 @@ struct Progress {
 
 // Phase 2's arrays, each a restrict parameter (GCC ignores restrict on locals and members), written
 // once for the functions below.
-#define IDMS_BATCH_PARAMS                                                                                    \
-  int32_t n, Real inv_t, Real lambda, const Real *__restrict k, const Real *__restrict b,                   \
-      const Real *__restrict leq, const Real *__restrict dx, const Real *__restrict dy,                     \
-      const Real *__restrict dz, const Real *__restrict dvx, const Real *__restrict dvy,                    \
-      const Real *__restrict dvz, const Real *__restrict prev_len, const Real *__restrict prev_rate,        \
-      const Real *__restrict fresh, Real *__restrict len, Real *__restrict rate_io, Real *__restrict l_out, \
-      Real *__restrict ex, Real *__restrict ey, Real *__restrict ez
+#define IDMS_BATCH_PARAMS                                                                                             \
+  int32_t n, Real inv_t, Real lambda, const Real *__restrict k, const Real *__restrict b, const Real *__restrict leq, \
+      const Real *__restrict dx, const Real *__restrict dy, const Real *__restrict dz, const Real *__restrict dvx,    \
+      const Real *__restrict dvy, const Real *__restrict dvz, const Real *__restrict prev_len,                        \
+      const Real *__restrict prev_rate, const Real *__restrict fresh, Real *__restrict len, Real *__restrict rate_io, \
+      Real *__restrict l_out, Real *__restrict ex, Real *__restrict ey, Real *__restrict ez
 #define IDMS_BATCH_ARGS \
   n, inv_t, lambda, k, b, leq, dx, dy, dz, dvx, dvy, dvz, prev_len, prev_rate, fresh, len, rate_io, l_out, ex, ey, ez
 
@@ -358,7 +358,8 @@ class Substep {
         if constexpr (kFilter && !kDirectIn) {
           const int32_t e = kIdentity ? w : ws_.elems[w];
           const Real old_len = s_.elem_len[e], old_rate = s_.elem_rate[e];
-          if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]] return false;
+          if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]]
+            return false;
           bool fresh = old_len != kFilterRestart;
           if constexpr (kRate == Rate::kFilteredStamped) {
             const int64_t stamp = s_.elem_stamp[e];
@@ -400,17 +401,14 @@ class Substep {
     return degenerate > 0;
   }
 
-  // A degenerate element's push (DegenerateElement in forces.cc, in g's frame). False: its filter
-  // state was not finite at the tick's start (read from the rollback copy; the general path would
-  // repair it). Elsewhere a non-finite filter state makes the result non-finite, which stops the
-  // pass anyway; gathered states were checked in phase 1.
+  // A degenerate element's push (DegenerateElement in forces.cc, in g's frame). False: the rate
+  // phase 2 formed from its filter state is not finite, so that state was not (or overflowed):
+  // the general path repairs it. Elsewhere a non-finite filter state makes the result non-finite,
+  // which stops the pass anyway.
   bool Degenerate(int32_t w, int32_t g, int32_t raw, V4& acc) {
     const int32_t e = kIdentity ? w : ws_.elems[w];
     if constexpr (kFilter) {
-      if (kDirectIn && backup_) {
-        StreamFence();
-        if (!(std::isfinite(ws_.backup_elem_len[w]) && std::isfinite(ws_.backup_elem_rate[w]))) return false;
-      }
+      if (!std::isfinite(s_.elem_rate[e])) return false;
       // Its rate would be noise: the filter restarts at the next update (forces.cc does the same).
       s_.elem_len[e] = kFilterRestart;
       s_.elem_rate[e] = 0;
@@ -420,7 +418,8 @@ class Substep {
     if (push <= 0) return true;
     const int32_t a0 = m_.elem_atoms[2 * e], a1 = m_.elem_atoms[2 * e + 1];
     Real dir[3];
-    for (int c = 0; c < 3; ++c) dir[c] = static_cast<Real>((m_.atom_pos_eq[3 * a1 + c] - m_.atom_pos_eq[3 * a0 + c]) / m_.elem_leq[e]);
+    for (int c = 0; c < 3; ++c)
+      dir[c] = static_cast<Real>((m_.atom_pos_eq[3 * a1 + c] - m_.atom_pos_eq[3 * a0 + c]) / m_.elem_leq[e]);
     // Atom 0 is pushed along -dir, atom 1 along +dir.
     const V4 f = push * Make4(dir[0], dir[1], dir[2]);
     const int32_t o = raw ^ (raw >> 31);
@@ -447,7 +446,8 @@ class Substep {
       np = p + T_ * v;
       nv = v + t_over_m * acc;
     }
-    if (!Finite3((np - np) + (nv - nv))) [[unlikely]] return false;
+    if (!Finite3((np - np) + (nv - nv))) [[unlikely]]
+      return false;
     if (backup_) StreamStore3(&ws_.backup_pos[3 * i], p), StreamStore3(&ws_.backup_vel[3 * i], v);
     Store3(pos_ + 3 * g, np);
     Store3(vel_ + 3 * g, nv);
@@ -505,7 +505,8 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
   StreamFence();
   for (int32_t i = 0; i < atoms; ++i) {
     const int32_t a = ws.active[i];
-    for (int c = 0; c < 3; ++c) s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
+    for (int c = 0; c < 3; ++c)
+      s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
   }
   if (!filter) return;
   for (int32_t w = 0; w < elems; ++w) {
@@ -550,7 +551,8 @@ void BuildFullPass(const Model& m, Workspace& ws) {
   for (int32_t i = 0; i < n; ++i) {
     const int32_t a = ws.active[i];
     fp.atom_mass[i] = static_cast<Real>(m.atom_mass[a]);
-    const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a], ws.atom_damp[a] + ws.options.air_damping};
+    const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
+                          ws.atom_damp[a] + ws.options.air_damping};
     const double dt = StableDt(integrator, bound, rate, ws.options.lambda);
     if (dt < fp.dt_free) {
       fp.dt_free = dt, fp.dt_free_count = 1;

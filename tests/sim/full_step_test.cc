@@ -82,7 +82,8 @@ std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOp
     ws.full.avx2 = fused == 1;
     for (int i = 0; i < ticks; ++i) {
       const StepReport r = Step(model, s, ws, tools ? Tools(i) : ToolInput{});
-      for (int t = 0; t < r.num_tools; ++t) runs[fused].force_bits += r.tools[t].force[0] + r.tools[t].force[1] + r.tools[t].force[2];
+      for (int t = 0; t < r.num_tools; ++t)
+        runs[fused].force_bits += r.tools[t].force[0] + r.tools[t].force[1] + r.tools[t].force[2];
     }
     runs[fused].hash = FoldedHash(model, s);
     runs[fused].warnings = TotalWarnings(s.warnings);
@@ -122,14 +123,15 @@ TEST_P(FusedEqualsGeneral, SameBitsOverManyTicks) {
 
 INSTANTIATE_TEST_SUITE_P(
     Configurations, FusedEqualsGeneral,
-    ::testing::Values(Case{"euler_filtered", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, false},
-                      Case{"symplectic_filtered", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, false, false, false},
-                      Case{"symplectic_lambda", Integrator::kSymplecticEuler, 0.2, LengthRate::kFiltered, 0.5, true, false, false},
-                      Case{"euler_analytic", Integrator::kExplicitEuler, 0.2, LengthRate::kAnalytic, 1.0, true, false, false},
-                      Case{"symplectic_undamped", Integrator::kSymplecticEuler, 0.0, LengthRate::kAuto, 1.0, true, false, false},
-                      Case{"symplectic_field", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, true, true, false},
-                      Case{"euler_tools", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, true},
-                      Case{"symplectic_everything", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true}),
+    ::testing::Values(
+        Case{"euler_filtered", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, false},
+        Case{"symplectic_filtered", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, false, false, false},
+        Case{"symplectic_lambda", Integrator::kSymplecticEuler, 0.2, LengthRate::kFiltered, 0.5, true, false, false},
+        Case{"euler_analytic", Integrator::kExplicitEuler, 0.2, LengthRate::kAnalytic, 1.0, true, false, false},
+        Case{"symplectic_undamped", Integrator::kSymplecticEuler, 0.0, LengthRate::kAuto, 1.0, true, false, false},
+        Case{"symplectic_field", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, true, true, false},
+        Case{"euler_tools", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, true},
+        Case{"symplectic_everything", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true}),
     [](const auto& param_info) { return param_info.param.name; });
 
 TEST(FusedPass, RestartMarksOfDegenerateElementsMatch) {
@@ -231,7 +233,7 @@ TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) {
     Workspace ws = MakeWorkspace(model, o);
     ws.full.enabled = fused == 1;
     for (int i = 0; i < 50; ++i) Step(model, s, ws, ToolInput{});
-    s.atom_vel[3 * 40 + 1] = nan;      // a free atom mid-model
+    s.atom_vel[3 * 40 + 1] = nan;  // a free atom mid-model
     s.elem_rate[model.num_elems / 2] = nan;
     for (int i = 0; i < 50; ++i) Step(model, s, ws, ToolInput{});
     hashes[fused] = FoldedHash(model, s);

@@ -30,7 +30,8 @@ Model Slab() {
 // Largest |a0 - a1| over the elements.
 int32_t Bandwidth(const Model& m) {
   int32_t band = 0;
-  for (int32_t e = 0; e < m.num_elems; ++e) band = std::max(band, std::abs(m.elem_atoms[2 * e] - m.elem_atoms[2 * e + 1]));
+  for (int32_t e = 0; e < m.num_elems; ++e)
+    band = std::max(band, std::abs(m.elem_atoms[2 * e] - m.elem_atoms[2 * e + 1]));
   return band;
 }
 
