@@ -258,13 +258,6 @@ void WriteCaseSection(std::ostream& md, const CaseResult& c, const ReportOptions
   }
 }
 
-bool ParseIntegrator(const std::string& name, Integrator* out) {
-  for (Integrator i : kIntegrators) {
-    if (name == IntegratorName(i)) return *out = i, true;
-  }
-  return false;
-}
-
 // A replacement default for when the current one is off the front somewhere: among the
 // configurations that update the force every ms (dt <= 1 ms: a 2 ms tick is cheaper but serves a
 // 1 kHz device at 500 Hz), are within the budget in every case and are never less accurate
@@ -337,7 +330,7 @@ bool ReadCsv(const std::string& path, std::vector<CaseResult>* cases, std::strin
     std::stringstream fields(line);
     for (std::string field; std::getline(fields, field, ',');) f.push_back(field);
     RunResult r;
-    if (f.size() != 26 || !ParseIntegrator(f[9], &r.config.integrator)) {
+    if (f.size() != 26 || !ParseIntegratorName(f[9], &r.config.integrator)) {
       *error = path + ":" + std::to_string(number) + ": expected 26 fields with an integrator name in the 10th";
       return false;
     }

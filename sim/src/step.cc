@@ -50,6 +50,17 @@ const char* IntegratorName(Integrator integrator) {
   return "?";
 }
 
+bool ParseIntegratorName(std::string_view name, Integrator* integrator) {
+  for (Integrator i : {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4,
+                       Integrator::kImplicitEuler}) {
+    if (name == IntegratorName(i)) {
+      *integrator = i;
+      return true;
+    }
+  }
+  return false;
+}
+
 namespace {
 
 using internal::NowNs;

@@ -26,17 +26,6 @@ struct DrapeArgs {
   bool json = false, quiet = false;
 };
 
-bool ParseIntegrator(const std::string& name, Integrator* out) {
-  static constexpr std::pair<const char*, Integrator> kNames[] = {{"euler", Integrator::kExplicitEuler},
-                                                                  {"symplectic", Integrator::kSymplecticEuler},
-                                                                  {"rk4", Integrator::kRk4},
-                                                                  {"implicit", Integrator::kImplicitEuler}};
-  for (const auto& [n, i] : kNames) {
-    if (name == n) return *out = i, true;
-  }
-  return false;
-}
-
 bool ParseCenter(const std::string& text, double out[3]) {
   std::stringstream in(text);
   char comma;
@@ -100,7 +89,7 @@ void Run(DrapeArgs& a) {
   // Form and step; the tick defaults to 90% of what the form and the elements allow, at most 1 ms.
   DrapeOptions& o = a.drape;
   if (!ParseCenter(a.center, o.form.center)) Fail("drape", "--center '" + a.center + "': expected X,Y,Z");
-  if (!ParseIntegrator(a.integrator, &o.step.integrator)) {
+  if (!ParseIntegratorName(a.integrator, &o.step.integrator)) {
     Fail("drape", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
   }
   const Model stripped = StripHomeElements(slab);

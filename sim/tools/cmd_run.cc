@@ -59,17 +59,6 @@ bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
   return true;
 }
 
-bool ParseIntegrator(const std::string& name, Integrator* out) {
-  static constexpr std::pair<const char*, Integrator> kNames[] = {{"euler", Integrator::kExplicitEuler},
-                                                                  {"symplectic", Integrator::kSymplecticEuler},
-                                                                  {"rk4", Integrator::kRk4},
-                                                                  {"implicit", Integrator::kImplicitEuler}};
-  for (const auto& [n, i] : kNames) {
-    if (name == n) return *out = i, true;
-  }
-  return false;
-}
-
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
   const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
@@ -147,7 +136,7 @@ void Run(const RunArgs& a) {
   std::string error;
   if (!a.tool.empty() && !ParseTool(a.tool, &tool, &error)) Fail("run", error);
   StepOptions options;
-  if (!ParseIntegrator(a.integrator, &options.integrator)) Fail("run", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
+  if (!ParseIntegratorName(a.integrator, &options.integrator)) Fail("run", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
   if (!(a.dt > 0 && a.dt <= 0.1)) Fail("run", "--dt: expected 0 < dt <= 0.1 s");
   options.dt_s = a.dt;
   options.full = a.full;

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string_view>
 
 #include "idms/sim/state.h"
 #include "idms/sim/tool.h"
@@ -161,5 +162,8 @@ StepReport Step(const Model& model, State& state, Workspace& workspace, const To
 double ModelEnergy(const Model& model, const State& state, const Workspace& workspace);
 
 const char* IntegratorName(Integrator integrator);
+
+// The inverse of IntegratorName ("euler", "symplectic", "rk4", "implicit"); false if unknown.
+bool ParseIntegratorName(std::string_view name, Integrator* integrator);
 
 }  // namespace idms
