@@ -1,4 +1,4 @@
-// The replaced global operator new/delete behind AllocationCount() for agent_tests.
+// The replaced global operator new/delete behind AllocationCount(), shared by the test executables.
 #include "alloc_counter.h"
 
 #include <atomic>
