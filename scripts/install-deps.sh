@@ -11,7 +11,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
-  gnuplot-nox hyperfine
+  gnuplot-nox hyperfine rt-tests
 )
 
 missing=()

@@ -56,9 +56,11 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   const ToolInput input;                                             // no tools: the element network alone
   for (int k = 0; k < 3; ++k) Step(model, state, workspace, input);  // builds the fused pass's lists
 
-  std::vector<double> rates;
+  const double bytes_per_elem = StreamedBytes(model, workspace) / model.num_elems;
+  std::vector<double> rates, ratios, triads;
   ThroughputResult r;
   for (int rep = 0; rep < reps; ++rep) {
+    const double triad = TriadSample();
     int64_t steps = 0;
     const double start = ThreadCpuSeconds();
     double elapsed = 0;
@@ -68,13 +70,20 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
       elapsed = ThreadCpuSeconds() - start;
     }
     rates.push_back(static_cast<double>(model.num_elems) * steps / elapsed);
+    ratios.push_back(rates.back() * bytes_per_elem / triad);
+    triads.push_back(triad);
     r.ns_per_step = 1e9 * elapsed / steps;
   }
-  std::sort(rates.begin(), rates.end());
+  auto median = [](std::vector<double>& v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
   r.atoms = model.num_atoms;
   r.elements = model.num_elems;
-  r.elem_updates_per_s = rates[rates.size() / 2];
+  r.elem_updates_per_s = median(rates);
+  r.bound_ratio = median(ratios);
+  r.triad_bytes_per_s = median(triads);
   r.identity = workspace.full.identity;
-  r.bytes_per_elem = StreamedBytes(model, workspace) / model.num_elems;
+  r.bytes_per_elem = bytes_per_elem;
   return r;
 }

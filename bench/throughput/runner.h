@@ -14,6 +14,11 @@ struct ThroughputResult {
   int64_t atoms = 0, elements = 0;
   double elem_updates_per_s = 0;  // median over repetitions, thread CPU time
   double bytes_per_elem = 0;      // what the fused pass streams per element and step (see runner.cc)
+  // Fraction of the memory-bandwidth bound: each repetition's rate over (the triad rate measured
+  // just before it / bytes_per_elem); the median over repetitions. Pairing each repetition with its
+  // own triad keeps the ratio steady while other tenants' traffic moves both.
+  double bound_ratio = 0;
+  double triad_bytes_per_s = 0;  // median of the triads paired with the repetitions
   double ns_per_step = 0;
   bool identity = false;  // the fused pass read its element arrays without an index
 };
@@ -26,6 +31,11 @@ ThroughputResult RunThroughputFloat(int64_t atoms, double seconds, int reps, Thr
 // Bullet's btSoftBody on the same network (nodes = atoms, links = elements, one position-solver
 // iteration); elements per second. Returns 0 when the bench was built without Bullet.
 double RunBulletSoftBody(int64_t atoms, double seconds, int reps, int64_t* links);
+
+// One STREAM triad a = b + s * c over arrays far larger than the caches, bytes/s as STREAM counts
+// them (24 per double element: two reads, one write; the write's read for ownership is not
+// counted), thread CPU time, median of a few passes. Taken before each repetition.
+double TriadSample();
 
 // Seconds of CPU time this thread has used (the machine is shared: a descheduled run would
 // otherwise count someone else's time).

@@ -2,17 +2,21 @@
 // samples and surface snapshots handed to the I/O thread through lock-free rings.
 #include "idms/agent/loop.h"
 
+#include <fcntl.h>
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 
 #include "idms/protocol/mesh_codec.h"
 #include "idms/sim/edit.h"
@@ -43,7 +47,20 @@ int64_t MonotonicNs() {
   return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
 }
 
-RealtimeReport SetUpRealtime(int priority) {
+int64_t WaitUntil(int64_t deadline_ns, int64_t spin_ns) {
+  // Sleep on the absolute deadline, or on the start of the spin before it.
+  const timespec ts = ToTimespec(deadline_ns - spin_ns);
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+  // Spin: poll the clock until the deadline (at once false when the sleep went all the way). No
+  // PAUSE in the loop: in a KVM guest a tight PAUSE loop can trigger a pause-loop exit, which
+  // hands the vCPU back to the host, the very stall the spin is there to avoid.
+  int64_t now_ns = MonotonicNs();
+  while (now_ns < deadline_ns) now_ns = MonotonicNs();
+  return now_ns;
+}
+
+RealtimeReport SetUpRealtime(int priority, int* dma_latency_fd) {
   RealtimeReport r;
   // Timer slack 1 ns: wake-ups are not coalesced with other timers.
   r.timer_slack = prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL) == 0;
@@ -55,7 +72,83 @@ RealtimeReport SetUpRealtime(int priority) {
   param.sched_priority = priority;
   r.fifo_errno = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
   r.fifo = r.fifo_errno == 0;
+  // CPU idle states with a non-zero exit latency off while the file stays open (PM QoS).
+  *dma_latency_fd = open("/dev/cpu_dma_latency", O_WRONLY | O_CLOEXEC);
+  if (*dma_latency_fd >= 0) {
+    const int32_t zero_us = 0;
+    if (write(*dma_latency_fd, &zero_us, sizeof(zero_us)) == static_cast<ssize_t>(sizeof(zero_us))) {
+      r.dma_latency = true;
+    } else {
+      r.dma_latency_errno = errno;
+      close(*dma_latency_fd);
+      *dma_latency_fd = -1;
+    }
+  } else {
+    r.dma_latency_errno = errno;
+  }
   return r;
+}
+
+std::vector<int> AllowedCpus() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  std::vector<int> cpus;
+  if (sched_getaffinity(0, sizeof(set), &set) != 0) return cpus;
+  for (int cpu = 0; cpu < CPU_SETSIZE; ++cpu) {
+    if (CPU_ISSET(cpu, &set)) cpus.push_back(cpu);
+  }
+  return cpus;
+}
+
+int PinThisThread(int cpu) {
+  if (cpu < 0 || cpu >= CPU_SETSIZE) return EINVAL;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  CPU_SET(cpu, &set);
+  return pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+}
+
+std::vector<int> KeepThisThreadOff(int cpu) {
+  // Every allowed CPU but `cpu`; nothing to do when there is no other.
+  std::vector<int> others = AllowedCpus();
+  others.erase(std::remove(others.begin(), others.end(), cpu), others.end());
+  if (others.empty()) return others;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  for (int c : others) CPU_SET(c, &set);
+  if (pthread_setaffinity_np(pthread_self(), sizeof(set), &set) != 0) others.clear();
+  return others;
+}
+
+int64_t ParseStealMs(const std::string& proc_stat, const std::string& line, long user_hz) {
+  if (user_hz <= 0) return -1;
+  // The line that starts with `line` and a blank ("cpu" must not match "cpu0").
+  size_t begin = 0;
+  while (begin < proc_stat.size()) {
+    size_t end = proc_stat.find('\n', begin);
+    if (end == std::string::npos) end = proc_stat.size();
+    const size_t after = begin + line.size();
+    if (after < end && proc_stat.compare(begin, line.size(), line) == 0 &&
+        (proc_stat[after] == ' ' || proc_stat[after] == '\t')) {
+      // user nice system idle iowait irq softirq steal ...: the 8th.
+      std::istringstream in(proc_stat.substr(after, end - after));
+      uint64_t value = 0;
+      for (int i = 0; i < 8; ++i) {
+        if (!(in >> value)) return -1;
+      }
+      return static_cast<int64_t>(value * 1000 / static_cast<uint64_t>(user_hz));
+    }
+    begin = end + 1;
+  }
+  return -1;
+}
+
+int64_t ReadStealMs(const std::string& line) {
+  std::ifstream in("/proc/stat");
+  if (!in) return -1;
+  std::ostringstream text;
+  text << in.rdbuf();
+  return ParseStealMs(text.str(), line, sysconf(_SC_CLK_TCK));
 }
 
 Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool, const Registration& registration,
@@ -91,10 +184,14 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   }
 }
 
-void Loop::Run() {
+Loop::~Loop() {
+  if (dma_latency_fd_ >= 0) close(dma_latency_fd_);
+}
+
+void Loop::SetUpThread() {
   // Real-time setup, said plainly when refused.
   if (options_.realtime) {
-    rt_report_ = SetUpRealtime(options_.fifo_priority);
+    rt_report_ = SetUpRealtime(options_.fifo_priority, &dma_latency_fd_);
     realtime_.store(rt_report_.fifo && rt_report_.mlock, std::memory_order_relaxed);
     if (!rt_report_.fifo) {
       std::fprintf(stderr, "idms-agent: NOT real-time: SCHED_FIFO refused (%s); the loop runs at normal priority\n",
@@ -107,20 +204,44 @@ void Loop::Run() {
     if (rt_report_.fifo && rt_report_.mlock) {
       std::fprintf(stderr, "idms-agent: real-time: SCHED_FIFO priority %d, memory locked\n", options_.fifo_priority);
     }
+    if (rt_report_.dma_latency) {
+      std::fprintf(stderr, "idms-agent: CPU idle exit latency held at 0 us (/dev/cpu_dma_latency)\n");
+    } else {
+      std::fprintf(stderr,
+                   "idms-agent: note: /dev/cpu_dma_latency refused (%s); waking from a deep CPU idle state may "
+                   "delay ticks\n",
+                   std::strerror(rt_report_.dma_latency_errno));
+    }
   } else {
     prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     std::fprintf(stderr, "idms-agent: NOT real-time: disabled by --no-realtime\n");
   }
+  // CPU pinning, before the first tick; refused = the loop runs wherever the scheduler puts it.
+  if (options_.cpu >= 0) {
+    rt_report_.pin_errno = PinThisThread(options_.cpu);
+    rt_report_.pinned = rt_report_.pin_errno == 0;
+    if (rt_report_.pinned) {
+      std::fprintf(stderr, "idms-agent: loop pinned to CPU %d\n", options_.cpu);
+    } else {
+      std::fprintf(stderr, "idms-agent: NOT pinned: CPU %d refused (%s); the loop runs on any CPU\n", options_.cpu,
+                   std::strerror(rt_report_.pin_errno));
+    }
+  }
+  if (options_.spin_ns > 0) {
+    std::fprintf(stderr, "idms-agent: spinning the last %lld us before each deadline\n",
+                 static_cast<long long>(options_.spin_ns / 1000));
+  }
+}
+
+void Loop::Run() {
+  SetUpThread();
   PrefaultStack();
 
   // Ticks on absolute deadlines.
   int64_t next_ns = MonotonicNs();
   while (!stop_.load(std::memory_order_relaxed) && !device_.finished() &&
          (options_.max_ticks == 0 || state_.tick < options_.max_ticks)) {
-    const timespec ts = ToTimespec(next_ns);
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-    }
-    Tick(MonotonicNs(), next_ns + period_ns_);
+    Tick(WaitUntil(next_ns, options_.spin_ns), next_ns + period_ns_);
     next_ns += period_ns_;
     // Behind schedule: skip the missed wake-ups rather than run them back to back.
     const int64_t now_ns = MonotonicNs();
@@ -193,6 +314,9 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.overrun = MonotonicNs() > deadline_ns;
   compute_hist_.Add(s.compute_us);
   if (prev_wake_ns_ >= 0) period_hist_.Add(s.period_us);
+  // Wake-up against its schedule (deadline_ns - one period): one period late = deadline gone.
+  wake_hist_.Add(ToMicros(wake_ns - (deadline_ns - period_ns_)));
+  if (wake_ns >= deadline_ns) counters_.late_wakeups.fetch_add(1, std::memory_order_relaxed);
   prev_wake_ns_ = wake_ns;
   if (s.overrun) counters_.overruns.fetch_add(1, std::memory_order_relaxed);
   if (!samples_.push(s)) counters_.samples_lost.fetch_add(1, std::memory_order_relaxed);

@@ -1,9 +1,11 @@
 // idms-agent: runs the 1 kHz DSM loop next to a haptic device and reports the session to an
 // idms-server. Threads: the loop (loop.h) and this one, which runs the uplink (uplink.h).
 #include <pthread.h>
+#include <sched.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -11,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "idms/agent/device.h"
 #include "idms/agent/loop.h"
@@ -32,7 +35,16 @@ struct Args {
   std::string rotation, offset;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5;
   int64_t backlog = 120000;
+  int cpu = -1;
+  int64_t spin_us = 0;
   bool no_realtime = false;
+};
+
+// What the main thread measured around the loop: hypervisor steal and where the I/O thread ran.
+struct Platform {
+  int64_t steal_ms = -1;           // all CPUs summed, over the run; -1 when /proc/stat was unreadable
+  int64_t steal_ms_loop_cpu = -1;  // the pinned CPU's alone; -1 when not pinned or unreadable
+  std::vector<int> io_cpus;        // the I/O thread's CPUs when it was moved off the loop's; else empty
 };
 
 int Fail(const std::string& message) {
@@ -65,16 +77,39 @@ bool ParseServer(const std::string& url, UplinkOptions* o, std::string* error) {
   return true;
 }
 
-void PrintSummary(const LatencySummary& period, const LatencySummary& compute, const Loop& loop, const UplinkStats& up,
-                  bool offline) {
+// "0-3,6": a CPU list the way the kernel writes one.
+std::string CpuList(const std::vector<int>& cpus) {
+  std::string out;
+  for (size_t i = 0; i < cpus.size();) {
+    size_t j = i;
+    while (j + 1 < cpus.size() && cpus[j + 1] == cpus[j] + 1) ++j;
+    if (!out.empty()) out += ",";
+    out += std::to_string(cpus[i]);
+    if (j > i) out += "-" + std::to_string(cpus[j]);
+    i = j + 1;
+  }
+  return out;
+}
+
+void PrintSummary(const LatencySummary& period, const LatencySummary& wake, const LatencySummary& compute,
+                  const Loop& loop, const Platform& platform, const UplinkStats& up, bool offline) {
+  const LoopOptions& o = loop.options();
+  const RealtimeReport rt = loop.realtime_report();
+  std::string cpu = "not pinned";
+  if (o.cpu >= 0) cpu = rt.pinned ? Cat({"CPU ", std::to_string(o.cpu)}) : "pinning refused";
   std::fprintf(stderr,
-               "idms-agent: %llu ticks, %llu overruns%s\n"
+               "idms-agent: %llu ticks, %llu overruns, %llu wake-ups >= 1 period late, steal %lld ms (%s, %s, "
+               "spin %lld us)\n"
                "  period  us: p50 %u  p99 %u  p99.9 %u  max %u\n"
+               "  wake    us: p50 %u  p99 %u  p99.9 %u  max %u  (after the scheduled time)\n"
                "  compute us: p50 %u  p99 %u  p99.9 %u  max %u\n",
                static_cast<unsigned long long>(loop.counters().ticks.load()),
                static_cast<unsigned long long>(loop.counters().overruns.load()),
-               loop.realtime() ? " (real-time)" : " (not real-time)", period.p50_us, period.p99_us, period.p999_us,
-               period.max_us, compute.p50_us, compute.p99_us, compute.p999_us, compute.max_us);
+               static_cast<unsigned long long>(loop.counters().late_wakeups.load()),
+               static_cast<long long>(platform.steal_ms), loop.realtime() ? "real-time" : "not real-time", cpu.c_str(),
+               static_cast<long long>(o.spin_ns / 1000), period.p50_us, period.p99_us, period.p999_us, period.max_us,
+               wake.p50_us, wake.p99_us, wake.p999_us, wake.max_us, compute.p50_us, compute.p99_us, compute.p999_us,
+               compute.max_us);
   if (!offline) {
     std::fprintf(stderr,
                  "  uplink: %llu samples sent (%llu resent, %llu dropped, %llu unsent), %llu mesh frames "
@@ -91,9 +126,11 @@ nlohmann::json LatencyJson(const LatencySummary& s) {
   return {{"p50", s.p50_us}, {"p99", s.p99_us}, {"p999", s.p999_us}, {"max", s.max_us}};
 }
 
-bool WriteSummary(const std::string& path, const LatencySummary& period, const LatencySummary& compute,
-                  const Loop& loop, const Device& device, const UplinkStats& up) {
+bool WriteSummary(const std::string& path, const LatencySummary& period, const LatencySummary& wake,
+                  const LatencySummary& compute, const Loop& loop, const Platform& platform, const Device& device,
+                  const UplinkStats& up) {
   const LoopCounters& c = loop.counters();
+  const RealtimeReport rt = loop.realtime_report();
   const nlohmann::json j = {
       {"ticks", c.ticks.load()},
       {"overruns", c.overruns.load()},
@@ -103,6 +140,15 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
       {"samples_dropped", up.samples_dropped + c.samples_lost.load()},
       {"reconnects", up.reconnects},
       {"realtime", loop.realtime()},
+      {"cpu_dma_latency", rt.dma_latency},
+      {"cpu", loop.options().cpu},
+      {"pinned", rt.pinned},
+      {"io_cpus", platform.io_cpus},
+      {"spin_us", loop.options().spin_ns / 1000},
+      {"wake_latency_us", LatencyJson(wake)},
+      {"late_wakeups_over_period", c.late_wakeups.load()},
+      {"steal_ms", platform.steal_ms},
+      {"steal_ms_loop_cpu", platform.steal_ms_loop_cpu},
       {"samples_resent", up.samples_resent},
       {"samples_unsent", up.samples_unsent},
       {"mesh_frames", up.mesh_frames},
@@ -177,8 +223,23 @@ int Main(int argc, char** argv) {
   app.add_option("--offset", a.offset, "Registration: X,Y,Z model units (overrides the scene)");
   app.add_option("--max-force", a.max_force, "Device force clamp, device units (overrides the scene)")
       ->check(CLI::PositiveNumber);
-  app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO and mlockall");
+  app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO, mlockall and cpu_dma_latency 0");
+  app.add_option("--cpu", a.cpu, "Pin the loop thread to this CPU; the I/O thread keeps off it (default: not pinned)")
+      ->check(CLI::Range(0, CPU_SETSIZE - 1));
+  app.add_option("--spin-us", a.spin_us,
+                 "Sleep until this many us before each deadline, then poll the clock (costs up to that much CPU "
+                 "per tick); 0 = off")
+      ->check(CLI::Range(int64_t{0}, int64_t{1000000}));
   CLI11_PARSE(app, argc, argv);
+
+  // A CPU this process may not use is an error, not a silently unpinned loop.
+  if (a.cpu >= 0) {
+    const std::vector<int> allowed = AllowedCpus();
+    if (std::find(allowed.begin(), allowed.end(), a.cpu) == allowed.end()) {
+      return Fail(Cat({"--cpu ", std::to_string(a.cpu), ": this process may run on CPUs ", CpuList(allowed),
+                       " only (sched_getaffinity); pick one of them or leave --cpu out"}));
+    }
+  }
 
   const bool offline = a.server == "none";
   UplinkOptions up;
@@ -233,6 +294,13 @@ int Main(int argc, char** argv) {
   lo.mesh_rate_hz = scene.stream_rate_hz();
   lo.max_ticks = a.duration_s > 0 ? std::max<int64_t>(1, std::llround(a.duration_s * lo.rate_hz)) : 0;
   lo.realtime = !a.no_realtime;
+  lo.cpu = a.cpu;
+  lo.spin_ns = a.spin_us * 1000;
+  if (static_cast<double>(lo.spin_ns) >= 1e9 / lo.rate_hz) {
+    return Fail(Cat({"--spin-us ", std::to_string(a.spin_us), ": must be shorter than the period (",
+                     std::to_string(std::llround(1e6 / lo.rate_hz)), " us at ",
+                     std::to_string(std::llround(lo.rate_hz)), " Hz)"}));
+  }
   DeviceContext dc;
   dc.model = &model;
   dc.registration = registration;
@@ -258,6 +326,22 @@ int Main(int argc, char** argv) {
   Uplink uplink(loop, up);
   std::signal(SIGPIPE, SIG_IGN);
 
+  // With the loop pinned, this thread (and any it starts) keeps off the loop's CPU if it can.
+  Platform platform;
+  if (lo.cpu >= 0) {
+    platform.io_cpus = KeepThisThreadOff(lo.cpu);
+    if (platform.io_cpus.empty()) {
+      std::fprintf(stderr, "idms-agent: note: the I/O thread shares CPU %d with the loop (no other CPU allowed)\n",
+                   lo.cpu);
+    } else {
+      std::fprintf(stderr, "idms-agent: I/O thread on CPUs %s\n", CpuList(platform.io_cpus).c_str());
+    }
+  }
+  // Steal before and after the run, read here: never on the loop thread.
+  const std::string loop_cpu_line = Cat({"cpu", std::to_string(lo.cpu)});
+  const int64_t steal_start_ms = ReadStealMs("cpu");
+  const int64_t steal_start_cpu_ms = lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1;
+
   // The loop thread starts with SIGINT/SIGTERM blocked: they are this thread's to handle.
   sigset_t block, old;
   sigemptyset(&block);
@@ -268,12 +352,19 @@ int Main(int argc, char** argv) {
   pthread_sigmask(SIG_SETMASK, &old, nullptr);
   const bool ok = uplink.Run();
   loop_thread.join();
+  const int64_t steal_end_ms = ReadStealMs("cpu");
+  const int64_t steal_end_cpu_ms = lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1;
+  if (steal_start_ms >= 0 && steal_end_ms >= 0) platform.steal_ms = steal_end_ms - steal_start_ms;
+  if (steal_start_cpu_ms >= 0 && steal_end_cpu_ms >= 0)
+    platform.steal_ms_loop_cpu = steal_end_cpu_ms - steal_start_cpu_ms;
 
   // Figures, files, exit status.
   const LatencySummary period = loop.period_histogram().Summary();
+  const LatencySummary wake = loop.wake_histogram().Summary();
   const LatencySummary compute = loop.compute_histogram().Summary();
-  PrintSummary(period, compute, loop, uplink.stats(), offline);
-  if (!a.summary_json.empty() && !WriteSummary(a.summary_json, period, compute, loop, *device, uplink.stats())) {
+  PrintSummary(period, wake, compute, loop, platform, uplink.stats(), offline);
+  if (!a.summary_json.empty() &&
+      !WriteSummary(a.summary_json, period, wake, compute, loop, platform, *device, uplink.stats())) {
     std::fprintf(stderr, "idms-agent: error: cannot write %s\n", a.summary_json.c_str());
   }
   if (!a.dump_final.empty() && !DumpFinal(a.dump_final, loop)) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <boost/lockfree/spsc_queue.hpp>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "idms/agent/device.h"
@@ -59,14 +60,18 @@ struct LoopOptions {
   int64_t max_ticks = 0;           // stop after this many ticks; 0 = until RequestStop
   uint32_t sample_ring = 1 << 14;  // samples the I/O thread may fall behind before some are lost
   uint32_t mesh_pool = 8;          // surface buffers in flight
-  bool realtime = true;            // try SCHED_FIFO, mlockall and zero timer slack
+  bool realtime = true;            // try SCHED_FIFO, mlockall, 1 ns timer slack, cpu_dma_latency 0
   int fifo_priority = 80;
+  int cpu = -1;         // pin the loop thread to this CPU before the first tick; -1 = not pinned
+  int64_t spin_ns = 0;  // sleep to deadline - spin_ns, then poll the clock to the deadline; 0 = off
 };
 
 // What the real-time setup achieved, reported before the first tick.
 struct RealtimeReport {
   bool fifo = false, mlock = false, timer_slack = false;
-  int fifo_errno = 0, mlock_errno = 0;
+  bool dma_latency = false;  // /dev/cpu_dma_latency held at 0 µs (CPU idle states with no exit latency)
+  bool pinned = false;       // the loop thread runs on LoopOptions::cpu only
+  int fifo_errno = 0, mlock_errno = 0, dma_latency_errno = 0, pin_errno = 0;
 };
 
 // Counters the loop publishes (relaxed atomics: any thread may read them).
@@ -77,6 +82,9 @@ struct LoopCounters {
   std::atomic<uint64_t> mesh_skipped{0};  // no free surface buffer at a snapshot time
   std::atomic<uint64_t> force_faults{0};  // non-finite device force zeroed at the write
   std::atomic<uint64_t> commands{0};
+  // Wake-ups one full period or more after their scheduled time (the tick's deadline passed
+  // before it started): the loop's count of what cyclictest reports as latency >= the period.
+  std::atomic<uint64_t> late_wakeups{0};
 };
 
 class Loop {
@@ -88,14 +96,16 @@ class Loop {
        Device& device, const LoopOptions& options);
   Loop(const Loop&) = delete;
   Loop& operator=(const Loop&) = delete;
+  ~Loop();  // lets go of /dev/cpu_dma_latency
 
   // The thread body: real-time setup (reported on stderr before the first tick), ticks on
   // absolute deadlines until RequestStop or max_ticks, then the device released, and the final
   // surface published. Run once, on the loop thread.
   void Run();
 
-  // One tick's work at wall time wake_ns (CLOCK_MONOTONIC) for the deadline deadline_ns. Public
-  // for tests, which drive it without sleeping. Loop thread; does not allocate.
+  // One tick's work at wall time wake_ns (CLOCK_MONOTONIC) for the deadline deadline_ns; the tick
+  // was scheduled to wake at deadline_ns - one period. Public for tests, which drive it without
+  // sleeping. Loop thread; does not allocate.
   void Tick(int64_t wake_ns, int64_t deadline_ns);
 
   // Any thread, async-signal-safe: finish the current tick and stop.
@@ -120,10 +130,13 @@ class Loop {
   // Loop-thread data: read only after finished() (or from the loop thread).
   const LatencyHistogram& period_histogram() const { return period_hist_; }
   const LatencyHistogram& compute_histogram() const { return compute_hist_; }
+  // Wake-up minus scheduled wake-up, µs: cyclictest's latency, measured the same way.
+  const LatencyHistogram& wake_histogram() const { return wake_hist_; }
   const State& state() const { return state_; }
   RealtimeReport realtime_report() const { return rt_report_; }
 
  private:
+  void SetUpThread();  // real-time setup and pinning of the calling thread, said on stderr
   void ApplyCommands();
   bool PublishMesh(bool final_frame);  // false when no buffer was free
   void Reset();
@@ -153,7 +166,9 @@ class Loop {
   bool last_button_ = false;       // the device's button last tick
   LatencyHistogram period_hist_;
   LatencyHistogram compute_hist_;
+  LatencyHistogram wake_hist_;
   RealtimeReport rt_report_;
+  int dma_latency_fd_ = -1;  // open while the loop runs: the kernel drops the request on close
 
   // Rings: samples out, surface slots out and back, commands in.
   boost::lockfree::spsc_queue<TickSample> samples_;
@@ -168,11 +183,39 @@ class Loop {
   std::atomic<bool> realtime_{false};
 };
 
-// CLOCK_MONOTONIC now, ns.
+// CLOCK_MONOTONIC now, ns (clock_gettime through the vDSO: no system call with the tsc or
+// kvm-clock clocksource).
 int64_t MonotonicNs();
 
-// Tries SCHED_FIFO at `priority` for the calling thread, mlockall(MCL_CURRENT | MCL_FUTURE) and
-// a 1 ns timer slack; reports what worked. Not for the tick itself (it makes system calls).
-RealtimeReport SetUpRealtime(int priority);
+// Returns at CLOCK_MONOTONIC deadline_ns or later, with the time it saw then, ns: clock_nanosleep
+// (TIMER_ABSTIME) until deadline_ns - spin_ns, then MonotonicNs in a busy loop until deadline_ns.
+// spin_ns 0 = sleep all the way. The spin trades up to spin_ns of CPU per call for a wake-up that
+// does not depend on the timer interrupt's latency. Loop thread; no allocation, and no system
+// call but the sleep.
+int64_t WaitUntil(int64_t deadline_ns, int64_t spin_ns);
+
+// Tries SCHED_FIFO at `priority` for the calling thread, mlockall(MCL_CURRENT | MCL_FUTURE), a
+// 1 ns timer slack and a 0 µs CPU idle exit latency (writes 0 to /dev/cpu_dma_latency, as
+// cyclictest does; the request holds while *dma_latency_fd stays open, -1 when refused); reports
+// what worked. Not for the tick itself (it makes system calls).
+RealtimeReport SetUpRealtime(int priority, int* dma_latency_fd);
+
+// The CPUs this process may run on (sched_getaffinity), ascending. Allocates; not in the tick.
+std::vector<int> AllowedCpus();
+
+// Restricts the calling thread to `cpu` alone; 0 or the errno.
+int PinThisThread(int cpu);
+
+// Restricts the calling thread to the allowed CPUs other than `cpu`, so that it and the threads it
+// starts later leave `cpu` to the loop; the CPUs it kept, empty when `cpu` is the only one (the
+// thread is then left as it was).
+std::vector<int> KeepThisThreadOff(int cpu);
+
+// Hypervisor steal time since boot, ms: the 8th value of `line` ("cpu" = all CPUs summed,
+// "cpu1" = CPU 1) in /proc/stat, in USER_HZ (sysconf(_SC_CLK_TCK)); -1 when unreadable. USER_HZ
+// is usually 100, so the figure moves in 10 ms steps. Reads a file and allocates: not in the loop.
+int64_t ReadStealMs(const std::string& line);
+// The same from /proc/stat's text (for tests).
+int64_t ParseStealMs(const std::string& proc_stat, const std::string& line, long user_hz);
 
 }  // namespace idms::agent
