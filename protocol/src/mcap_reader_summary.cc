@@ -22,6 +22,26 @@ uint32_t GetU32(const char* p) {
   return v;
 }
 
+// A map<uint16, uint64> field (`map_bytes` long, just read) entry by entry into add(key, value);
+// false with what is wrong when its length is not whole entries within the record.
+template <class Add>
+bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char* field, std::string* what,
+                   Add add) {
+  if (map_bytes % 10 != 0 || map_bytes > c.remaining()) {
+    *what = std::string(record) + " record: " + field + " of " + std::to_string(map_bytes) +
+            " bytes is not a whole number of entries within the record";
+    return false;
+  }
+  for (uint32_t i = 0; i < map_bytes / 10; ++i) {
+    uint16_t key = 0;
+    uint64_t value = 0;
+    c.U16(&key, field);
+    c.U64(&value, field);
+    add(key, value);
+  }
+  return true;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -152,18 +172,10 @@ bool McapReader::Impl::ReadChunkIndex(std::string_view content, uint64_t pos, ui
   if (c.U64(&chunk.message_start_ns, "message_start_time") && c.U64(&chunk.message_end_ns, "message_end_time") &&
       c.U64(&chunk.offset, "chunk_start_offset") && c.U64(&chunk.length, "chunk_length") &&
       c.U32(&map_bytes, "message_index_offsets")) {
-    if (map_bytes % 10 != 0 || map_bytes > c.remaining()) {
-      return Fail(where,
-                  "ChunkIndex record: message_index_offsets of " + std::to_string(map_bytes) +
-                      " bytes is not a whole number of entries within the record",
-                  error);
-    }
-    for (uint32_t i = 0; i < map_bytes / 10; ++i) {
-      uint16_t channel = 0;
-      uint64_t offset = 0;
-      c.U16(&channel, "message_index_offsets");
-      c.U64(&offset, "message_index_offsets");
-      location.offsets.emplace_back(channel, offset);
+    std::string what;
+    if (!ReadU16U64Map(c, map_bytes, "ChunkIndex", "message_index_offsets", &what,
+                       [&](uint16_t channel, uint64_t offset) { location.offsets.emplace_back(channel, offset); })) {
+      return Fail(where, what, error);
     }
   }
   if (!c.U64(&location.length, "message_index_length") || !c.String(&compression, "compression") ||
@@ -211,18 +223,10 @@ bool McapReader::Impl::ReadStatistics(std::string_view content, uint64_t pos,
       !c.U32(&map_bytes, "channel_message_counts")) {
     return Fail("Statistics record", c.Error(), error);
   }
-  if (map_bytes % 10 != 0 || map_bytes > c.remaining()) {
-    return Fail("byte " + std::to_string(pos),
-                "Statistics record: channel_message_counts of " + std::to_string(map_bytes) +
-                    " bytes is not a whole number of entries within the record",
-                error);
-  }
-  for (uint32_t i = 0; i < map_bytes / 10; ++i) {
-    uint16_t channel = 0;
-    uint64_t count = 0;
-    c.U16(&channel, "channel_message_counts");
-    c.U64(&count, "channel_message_counts");
-    (*channel_counts)[channel] = count;
+  std::string what;
+  if (!ReadU16U64Map(c, map_bytes, "Statistics", "channel_message_counts", &what,
+                     [&](uint16_t channel, uint64_t count) { (*channel_counts)[channel] = count; })) {
+    return Fail("byte " + std::to_string(pos), what, error);
   }
   return true;
 }

@@ -12,6 +12,7 @@
 #include "idms/sim/integrate.h"
 #include "idms/sim/stability.h"
 #include "idms/sim/workspace.h"
+#include "step_internal.h"
 
 namespace idms {
 namespace {
@@ -48,19 +49,6 @@ StageTwoState FormPass(const Model& m, const SphereForm& form, const State& s, s
   }
   out.max_speed = std::sqrt(max_speed2);
   return out;
-}
-
-// Elastic energy against the slab's own (flat) rest lengths.
-double ElasticEnergy(const Model& m, const State& s) {
-  double h = 0;
-  for (int32_t e = 0; e < m.num_elems; ++e) {
-    const Real* p0 = &s.atom_pos[3 * m.elem_atoms[2 * e]];
-    const Real* p1 = &s.atom_pos[3 * m.elem_atoms[2 * e + 1]];
-    const double dx = p1[0] - p0[0], dy = p1[1] - p0[1], dz = p1[2] - p0[2];
-    const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - m.elem_leq[e];
-    h += 0.5 * m.elem_k[e] * stretch * stretch;
-  }
-  return h;
 }
 
 // Stage 1 (thesis 5.6.1): the slab's bounding-box centre over the form's centre, its lowest atom
@@ -256,7 +244,7 @@ DrapeResult Drape(const Model& slab, const DrapeOptions& o, const std::function<
       p.tick = tick;
       p.kinetic = now.kinetic;
       p.max_speed = now.max_speed;
-      p.energy = now.kinetic + now.form + ElasticEnergy(m, s);
+      p.energy = now.kinetic + now.form + internal::ElasticEnergy(m, s);
       p.fraction = std::min(1.0, s.time_s / o.max_time_s);
       p.settled = settled;
       if (tick == 0) result.energy_start = p.energy;

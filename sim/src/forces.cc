@@ -229,6 +229,13 @@ double ModelEnergy(const Model& m, const State& s, const Workspace& ws) {
       }
     }
   }
+  return h + internal::ElasticEnergy(m, s);
+}
+
+namespace internal {
+
+double ElasticEnergy(const Model& m, const State& s) {
+  double h = 0;
   for (int32_t e = 0; e < m.num_elems; ++e) {
     const Real* p0 = &s.atom_pos[3 * m.elem_atoms[2 * e]];
     const Real* p1 = &s.atom_pos[3 * m.elem_atoms[2 * e + 1]];
@@ -238,5 +245,7 @@ double ModelEnergy(const Model& m, const State& s, const Workspace& ws) {
   }
   return h;
 }
+
+}  // namespace internal
 
 }  // namespace idms

@@ -172,33 +172,34 @@ void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
   if (repaired) ++s.warnings.state_repaired;
 }
 
-// Rollback copy of the active region: atoms by slot, elements by list index.
-void Backup(const State& s, Workspace& ws) {
+// The active region and its rollback copy: atoms by slot, elements by list index. kSave: State
+// to the copy (the tick's start); else the copy back to State.
+template <bool kSave>
+void CopyRegion(State& s, Workspace& ws) {
+  auto copy = [](auto& in_state, auto& in_copy) {
+    if constexpr (kSave) {
+      in_copy = in_state;
+    } else {
+      in_state = in_copy;
+    }
+  };
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
-    for (int c = 0; c < 3; ++c) ws.backup_pos[3 * i + c] = s.atom_pos[3 * a + c], ws.backup_vel[3 * i + c] = s.atom_vel[3 * a + c];
+    for (int c = 0; c < 3; ++c) copy(s.atom_pos[3 * a + c], ws.backup_pos[3 * i + c]), copy(s.atom_vel[3 * a + c], ws.backup_vel[3 * i + c]);
   }
   const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
   for (int32_t i = 0; i < num_elems; ++i) {
     const int32_t e = ws.elems[i];
-    ws.backup_elem_len[i] = s.elem_len[e];
-    ws.backup_elem_rate[i] = s.elem_rate[e];
-    ws.backup_elem_stamp[i] = s.elem_stamp[e];
+    copy(s.elem_len[e], ws.backup_elem_len[i]);
+    copy(s.elem_rate[e], ws.backup_elem_rate[i]);
+    copy(s.elem_stamp[e], ws.backup_elem_stamp[i]);
   }
 }
 
-void Restore(State& s, const Workspace& ws, int64_t clock) {
-  for (int32_t i = 0; i < ws.num_active; ++i) {
-    const int32_t a = ws.active[i];
-    for (int c = 0; c < 3; ++c) s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
-  }
-  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
-  for (int32_t i = 0; i < num_elems; ++i) {
-    const int32_t e = ws.elems[i];
-    s.elem_len[e] = ws.backup_elem_len[i];
-    s.elem_rate[e] = ws.backup_elem_rate[i];
-    s.elem_stamp[e] = ws.backup_elem_stamp[i];
-  }
+void Backup(State& s, Workspace& ws) { CopyRegion<true>(s, ws); }
+
+void Restore(State& s, Workspace& ws, int64_t clock) {
+  CopyRegion<false>(s, ws);
   s.substep_clock = clock;
 }
 

@@ -74,6 +74,9 @@ struct Energy {
 };
 Energy ActiveEnergy(const Model& model, const State& state, const Workspace& ws);
 
+// Elastic energy of every element against its rest length, sum of k (l - l_eq)^2 / 2.
+double ElasticEnergy(const Model& model, const State& state);
+
 // integrate.cc — stage 4: `substeps` substeps of `integrator` over dt; accumulates the tools'
 // tick_force (evaluation-weighted average of eval_force). Returns CG iterations (implicit).
 int32_t RunIntegrator(const Model& model, State& state, Workspace& ws, Integrator integrator, int32_t substeps,

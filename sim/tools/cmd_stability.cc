@@ -15,6 +15,7 @@
 
 #include "command.h"
 #include "idms/sim/haptic_window.h"
+#include "idms/sim/step.h"
 #include "plot.h"
 
 namespace idms::tool {
@@ -30,28 +31,6 @@ struct StabilityArgs {
   std::string out;
   int steps = 201;
 };
-
-// `--integrator` names of step.h's schemes (issue 3 uses the same for `idms-sim run`).
-constexpr std::pair<const char*, Integrator> kSchemes[] = {
-    {"euler", Integrator::kExplicitEuler},
-    {"symplectic", Integrator::kSymplecticEuler},
-    {"rk4", Integrator::kRk4},
-    {"implicit", Integrator::kImplicitEuler},
-};
-
-const char* SchemeName(Integrator integrator) {
-  for (const auto& [name, scheme] : kSchemes) {
-    if (scheme == integrator) return name;
-  }
-  return "?";
-}
-
-std::optional<Integrator> ParseScheme(const std::string& name) {
-  for (const auto& [scheme_name, scheme] : kSchemes) {
-    if (name == scheme_name) return scheme;
-  }
-  return std::nullopt;
-}
 
 // The parameter P of `--sweep P ...`, as the figures of section 4.2 vary them.
 struct SweepParam {
@@ -107,7 +86,7 @@ void RunPoint(const StabilityArgs& args, Integrator integrator) {
   const HapticWindowParams& p = args.params;
   const StabilityReport report = AnalyzeHapticWindow(p, integrator);
   if (args.json) {
-    PrintJson({{"integrator", SchemeName(integrator)},
+    PrintJson({{"integrator", IntegratorName(integrator)},
                {"eigenvalues", Pairs(report.discrete)},
                {"continuous_eigenvalues", Pairs(report.continuous)},
                {"spectral_radius", report.spectral_radius},
@@ -115,7 +94,7 @@ void RunPoint(const StabilityArgs& args, Integrator integrator) {
     return;
   }
   std::cout << "haptic window (thesis fig. 4-2, eq. 4.17): k = " << Num(p.k) << ", b = " << Num(p.b)
-            << ", m = " << Num(p.m) << ", dt = " << Num(p.dt_s) << " s, integrator " << SchemeName(integrator)
+            << ", m = " << Num(p.m) << ", dt = " << Num(p.dt_s) << " s, integrator " << IntegratorName(integrator)
             << "\ncontinuous eigenvalues of A (1/s):\n";
   for (const auto& v : report.continuous) std::cout << "  " << Complex(v) << "\n";
   std::cout << "discrete eigenvalues of A_z (z-plane):              |z|\n";
@@ -231,7 +210,7 @@ bool PlotLocus(const Sweep& sweep, const std::string& csv_path, const std::strin
   PlotSpec spec;
   spec.title = "Z-plane root locus of the haptic window (cf. thesis fig. " + std::string(sweep.param->figure) +
                "): " + Num(sweep.from) + " < " + sweep.param->name + " < " + Num(sweep.to) + ", " +
-               SchemeName(sweep.integrator);
+               IntegratorName(sweep.integrator);
   spec.x_label = "Re z";
   spec.y_label = "Im z";
   spec.color_label = sweep.param->name;
@@ -287,7 +266,7 @@ void RunSweep(const StabilityArgs& args, Integrator integrator) {
                         {"from", sweep.from},
                         {"to", sweep.to},
                         {"steps", sweep.steps},
-                        {"integrator", SchemeName(integrator)},
+                        {"integrator", IntegratorName(integrator)},
                         {"nominal", {{"k", p.k}, {"b", p.b}, {"m", p.m}, {"dt", p.dt_s}}},
                         {"stable_at_from", sweep.ExactStable(sweep.from)},
                         {"edges", EdgesJson(edges)},
@@ -299,7 +278,7 @@ void RunSweep(const StabilityArgs& args, Integrator integrator) {
     PrintJson(j);
   } else {
     std::cout << "swept " << name << " from " << Num(sweep.from) << " to " << Num(sweep.to) << " (" << sweep.steps
-              << " values), integrator " << SchemeName(integrator) << ", others at " << FixedValues(sweep.base) << "\n"
+              << " values), integrator " << IntegratorName(integrator) << ", others at " << FixedValues(sweep.base) << "\n"
               << "exact (eigenvalues): " << EdgesText(edges, name, sweep.ExactStable(sweep.from))
               << "; max spectral radius " << Num(max_radius) << "\n";
     if (has_gershgorin) {
@@ -329,16 +308,16 @@ void Setup(CLI::App& app) {
       cmd->add_option("--steps", args->steps, "with --sweep: number of values, ends included")->capture_default_str();
   cmd->callback([args, steps] {
     // Validate everything before computing anything.
-    const std::optional<Integrator> integrator = ParseScheme(args->integrator);
-    if (!integrator) {
+    Integrator integrator{};
+    if (!ParseIntegratorName(args->integrator, &integrator)) {
       Fail(kCommand, "unknown --integrator '" + args->integrator + "' (expected euler, symplectic, rk4 or implicit)");
     }
     ValidateParams(args->params);
     if (args->sweep.empty()) {
       if (!args->out.empty() || steps->count() > 0) Fail(kCommand, "--out and --steps are only used with --sweep");
-      RunPoint(*args, *integrator);
+      RunPoint(*args, integrator);
     } else {
-      RunSweep(*args, *integrator);
+      RunSweep(*args, integrator);
     }
   });
 }

@@ -13,14 +13,7 @@ namespace idms {
 namespace {
 
 using test::OneSpring;
-
-StepOptions FullOptions(Integrator integrator, double dt) {
-  StepOptions o;
-  o.full = true;
-  o.integrator = integrator;
-  o.dt_s = dt;
-  return o;
-}
+using test::FullOptions;
 
 TEST(IntegrateExplicitEuler, MatchesEquations413To415ByHand) {
   const double k = 15, b = 0.2, m = 0.002, T = 1e-4;

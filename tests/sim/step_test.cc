@@ -20,14 +20,7 @@ namespace {
 
 using test::HashState;
 using test::SphereAt;
-
-StepOptions FullOptions(Integrator integrator, double dt) {
-  StepOptions o;
-  o.full = true;
-  o.integrator = integrator;
-  o.dt_s = dt;
-  return o;
-}
+using test::FullOptions;
 
 TEST(StepFieldForces, GravityAndAirOnlyWhenAsked) {
   const Model model = GenerateSlab(SlabOptions{});

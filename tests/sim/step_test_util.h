@@ -7,6 +7,7 @@
 
 #include "idms/sim/model.h"
 #include "idms/sim/state.h"
+#include "idms/sim/step.h"
 #include "idms/sim/tool.h"
 
 namespace idms::test {
@@ -24,6 +25,15 @@ inline Model OneSpring(double k, double b, double mass, double leq = 1.0) {
   m.elem_b = {b};
   FinalizeModel(m);
   return m;
+}
+
+// Full mode (local simulation off) with the given integrator and step.
+inline StepOptions FullOptions(Integrator integrator, double dt) {
+  StepOptions o;
+  o.full = true;
+  o.integrator = integrator;
+  o.dt_s = dt;
+  return o;
 }
 
 inline ToolInput SphereAt(double x, double y, double z, double r = 1.5, double k = 400,
