@@ -6,6 +6,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -337,10 +338,13 @@ int Main(int argc, char** argv) {
       std::fprintf(stderr, "idms-agent: I/O thread on CPUs %s\n", CpuList(platform.io_cpus).c_str());
     }
   }
-  // Steal before and after the run, read here: never on the loop thread.
+  // Steal before and after the run, read here: never on the loop thread. {all CPUs, the loop's
+  // CPU}, -1 where unreadable (or not pinned).
   const std::string loop_cpu_line = Cat({"cpu", std::to_string(lo.cpu)});
-  const int64_t steal_start_ms = ReadStealMs("cpu");
-  const int64_t steal_start_cpu_ms = lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1;
+  auto read_steal = [&] {
+    return std::array<int64_t, 2>{ReadStealMs("cpu"), lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1};
+  };
+  const std::array<int64_t, 2> steal_start = read_steal();
 
   // The loop thread starts with SIGINT/SIGTERM blocked: they are this thread's to handle.
   sigset_t block, old;
@@ -352,11 +356,10 @@ int Main(int argc, char** argv) {
   pthread_sigmask(SIG_SETMASK, &old, nullptr);
   const bool ok = uplink.Run();
   loop_thread.join();
-  const int64_t steal_end_ms = ReadStealMs("cpu");
-  const int64_t steal_end_cpu_ms = lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1;
-  if (steal_start_ms >= 0 && steal_end_ms >= 0) platform.steal_ms = steal_end_ms - steal_start_ms;
-  if (steal_start_cpu_ms >= 0 && steal_end_cpu_ms >= 0)
-    platform.steal_ms_loop_cpu = steal_end_cpu_ms - steal_start_cpu_ms;
+  const std::array<int64_t, 2> steal_end = read_steal();
+  auto delta = [](int64_t start, int64_t end) { return start >= 0 && end >= 0 ? end - start : int64_t{-1}; };
+  platform.steal_ms = delta(steal_start[0], steal_end[0]);
+  platform.steal_ms_loop_cpu = delta(steal_start[1], steal_end[1]);
 
   // Figures, files, exit status.
   const LatencySummary period = loop.period_histogram().Summary();
