@@ -19,10 +19,11 @@ namespace {
 double StreamedBytes(const idms::Model& m, const idms::Workspace& ws) {
   using idms::Real;
   const double r = sizeof(Real);
-  // Per element of the walk: other endpoint (int32), element id when the ids are not the walk
-  // order (int32), k, b, l_eq; the eq. 4.6 length and rate read and written, and copied.
+  // Per element of the walk: its two endpoints (the group's atom and the other, int32 each),
+  // element id when the ids are not the walk order (int32), k, b, l_eq; the eq. 4.6 length and
+  // rate read and written, and copied.
   const bool filter = ws.any_damping;
-  const double per_elem = 4 + (ws.full.identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
+  const double per_elem = 4 + 4 + (ws.full.identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
   // Per free atom: slot -> atom id and group end (int32 each), mass; position and velocity read
   // and written; the 4-wide force accumulator read and written; position and velocity copied.
   const double per_free = 4 + 4 + r + 2 * 3 * r + 2 * 3 * r + 2 * 4 * r + 2 * 3 * r;
@@ -49,6 +50,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
   workspace.full.enabled = variant.fused;
+  workspace.full.huge_pages = variant.huge_pages;
   // A deformed start, so every element carries force.
   for (int32_t i = 0; i < model.num_atoms; ++i) {
     if (!model.atom_fixed[i]) state.atom_pos[3 * i + 2] += static_cast<Real>(0.01 * std::sin(0.37 * i));
@@ -84,6 +86,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   r.bound_ratio = median(ratios);
   r.triad_bytes_per_s = median(triads);
   r.identity = workspace.full.identity;
+  r.huge_mib = static_cast<double>(workspace.full.huge_bytes) / (1 << 20);
   r.bytes_per_elem = bytes_per_elem;
   return r;
 }

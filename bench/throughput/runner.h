@@ -8,6 +8,7 @@
 struct ThroughputVariant {
   bool reorder = true;  // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
   bool fused = true;    // full mode's fused pass (false: the general path, ws.full.enabled = false)
+  bool huge_pages = true;  // FullPass::huge_pages (the pass's arrays on 2 MiB pages where the kernel agrees)
 };
 
 struct ThroughputResult {
@@ -21,6 +22,7 @@ struct ThroughputResult {
   double triad_bytes_per_s = 0;  // median of the triads paired with the repetitions
   double ns_per_step = 0;
   bool identity = false;  // the fused pass read its element arrays without an index
+  double huge_mib = 0;    // MiB of the pass's arrays the kernel put on huge pages (FullPass::huge_bytes)
 };
 
 // Steps a full (local simulation off) slab of about `atoms` atoms with symplectic Euler for at

@@ -58,7 +58,7 @@ int main(int argc, char** argv) {
   std::vector<long long> sizes = {1000, 10000, 100000, 1000000};
   double seconds = 0.5;
   int reps = 5;
-  bool bullet = true;
+  bool bullet = true, variants = true, f64 = true, f32 = true, huge = true;
   const char* csv_path = nullptr;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) {
@@ -69,8 +69,20 @@ int main(int argc, char** argv) {
       csv_path = argv[++i];
     } else if (!std::strcmp(argv[i], "--atoms") && i + 1 < argc) {
       sizes = {std::atoll(argv[++i])};
+    } else if (!std::strcmp(argv[i], "--precision") && i + 1 < argc) {
+      const char* p = argv[++i];
+      f64 = !std::strcmp(p, "f64") || !std::strcmp(p, "both");
+      f32 = !std::strcmp(p, "f32") || !std::strcmp(p, "both");
+      if (!f64 && !f32) {
+        std::fprintf(stderr, "--precision: expected f32, f64 or both, got '%s'\n", p);
+        return 2;
+      }
+    } else if (!std::strcmp(argv[i], "--no-huge-pages")) {
+      huge = false;
+    } else if (!std::strcmp(argv[i], "--main-only")) {
+      variants = false, bullet = false;
     } else {
-      std::fprintf(stderr, "usage: %s [--quick] [--no-bullet] [--atoms N] [--csv FILE]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--quick] [--no-bullet] [--main-only] [--no-huge-pages] [--precision f32|f64|both] [--atoms N] [--csv FILE]\n", argv[0]);
       return 2;
     }
   }
@@ -91,20 +103,25 @@ int main(int argc, char** argv) {
     std::fprintf(csv,
                  "atoms,elements,double_el_per_s,double_bytes_per_el,double_bound_ratio,float_el_per_s,"
                  "float_bytes_per_el,float_bound_ratio,float_as_generated_el_per_s,float_general_el_per_s,"
-                 "double_general_el_per_s,bullet_el_per_s,triad_bytes_per_s,float_paired_triad_bytes_per_s\n");
+                 "double_general_el_per_s,bullet_el_per_s,triad_bytes_per_s,float_paired_triad_bytes_per_s,"
+                 "double_huge_mib,float_huge_mib\n");
   }
+  std::string huge_note;
   for (long long n : sizes) {
-    const ThroughputResult d = RunThroughputDouble(n, seconds, reps, {});
-    const ThroughputResult f = RunThroughputFloat(n, seconds, reps, {});
-    const ThroughputResult f_gen = RunThroughputFloat(n, seconds, reps, {.reorder = false});
-    const ThroughputResult f_general = RunThroughputFloat(n, seconds, reps, {.reorder = true, .fused = false});
-    const ThroughputResult d_general = RunThroughputDouble(n, seconds, reps, {.reorder = true, .fused = false});
+    const ThroughputResult d = f64 ? RunThroughputDouble(n, seconds, reps, {.huge_pages = huge}) : ThroughputResult{};
+    const ThroughputResult f = f32 ? RunThroughputFloat(n, seconds, reps, {.huge_pages = huge}) : ThroughputResult{};
+    // --main-only: the fused pass on the renumbered slab only (the other columns print 0).
+    const ThroughputResult f_gen = variants && f32 ? RunThroughputFloat(n, seconds, reps, {.reorder = false, .huge_pages = huge}) : ThroughputResult{};
+    const ThroughputResult f_general =
+        variants && f32 ? RunThroughputFloat(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge}) : ThroughputResult{};
+    const ThroughputResult d_general =
+        variants && f64 ? RunThroughputDouble(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge}) : ThroughputResult{};
     int64_t links = 0;
     const double b = bullet ? RunBulletSoftBody(n, seconds, reps, &links) : 0;
     const double d_ratio = d.bound_ratio, f_ratio = f.bound_ratio;
     std::printf("%9lld %9lld | %10.3e %6.1f %4.0f%% | %10.3e %6.1f %4.0f%% %6.1f | %10.3e %10.3e | ",
-                static_cast<long long>(d.atoms), static_cast<long long>(d.elements), d.elem_updates_per_s,
-                d.bytes_per_elem, 100 * d_ratio, f.elem_updates_per_s, f.bytes_per_elem, 100 * f_ratio,
+                static_cast<long long>(f64 ? d.atoms : f.atoms), static_cast<long long>(f64 ? d.elements : f.elements),
+                d.elem_updates_per_s, d.bytes_per_elem, 100 * d_ratio, f.elem_updates_per_s, f.bytes_per_elem, 100 * f_ratio,
                 f.triad_bytes_per_s / 1e9, f_gen.elem_updates_per_s, f_general.elem_updates_per_s);
     if (b > 0) {
       std::printf("%10.3e %6.1fx\n", b, f.elem_updates_per_s / b);
@@ -112,12 +129,17 @@ int main(int argc, char** argv) {
       std::printf("%10s %7s\n", "n/a", "n/a");
     }
     if (csv) {
-      std::fprintf(csv, "%lld,%lld,%.6g,%.4g,%.4f,%.6g,%.4g,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
-                   static_cast<long long>(d.atoms), static_cast<long long>(d.elements), d.elem_updates_per_s,
+      std::fprintf(csv, "%lld,%lld,%.6g,%.4g,%.4f,%.6g,%.4g,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.1f,%.1f\n",
+                   static_cast<long long>(f64 ? d.atoms : f.atoms), static_cast<long long>(f64 ? d.elements : f.elements),
+                   d.elem_updates_per_s,
                    d.bytes_per_elem, d_ratio, f.elem_updates_per_s, f.bytes_per_elem, f_ratio, f_gen.elem_updates_per_s,
-                   f_general.elem_updates_per_s, d_general.elem_updates_per_s, b, triad, f.triad_bytes_per_s);
+                   f_general.elem_updates_per_s, d_general.elem_updates_per_s, b, triad, f.triad_bytes_per_s,
+                   d.huge_mib, f.huge_mib);
     }
     std::fflush(stdout);
+    char line[128];
+    std::snprintf(line, sizeof line, " %lld atoms: f64 %.0f MiB, f32 %.0f MiB;", n, d.huge_mib, f.huge_mib);
+    huge_note += line;
   }
   if (csv) std::fclose(csv);
   std::printf(
@@ -125,6 +147,8 @@ int main(int argc, char** argv) {
       "element and step, counted from its layout; bound = median over repetitions of el/s / (triad bytes/s / B/el),\n"
       "each repetition against the triad taken just before it; triad = the f32 run's median paired triad, GB/s.\n"
       "f32 as-gen = the slab in generator order (element arrays read through an index); f32 gener. = the general\n"
-      "path on the renumbered slab (StepOptions as above, the fused pass switched off).\n");
+      "path on the renumbered slab (StepOptions as above, the fused pass switched off).\n"
+      "The pass's arrays on 2 MiB pages (FullPass::huge_pages%s):%s\n",
+      huge ? "" : ", off: --no-huge-pages", huge_note.c_str());
   return 0;
 }

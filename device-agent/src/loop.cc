@@ -165,6 +165,9 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   // Simulation buffers, and their rest copies for Reset.
   state_ = MakeState(model_);
   workspace_ = MakeWorkspace(model_, step_options_);
+  // No madvise from the loop's first full-mode tick: huge pages pay only past the caches, far
+  // beyond what a 1 kHz full-mode scene can step.
+  workspace_.full.huge_pages = false;
   // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5).
   ResyncWorkspace(model_, state_, workspace_);
   rest_model_ = model_;

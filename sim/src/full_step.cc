@@ -6,10 +6,14 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
 
+#include "full_step_internal.h"
 #include "idms/sim/check.h"
 #include "idms/sim/integrate.h"
 #include "idms/sim/model.h"
@@ -18,19 +22,6 @@
 
 namespace idms::internal {
 namespace {
-
-// Where the eq. 4.8 length rate comes from in this pass.
-enum class Rate : uint8_t {
-  kNone,             // no element has b > 0: no rate, no filter
-  kAnalytic,         // s^ . (v1 - v0)
-  kFiltered,         // eq. 4.6; every element was updated in the previous substep, none degenerate
-  kFilteredMarked,   // eq. 4.6; as kFiltered, but some carry a restart mark (kFilterRestart)
-  kFilteredStamped,  // eq. 4.6, freshness read from each element's stamp (first fused substep)
-};
-
-constexpr bool IsFiltered(Rate rate) {
-  return rate == Rate::kFiltered || rate == Rate::kFilteredMarked || rate == Rate::kFilteredStamped;
-}
 
 // An atom's three components and a fourth lane, as one vector: GCC and Clang vector extensions
 // when the target has registers that wide (float: SSE or NEON; double: AVX), else four plain
@@ -41,9 +32,9 @@ constexpr bool IsFiltered(Rate rate) {
 using V4 = Real __attribute__((vector_size(4 * sizeof(Real))));
 
 inline V4 Make4(Real x, Real y, Real z) { return V4{x, y, z, 0}; }
-inline Real X(const V4& v) { return v[0]; }
-inline Real Y(const V4& v) { return v[1]; }
-inline Real Z(const V4& v) { return v[2]; }
+[[maybe_unused]] inline Real X(const V4& v) { return v[0]; }
+[[maybe_unused]] inline Real Y(const V4& v) { return v[1]; }
+[[maybe_unused]] inline Real Z(const V4& v) { return v[2]; }
 inline V4 Load4(const Real* p) {
   V4 v;
   std::memcpy(&v, p, sizeof(v));
@@ -51,6 +42,8 @@ inline V4 Load4(const Real* p) {
 }
 inline void Store4(Real* p, V4 v) { std::memcpy(p, &v, sizeof(v)); }
 inline void Store3(Real* p, V4 v) { std::memcpy(p, &v, 3 * sizeof(Real)); }
+// A row of the batch scratch: lanes 0-2, and lane 3 too where that is cheaper.
+inline void StoreRow(Real* p, V4 v) { Store4(p, v); }
 
 // Atom a's xyz from a (num_atoms x 3) array; the 4th lane reads the next atom's x, except for the
 // last atom, whose array ends there.
@@ -76,42 +69,9 @@ inline Real Z(const V4& v) { return v.z; }
 inline V4 Load4(const Real* p) { return V4{p[0], p[1], p[2]}; }
 inline void Store4(Real* p, V4 v) { p[0] = v.x, p[1] = v.y, p[2] = v.z, p[3] = 0; }
 inline void Store3(Real* p, V4 v) { p[0] = v.x, p[1] = v.y, p[2] = v.z; }
+inline void StoreRow(Real* p, V4 v) { Store3(p, v); }
 inline V4 LoadAtom(const Real* base, int32_t a, int32_t) { return Load4(base + 3 * a); }
 #endif
-
-// The rollback copy is written once and read only after a failure: non-temporal stores keep it
-// from evicting the arrays the pass is still working on, and skip the read-for-ownership.
-template <class T>
-inline void StreamStore(T* dst, T value) {
-#if defined(__SSE2__)
-  if constexpr (sizeof(T) == 4) {
-    _mm_stream_si32(reinterpret_cast<int*>(dst), std::bit_cast<int>(value));
-  } else {
-    static_assert(sizeof(T) == 8);
-    _mm_stream_si64(reinterpret_cast<long long*>(dst), std::bit_cast<long long>(value));
-  }
-#else
-  *dst = value;
-#endif
-}
-
-// Copies n values (dst 16-byte aligned) with non-temporal stores.
-inline void StreamCopy(Real* dst, const Real* src, int32_t n) {
-  int32_t j = 0;
-#if defined(__SSE2__)
-  constexpr int32_t kLanes = 16 / sizeof(Real);
-  if (reinterpret_cast<uintptr_t>(dst) % 16 == 0) {
-    for (; j + kLanes <= n; j += kLanes) {
-      if constexpr (sizeof(Real) == 4) {
-        _mm_stream_ps(reinterpret_cast<float*>(dst + j), _mm_loadu_ps(reinterpret_cast<const float*>(src + j)));
-      } else {
-        _mm_stream_pd(reinterpret_cast<double*>(dst + j), _mm_loadu_pd(reinterpret_cast<const double*>(src + j)));
-      }
-    }
-  }
-#endif
-  for (; j < n; ++j) StreamStore(dst + j, src[j]);
-}
 
 // x - x is 0 for finite x and NaN otherwise: true when lanes 0-2 of such a difference are all 0
 // (lane 3 belongs to the next atom).
@@ -141,15 +101,15 @@ inline void StreamFence() {
 #endif
 }
 
-// Elements per batch: the batch's temporaries (15 values per element) stay in L1.
-constexpr int32_t kBatch = 128;
-
-// The per-batch temporaries, views into FullPass::scratch.
+// The per-batch temporaries, views into FullPass::scratch. s' (and v_other - v_g) is one 4-wide
+// row per element, written by phase 1 with one vector store and transposed by phase 2; the force
+// comes back by component, which phase 3 loads with three scalar loads. Rejected: components
+// for s' too (three scalar stores in phase 1; 5% slower at 10^6 atoms), and rows for the force
+// (phase 2's transposes cost more than they save in phase 3; 8% slower).
 struct Batch {
-  Real *dx, *dy, *dz;     // (kBatch) s' = p_other - p_g, by component (so phase 2 vectorises)
-  Real *dvx, *dvy, *dvz;  // (kBatch) v_other - v_g (analytic rate)
+  Real* s4;               // (kBatch x 4) s' = p_other - p_g; lane 3 is not read
+  Real* dv4;              // (kBatch x 4) v_other - v_g (analytic rate)
   Real *ex, *ey, *ez;     // (kBatch) the element's force on g (eq. 4.9, g's frame)
-  Real* l;                // (kBatch) eq. 4.4
   Real* prev_len;         // (kBatch) eq. 4.6 inputs when they are gathered
   Real* prev_rate;        // (kBatch)
   Real* fresh;            // (kBatch) 1 = continue the filter, 0 = restart it
@@ -160,17 +120,17 @@ struct Batch {
 Batch BatchViews(FullPass& fp) {
   Real* p = fp.scratch.data();
   Batch b;
-  b.dx = p, b.dy = p + kBatch, b.dz = p + 2 * kBatch;
-  b.dvx = p + 3 * kBatch, b.dvy = p + 4 * kBatch, b.dvz = p + 5 * kBatch;
-  b.ex = p + 6 * kBatch, b.ey = p + 7 * kBatch, b.ez = p + 8 * kBatch;
-  b.l = p + 9 * kBatch, b.prev_len = p + 10 * kBatch, b.prev_rate = p + 11 * kBatch;
-  b.fresh = p + 12 * kBatch, b.new_len = p + 13 * kBatch, b.new_rate = p + 14 * kBatch;
+  b.s4 = p, b.dv4 = p + 4 * kBatch;
+  b.ex = p + 8 * kBatch, b.ey = p + 9 * kBatch, b.ez = p + 10 * kBatch;
+  b.prev_len = p + 11 * kBatch, b.prev_rate = p + 12 * kBatch, b.fresh = p + 13 * kBatch;
+  b.new_len = p + 14 * kBatch, b.new_rate = p + 15 * kBatch;
   return b;
 }
-constexpr int32_t kScratchPerElement = 15;
+constexpr int32_t kScratchPerElement = 16;
 
 // How far a substep got: atoms [0, atoms) by slot and elements [0, elems) by walk index have
-// been written (and copied). ok = false: it stopped at a non-finite input or result.
+// been written (and copied). ok = false: it stopped at a non-finite input, or at the end of the
+// batch in which a result was not finite.
 struct Progress {
   int32_t atoms = 0;
   int32_t elems = 0;
@@ -178,86 +138,13 @@ struct Progress {
   bool ok = true;
 };
 
-// Phase 2's arrays, each a restrict parameter (GCC ignores restrict on locals and members), written
-// once for the functions below.
-#define IDMS_BATCH_PARAMS                                                                                             \
-  int32_t n, Real inv_t, Real lambda, const Real *__restrict k, const Real *__restrict b, const Real *__restrict leq, \
-      const Real *__restrict dx, const Real *__restrict dy, const Real *__restrict dz, const Real *__restrict dvx,    \
-      const Real *__restrict dvy, const Real *__restrict dvz, const Real *__restrict prev_len,                        \
-      const Real *__restrict prev_rate, const Real *__restrict fresh, Real *__restrict len, Real *__restrict rate_io, \
-      Real *__restrict l_out, Real *__restrict ex, Real *__restrict ey, Real *__restrict ez
-#define IDMS_BATCH_ARGS \
-  n, inv_t, lambda, k, b, leq, dx, dy, dz, dvx, dvy, dvz, prev_len, prev_rate, fresh, len, rate_io, l_out, ex, ey, ez
-
-// Phase 2 of a batch: eqs. 4.4-4.9 for n elements in contiguous arrays, as one loop the compiler
-// vectorises. len and rate hold the eq. 4.6 state in place (kDirectIn; kFilterRestart marks a
-// filter to restart, looked for only with kFilteredMarked) or receive it (inputs then come
-// gathered, with fresh = 0 restarting the filter: l_{n-1} = l, l'_{n-1} = 0). A degenerate
-// element's new state is replaced by a restart mark in phase 3.
-template <Rate kRate, bool kDirectIn>
-[[gnu::always_inline]] inline void BatchForcesBody(IDMS_BATCH_PARAMS) {
-  constexpr bool kFilter = IsFiltered(kRate);
-  for (int32_t j = 0; j < n; ++j) {
-    const Real sx = dx[j], sy = dy[j], sz = dz[j];
-    const Real l = std::sqrt(sx * sx + sy * sy + sz * sz);
-    l_out[j] = l;
-    [[maybe_unused]] Real rate = 0;
-    if constexpr (kFilter) {
-      Real pl, pr;
-      if constexpr (kDirectIn && kRate == Rate::kFilteredMarked) {
-        const Real old_len = len[j], old_rate = rate_io[j];
-        const bool keep = old_len != kFilterRestart;
-        pl = keep ? old_len : l;
-        pr = keep ? old_rate : Real(0);
-      } else if constexpr (kDirectIn) {
-        pl = len[j], pr = rate_io[j];
-      } else {
-        const Real gathered_len = prev_len[j], gathered_rate = prev_rate[j];
-        pl = fresh[j] != 0 ? gathered_len : l;
-        pr = fresh[j] != 0 ? gathered_rate : Real(0);
-      }
-      rate = lambda * (l - pl) * inv_t + (Real(1) - lambda) * pr;
-      len[j] = l;
-      rate_io[j] = rate;
-    }
-    // eqs. 4.7-4.9 as a multiple of s'.
-    const Real inv_l = Real(1) / l;
-    Real mag = k[j] * (Real(1) - leq[j] * inv_l);
-    if constexpr (kRate == Rate::kAnalytic) rate = (dvx[j] * sx + dvy[j] * sy + dvz[j] * sz) * inv_l;
-    if constexpr (kRate != Rate::kNone) mag += b[j] * rate * inv_l;
-    ex[j] = mag * sx, ey[j] = mag * sy, ez[j] = mag * sz;
-  }
-}
-
-// Phase 2 for the baseline target (SSE2 on x86-64) and, on x86-64, a clone for AVX2 (8 floats or
-// 4 doubles per instruction) chosen once at run time: the default build runs on any x86-64 and
-// uses AVX2 where it exists. The same IEEE operations in both (no FMA: -ffp-contract=off), so the
-// same bits. Rejected: -march=native (the binary must run on any CI machine); compiling the whole
-// file twice (inline functions it shares with other files could be linked in their AVX2 form and
-// fault on an older CPU); passing the arrays in a struct (GCC then loses their restrict and the
-// loop runs 9% slower).
-template <Rate kRate, bool kDirectIn>
-void BatchForcesBase(IDMS_BATCH_PARAMS) {
-  BatchForcesBody<kRate, kDirectIn>(IDMS_BATCH_ARGS);
-}
-
-#if defined(__x86_64__) && !defined(__AVX2__)
-template <Rate kRate, bool kDirectIn>
-[[gnu::target("avx2")]] void BatchForcesAvx2(IDMS_BATCH_PARAMS) {
-  BatchForcesBody<kRate, kDirectIn>(IDMS_BATCH_ARGS);
-}
-#endif
-
-template <Rate kRate, bool kDirectIn>
-void BatchForces([[maybe_unused]] bool allow_avx2, IDMS_BATCH_PARAMS) {
-#if defined(__x86_64__) && !defined(__AVX2__)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2 && allow_avx2) return BatchForcesAvx2<kRate, kDirectIn>(IDMS_BATCH_ARGS);
-#endif
-  BatchForcesBase<kRate, kDirectIn>(IDMS_BATCH_ARGS);
-}
-#undef IDMS_BATCH_PARAMS
-#undef IDMS_BATCH_ARGS
+// The pass reads each atom's position and force accumulator first at the front of its window,
+// the highest atom a batch reaches; Gather prefetches both up to kPrefetchAtoms past it. Only in
+// double and past the caches: at 10^5 and 10^6 atoms double gains 9-10% (the hardware prefetcher
+// falls behind 24- and 32-byte rows), float loses 3-6% at 10^5 and gains nothing at 10^6
+// (idms-step-throughput-bench, alternating builds; 16 to 64 atoms ahead gave the same).
+constexpr int32_t kPrefetchAtoms = 32;
+inline bool WantPrefetch(const Model& m) { return sizeof(Real) == 8 && m.num_atoms >= (int32_t{1} << 16); }
 
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
 // endpoint is atom g = active[i]; they are visited after every earlier group, so once group i is
@@ -267,9 +154,9 @@ void BatchForces([[maybe_unused]] bool allow_avx2, IDMS_BATCH_PARAMS) {
 // order (field and tool forces first, then the elements in walk order).
 //
 // The walk goes in batches of kBatch elements, each in three phases: (1) gather s' (and the
-// filter inputs that need an index or a stamp), (2) eqs. 4.4-4.9 for the whole batch in
-// contiguous arrays, which the compiler vectorises, (3) the sums and integrations in walk order.
-// A batch may only read atoms whose group has not ended, so no atom moves under a later batch.
+// filter inputs that need an index or a stamp), (2) eqs. 4.4-4.9 for the whole batch, vectorised
+// (full_step_batch.cc), (3) the sums and integrations in walk order. A batch may only read atoms
+// whose group has not ended, so no atom moves under a later batch.
 template <bool kSymplectic, Rate kRate, bool kIdentity>
 class Substep {
  public:
@@ -285,110 +172,166 @@ class Substep {
     const int32_t n = ws_.num_active, ne = ws_.num_elems;
     Progress out;
     if (n == 0) return out;
-    int32_t slot = 0, gather_slot = 0;
-    int32_t g = ws_.active[0];
-    V4 acc = Load4(force_ + 4 * g);  // g's sum so far: field, tools, earlier groups
+    // Locals, not members, in the loops: to the compiler the vector stores (memcpy) may write
+    // anything, so it would reload each member after every one of them (7% at 10^6 atoms).
+    const int32_t* const group_end = fp_.group_end.data();
+    const int32_t* const other = fp_.other.data();
+    const int32_t* const active = ws_.active.data();
+    const Real *const ex = b_.ex, *const ey = b_.ey, *const ez = b_.ez;
+    Real* const force = force_;
+    const AtomIo atom_io = MakeAtomIo();
+    int32_t slot = 0;
+    int32_t g = active[0];
+    V4 acc = Load4(force + 4 * g);  // g's sum so far: field, tools, earlier groups
+    V4 check = Make4(0, 0, 0);      // the integrated atoms' x - x: 0 while every result is finite
     for (int32_t w0 = 0; w0 < ne; w0 += kBatch) {
-      const int32_t nb = std::min(kBatch, ne - w0);
+      const int32_t nb = std::min(kBatch, ne - w0), w_end = w0 + nb;
       out.elems = w0;
-      if (!Gather(w0, nb, gather_slot)) return Stop(out, slot);
-      const bool degenerate = Forces(w0, nb);
-      out.elems = w0 + nb;
-      // 3. Sums in walk order; each atom is integrated when its group ends.
-      for (int32_t w = w0; w < w0 + nb; ++w) {
-        while (fp_.group_end[slot] <= w) {
-          if (!Integrate(slot, g, acc)) return Stop(out, slot);
-          g = ws_.active[++slot];
-          acc = Load4(force_ + 4 * g);
+      if (!Gather(w0, nb)) return Stop(out, slot);
+      Forces(w0, nb);
+      out.elems = w_end;
+      // 3. Sums in walk order. The inner loop runs to the next event: the end of g's group (g is
+      // integrated), a degenerate element (its own branch) or the end of the batch, so it tests
+      // nothing per element but the fixed endpoint. Results are checked once per batch: a
+      // non-finite one stops the pass there, and the atoms written after it are restored too.
+      const int32_t* const batch_other = other + w0;
+      int32_t j = 0, next_degenerate = PopDegenerate();  // batch indices
+      for (;;) {
+        const int32_t stop = std::min(std::min(group_end[slot] - w0, next_degenerate), nb);
+        for (; j < stop; ++j) {
+          const V4 e = Make4(ex[j], ey[j], ez[j]);
+          acc += e;
+          const int32_t raw = batch_other[j];
+          if (raw >= 0) Store4(force + 4 * raw, Load4(force + 4 * raw) - e);
         }
-        const int32_t j = w - w0;
-        const int32_t raw = fp_.other[w];
-        if (degenerate && b_.l[j] <= kMinLength) [[unlikely]] {
-          if (!Degenerate(w, g, raw, acc)) return Stop(out, slot);
+        if (j == nb) break;
+        if (group_end[slot] - w0 <= j) {
+          Integrate(atom_io, slot, g, acc, check);
+          g = active[++slot];
+          acc = Load4(force + 4 * g);
           continue;
         }
-        const V4 e = Make4(b_.ex[j], b_.ey[j], b_.ez[j]);
-        acc += e;
-        if (raw >= 0) Store4(force_ + 4 * raw, Load4(force_ + 4 * raw) - e);
+        if (!Degenerate(w0 + j, g, batch_other[j], acc)) return Stop(out, slot);
+        ++j, next_degenerate = PopDegenerate();
       }
+      if (!Finite3(check)) return Stop(out, slot);
     }
     // The last group, and free atoms after it whose elements all lie in earlier groups.
     for (;;) {
-      if (!Integrate(slot, g, acc)) return Stop(out, slot);
+      Integrate(atom_io, slot, g, acc, check);
       if (++slot == n) break;
-      g = ws_.active[slot];
-      acc = Load4(force_ + 4 * g);
+      g = active[slot];
+      acc = Load4(force + 4 * g);
     }
+    if (!Finite3(check)) return Stop(out, n);
     out.atoms = n;
     out.marks = marks_;
     return out;
   }
 
  private:
+  // The batch's next degenerate element (batch index), taken from degenerate_; kBatch if none.
+  int32_t PopDegenerate() {
+    for (int32_t i = 0; i < kMaskWords; ++i) {
+      if (uint64_t& bits = degenerate_[i]; bits != 0) {
+        const int32_t j = 64 * i + std::countr_zero(bits);
+        bits &= bits - 1;
+        return j;
+      }
+    }
+    return kBatch;
+  }
+
   Progress Stop(Progress out, int32_t slot) {
     out.atoms = slot;
     out.ok = false;
     return out;
   }
 
-  // 1. s' for each element of the batch (g's position reloaded at each group start); the eq. 4.6
-  // inputs by element id, with the stale rule, when they cannot be read in place. False: a
-  // non-finite filter state (the general path repairs it).
-  bool Gather(int32_t w0, int32_t nb, int32_t& slot) {
-    const int32_t* group_end = fp_.group_end.data();
-    const int32_t* other = fp_.other.data();
-    int32_t w = w0;
-    while (w < w0 + nb) {
-      while (group_end[slot] <= w) ++slot;
-      const int32_t g = ws_.active[slot];
-      const V4 pg = LoadAtom(pos_, g, last_);
-      [[maybe_unused]] V4 vg = Make4(0, 0, 0);
-      if constexpr (kRate == Rate::kAnalytic) vg = LoadAtom(vel_, g, last_);
-      const int32_t end = std::min(group_end[slot], w0 + nb);
-      for (; w < end; ++w) {
-        const int32_t raw = other[w];
-        const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
-        const int32_t j = w - w0;
-        const V4 d = LoadAtom(pos_, o, last_) - pg;
-        b_.dx[j] = X(d), b_.dy[j] = Y(d), b_.dz[j] = Z(d);
-        if constexpr (kRate == Rate::kAnalytic) {
-          const V4 dv = LoadAtom(vel_, o, last_) - vg;
-          b_.dvx[j] = X(dv), b_.dvy[j] = Y(dv), b_.dvz[j] = Z(dv);
+  // 1. s' for each element of the batch, one flat loop (each element names its group's atom:
+  // a loop per group exits at a different count each time, and the flat loop was 2-4% faster in
+  // float); the eq. 4.6 inputs by element id, with the stale rule, when they cannot be read in
+  // place. False: a non-finite filter state (the general path repairs it).
+  bool Gather(int32_t w0, int32_t nb) {
+    // Locals, as in Run.
+    const int32_t* const other = fp_.other.data() + w0;
+    const int32_t* const group_atom = fp_.elem_g.data() + w0;
+    const Real *const pos = pos_, *const vel = vel_;
+    Real *const s4 = b_.s4, *const dv4 = b_.dv4;
+    const int32_t last = last_;
+    [[maybe_unused]] const int32_t* const elems = ws_.elems.data();
+    [[maybe_unused]] const Real *const elem_len = s_.elem_len.data(), *const elem_rate = s_.elem_rate.data();
+    [[maybe_unused]] const int64_t* const elem_stamp = s_.elem_stamp.data();
+    [[maybe_unused]] const int64_t stamp_floor = s_.elem_stamp_floor, clock = s_.substep_clock;
+    [[maybe_unused]] Real *const prev_len = b_.prev_len, *const prev_rate = b_.prev_rate, *const fresh_in = b_.fresh;
+    [[maybe_unused]] Real* const backup_len = backup_ ? ws_.backup_elem_len.data() : nullptr;
+    [[maybe_unused]] Real* const backup_rate = ws_.backup_elem_rate.data();
+    int32_t hi = 0;  // the highest atom the batch reads (the front of the pass's window)
+    for (int32_t j = 0; j < nb; ++j) {
+      const int32_t raw = other[j], g = group_atom[j];
+      hi = std::max(hi, raw);
+      const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
+      StoreRow(s4 + 4 * j, LoadAtom(pos, o, last) - LoadAtom(pos, g, last));
+      if constexpr (kRate == Rate::kAnalytic) StoreRow(dv4 + 4 * j, LoadAtom(vel, o, last) - LoadAtom(vel, g, last));
+      if constexpr (kFilter && !kDirectIn) {
+        const int32_t w = w0 + j;
+        const int32_t e = kIdentity ? w : elems[w];
+        const Real old_len = elem_len[e], old_rate = elem_rate[e];
+        if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]]
+          return false;
+        bool fresh = old_len != kFilterRestart;
+        if constexpr (kRate == Rate::kFilteredStamped) {
+          const int64_t stamp = elem_stamp[e];
+          fresh = fresh && (stamp > stamp_floor ? stamp : stamp_floor) == clock - 1;
         }
-        if constexpr (kFilter && !kDirectIn) {
-          const int32_t e = kIdentity ? w : ws_.elems[w];
-          const Real old_len = s_.elem_len[e], old_rate = s_.elem_rate[e];
-          if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]]
-            return false;
-          bool fresh = old_len != kFilterRestart;
-          if constexpr (kRate == Rate::kFilteredStamped) {
-            const int64_t stamp = s_.elem_stamp[e];
-            fresh = fresh && (stamp > s_.elem_stamp_floor ? stamp : s_.elem_stamp_floor) == s_.substep_clock - 1;
-          }
-          b_.prev_len[j] = old_len;
-          b_.prev_rate[j] = old_rate;
-          b_.fresh[j] = fresh ? Real(1) : Real(0);
-          if (backup_) StreamStore(&ws_.backup_elem_len[w], old_len), StreamStore(&ws_.backup_elem_rate[w], old_rate);
-        }
+        prev_len[j] = old_len;
+        prev_rate[j] = old_rate;
+        fresh_in[j] = fresh ? Real(1) : Real(0);
+        if (backup_len) StreamStore(backup_len + w, old_len), StreamStore(backup_rate + w, old_rate);
       }
     }
+    if (prefetch_) Prefetch(hi);
     return true;
   }
 
-  // 2. eqs. 4.4-4.9 over the batch (BatchForces); the filter state advances (a degenerate
-  // element's is marked to restart), scattered by element id when the ids are not the walk order.
-  // Returns whether any element is degenerate.
-  bool Forces(int32_t w0, int32_t nb) {
+  // The lines of position and force from the last prefetched atom to kPrefetchAtoms past hi.
+  void Prefetch(int32_t hi) {
+    const int32_t to = std::min(hi + kPrefetchAtoms, last_);
+    constexpr int32_t kLine = 64 / sizeof(Real);
+    for (; prefetched_ <= to; prefetched_ += kLine / 4) {  // a force row is 4 wide
+      __builtin_prefetch(pos_ + 3 * prefetched_);
+      __builtin_prefetch(force_ + 4 * prefetched_, 1);
+    }
+  }
+
+  // 2. eqs. 4.4-4.9 over the batch (BatchForces), with the rollback copy of the filter state when
+  // it is read in place; the filter state advances (a degenerate element's is marked to restart
+  // in phase 3), scattered by element id when the ids are not the walk order. The degenerate
+  // elements go to degenerate_.
+  void Forces(int32_t w0, int32_t nb) {
     Real* len = kDirectOut ? s_.elem_len.data() + w0 : b_.new_len;
     Real* rate = kDirectOut ? s_.elem_rate.data() + w0 : b_.new_rate;
-    if (kFilter && kDirectIn && backup_) {
-      StreamCopy(ws_.backup_elem_len.data() + w0, len, nb);
-      StreamCopy(ws_.backup_elem_rate.data() + w0, rate, nb);
-    }
-    const Real inv_t = Real(1) / T_, lambda = static_cast<Real>(ws_.options.lambda);
-    BatchForces<kRate, kDirectIn>(fp_.avx2, nb, inv_t, lambda, fp_.elem_k.data() + w0, fp_.elem_b.data() + w0,
-                                  fp_.elem_leq.data() + w0, b_.dx, b_.dy, b_.dz, b_.dvx, b_.dvy, b_.dvz, b_.prev_len,
-                                  b_.prev_rate, b_.fresh, len, rate, b_.l, b_.ex, b_.ey, b_.ez);
+    const bool copy = kFilter && kDirectIn && backup_;
+    const BatchIo io{.n = nb,
+                     .inv_t = Real(1) / T_,
+                     .lambda = static_cast<Real>(ws_.options.lambda),
+                     .k = fp_.elem_k.data() + w0,
+                     .b = fp_.elem_b.data() + w0,
+                     .leq = fp_.elem_leq.data() + w0,
+                     .s4 = b_.s4,
+                     .dv4 = b_.dv4,
+                     .prev_len = b_.prev_len,
+                     .prev_rate = b_.prev_rate,
+                     .fresh = b_.fresh,
+                     .len = len,
+                     .rate = rate,
+                     .backup_len = copy ? ws_.backup_elem_len.data() + w0 : nullptr,
+                     .backup_rate = copy ? ws_.backup_elem_rate.data() + w0 : nullptr,
+                     .ex = b_.ex,
+                     .ey = b_.ey,
+                     .ez = b_.ez,
+                     .degenerate = degenerate_};
+    BatchForces(kRate, kDirectIn, fp_.avx2, io);
     if constexpr (kFilter && !kDirectOut) {
       for (int32_t j = 0; j < nb; ++j) {
         const int32_t id = ws_.elems[w0 + j];
@@ -396,9 +339,6 @@ class Substep {
         s_.elem_rate[id] = b_.new_rate[j];
       }
     }
-    int32_t degenerate = 0;
-    for (int32_t j = 0; j < nb; ++j) degenerate += b_.l[j] <= kMinLength;
-    return degenerate > 0;
   }
 
   // A degenerate element's push (DegenerateElement in forces.cc, in g's frame). False: the rate
@@ -433,27 +373,39 @@ class Substep {
     return true;
   }
 
-  // Eqs. 4.13-4.15 (or symplectic Euler) for atom g of slot i, with its rollback copy. False: a
-  // result is not finite (nothing is written).
-  bool Integrate(int32_t i, int32_t g, V4 acc) {
-    const V4 p = LoadAtom(pos_, g, last_), v = LoadAtom(vel_, g, last_);
-    const Real t_over_m = T_ / fp_.atom_mass[i];
+  // Eqs. 4.13-4.15 (or symplectic Euler) for atom g of slot i, with its rollback copy. check
+  // collects x - x of the results, for Run to test once per batch (a test and branch per atom
+  // cost 3%).
+  // Integrate's arrays and constants, as locals of Run (see there).
+  struct AtomIo {
+    Real *pos, *vel, *force;
+    const Real* t_over_m;             // by slot
+    Real *backup_pos, *backup_vel;    // by slot; null: no rollback copy in this substep
+    Real T;
+    int32_t last;
+  };
+  AtomIo MakeAtomIo() const {
+    return {pos_,  vel_, force_, fp_.atom_t_over_m.data(), backup_ ? ws_.backup_pos.data() : nullptr,
+            ws_.backup_vel.data(), T_, last_};
+  }
+
+  static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check) {
+    const V4 p = LoadAtom(io.pos, g, io.last), v = LoadAtom(io.vel, g, io.last);
+    const Real t_over_m = io.t_over_m[i];
     V4 np, nv;
     if constexpr (kSymplectic) {
       nv = v + t_over_m * acc;
-      np = p + T_ * nv;
+      np = p + io.T * nv;
     } else {
-      np = p + T_ * v;
+      np = p + io.T * v;
       nv = v + t_over_m * acc;
     }
-    if (!Finite3((np - np) + (nv - nv))) [[unlikely]]
-      return false;
-    if (backup_) StreamStore3(&ws_.backup_pos[3 * i], p), StreamStore3(&ws_.backup_vel[3 * i], v);
-    Store3(pos_ + 3 * g, np);
-    Store3(vel_ + 3 * g, nv);
+    check += (np - np) + (nv - nv);
+    if (io.backup_pos) StreamStore3(io.backup_pos + 3 * i, p), StreamStore3(io.backup_vel + 3 * i, v);
+    Store3(io.pos + 3 * g, np);
+    Store3(io.vel + 3 * g, nv);
     // Cleared for the next tick, whose field forces are then zero unless the scene has some.
-    Store4(force_ + 4 * g, Make4(0, 0, 0));
-    return true;
+    Store4(io.force + 4 * g, Make4(0, 0, 0));
   }
 
   const Model& m_;
@@ -467,7 +419,10 @@ class Substep {
   Real* const vel_ = s_.atom_vel.data();
   Real* const force_ = ws_.full.force.data();
   const int32_t last_ = m_.num_atoms - 1;
+  const bool prefetch_ = WantPrefetch(m_);
+  int32_t prefetched_ = 0;  // Prefetch has covered the atoms before this one
   int32_t marks_ = 0;
+  uint64_t degenerate_[kMaskWords] = {};  // the batch's degenerate elements not yet taken
 };
 
 template <bool kSymplectic, Rate kRate, bool kIdentity>
@@ -536,6 +491,7 @@ void BuildFullPass(const Model& m, Workspace& ws) {
     last_slot = slot;
     ++fp.group_end[slot];
     fp.other[w] = m.atom_fixed[o] ? ~o : o;
+    fp.elem_g[w] = g;
     fp.elem_k[w] = static_cast<Real>(m.elem_k[e]);
     fp.elem_b[w] = static_cast<Real>(m.elem_b[e]);
     fp.elem_leq[w] = static_cast<Real>(m.elem_leq[e]);
@@ -560,6 +516,7 @@ void BuildFullPass(const Model& m, Workspace& ws) {
       ++fp.dt_free_count;
     }
   }
+  fp.t_over_m_of = 0;
   fp.topology_version = m.topology_version;
 }
 
@@ -576,7 +533,9 @@ void SizeFullPass(const Model& m, Workspace& ws) {
   FullPass& fp = ws.full;
   fp.group_end.assign(m.num_atoms, 0);
   fp.atom_mass.assign(m.num_atoms, Real(0));
+  fp.atom_t_over_m.assign(m.num_atoms, Real(0));
   fp.other.assign(m.num_elems, 0);
+  fp.elem_g.assign(m.num_elems, 0);
   fp.elem_k.assign(m.num_elems, Real(0));
   fp.elem_b.assign(m.num_elems, Real(0));
   fp.elem_leq.assign(m.num_elems, Real(0));
@@ -584,8 +543,55 @@ void SizeFullPass(const Model& m, Workspace& ws) {
   fp.scratch.assign(kScratchPerElement * kBatch, Real(0));
 }
 
+HugeRange HugePageInterior(const void* data, size_t bytes) {
+  constexpr uintptr_t kHuge = uintptr_t{2} << 20;
+  const uintptr_t start = reinterpret_cast<uintptr_t>(data);
+  if (data == nullptr || bytes < kHuge || start > UINTPTR_MAX - bytes) return {};
+  const uintptr_t begin = (start + kHuge - 1) & ~(kHuge - 1), end = (start + bytes) & ~(kHuge - 1);
+  if (end <= begin) return {};
+  return {begin, end - begin};
+}
+
+namespace {
+
+// MADV_COLLAPSE (Linux 6.1) copies the range into huge pages now, whatever the system's THP
+// setting ("madvise" on Debian); glibc 2.36's headers predate it.
+#if defined(__linux__) && !defined(MADV_COLLAPSE)
+constexpr int MADV_COLLAPSE = 25;
+#endif
+
+// Bytes of v the kernel put on huge pages (0 where it declined, or off Linux).
+template <class T>
+int64_t AdviseHuge(const std::vector<T>& v) {
+#if defined(__linux__)
+  const HugeRange r = HugePageInterior(v.data(), v.size() * sizeof(T));
+  if (r.length == 0) return 0;
+  // The contents stay as they are; failure (an older kernel, no free huge page) only costs speed.
+  return madvise(reinterpret_cast<void*>(r.begin), r.length, MADV_COLLAPSE) == 0 ? static_cast<int64_t>(r.length) : 0;
+#else
+  (void)v;
+  return 0;
+#endif
+}
+
+void AdviseHugePages(State& s, Workspace& ws) {
+  FullPass& fp = ws.full;
+  if (!fp.huge_workspace_done) {
+    fp.huge_workspace_done = true;
+    fp.huge_bytes += AdviseHuge(fp.other) + AdviseHuge(fp.elem_k) + AdviseHuge(fp.elem_b) + AdviseHuge(fp.elem_leq) +
+                     AdviseHuge(fp.force) + AdviseHuge(fp.group_end) + AdviseHuge(fp.atom_t_over_m) +
+                     AdviseHuge(ws.active) + AdviseHuge(ws.elems) + AdviseHuge(ws.backup_pos) +
+                     AdviseHuge(ws.backup_vel) + AdviseHuge(ws.backup_elem_len) + AdviseHuge(ws.backup_elem_rate);
+  }
+  fp.huge_state = s.atom_pos.data();
+  fp.huge_bytes += AdviseHuge(s.atom_pos) + AdviseHuge(s.atom_vel) + AdviseHuge(s.elem_len) + AdviseHuge(s.elem_rate);
+}
+
+}  // namespace
+
 void EnsureFullLive(const Model& m, State& s, Workspace& ws) {
   FullPass& fp = ws.full;
+  if (fp.huge_pages && fp.huge_state != s.atom_pos.data()) AdviseHugePages(s, ws);
   if (fp.live && fp.topology_version == m.topology_version) return;
   EndFullLive(ws);
   BuildActiveSet(m, s, ws);
@@ -650,6 +656,11 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   const bool field = o.gravity || o.air_damping > 0 || !ws.atom_force_external.empty();
   const int64_t clock0 = s.substep_clock, floor0 = s.elem_stamp_floor;
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+  // T / m by slot: one division per atom when T changes rather than in every substep.
+  if (ws.full.t_over_m_of != T) {
+    for (int32_t i = 0; i < ws.num_active; ++i) ws.full.atom_t_over_m[i] = T / ws.full.atom_mass[i];
+    ws.full.t_over_m_of = T;
+  }
   for (int32_t k = 0; k < substeps; ++k) {
     const int64_t t0 = NowNs();
     // Field and tool forces first, as EvaluateForces adds them; then the sweep.

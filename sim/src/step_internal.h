@@ -101,6 +101,13 @@ void EnsureFullLive(const Model& model, State& state, Workspace& ws);
 void EndFullLive(Workspace& ws);
 // Sizes FullPass (MakeWorkspace, full mode).
 void SizeFullPass(const Model& model, Workspace& ws);
+
+// The part of [data, data + bytes) that whole 2 MiB pages cover: {begin, length}, length 0 if none.
+struct HugeRange {
+  uintptr_t begin = 0;
+  size_t length = 0;
+};
+HugeRange HugePageInterior(const void* data, size_t bytes);
 // The stable step of `integrator` over the free atoms with the tools' stiffness this tick, from
 // the cached tool-free minimum plus the atoms a tool stiffens: the value PredictStableDt gives.
 double FullPredictStableDt(const Model& model, const Workspace& ws, Integrator integrator);

@@ -12,8 +12,10 @@
 #include "idms/sim/edit.h"
 #include "idms/sim/generate.h"
 #include "idms/sim/model.h"
+#include "idms/sim/reorder.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
+#include "step_internal.h"
 #include "step_test_util.h"
 
 namespace idms {
@@ -222,8 +224,10 @@ TEST(FusedPass, AlternatingWithTheGeneralPathMatches) {
   EXPECT_EQ(FoldedHash(model, a), FoldedHash(model, b));
 }
 
-TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) {
-  const Model model = Slab();
+// Fused against general: 50 ticks, then a NaN in a free atom's velocity and in an element's
+// filter rate mid-model, then 50 more. The pass stops, restores what it wrote and the general path
+// repairs the state: both must end on the same bits, with the same repairs.
+void ExpectNanRepairedAlike(const Model& model) {
   const StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
   const Real nan = std::numeric_limits<Real>::quiet_NaN();
   uint64_t hashes[2];
@@ -245,18 +249,21 @@ TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) {
   EXPECT_GE(repaired[0], 1);
 }
 
-TEST(FusedPass, DivergenceFallsBackLikeTheGeneralPath) {
-  // Undamped explicit Euler diverges: with the prediction off nothing substeps, so the state
-  // grows until a result is not finite; both paths must then roll back and fall back alike.
-  const Model model = Slab(0.0);
+// Undamped explicit Euler diverges: with the prediction off nothing substeps, so the state grows
+// until a result is not finite; both paths must then roll back and fall back alike.
+void ExpectDivergenceAlike(const Model& undamped) {
   StepOptions o = FullNoCheck(Integrator::kExplicitEuler);
   o.stability.predict = false;
   o.dt_s = 5e-3;
-  const auto [general, fused] = RunBoth(model, Deformed(model), o, 3000, false);
+  const auto [general, fused] = RunBoth(undamped, Deformed(undamped), o, 3000, false);
   EXPECT_GT(general.warnings, 0) << "the run never left the fused pass";
   EXPECT_EQ(fused.hash, general.hash);
   EXPECT_EQ(fused.warnings, general.warnings);
 }
+
+TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) { ExpectNanRepairedAlike(Slab()); }
+
+TEST(FusedPass, DivergenceFallsBackLikeTheGeneralPath) { ExpectDivergenceAlike(Slab(0.0)); }
 
 TEST(FusedPass, ScalpelCutsAndEditsMatch) {
   const Model base = Slab();
@@ -282,6 +289,31 @@ TEST(FusedPass, ScalpelCutsAndEditsMatch) {
   EXPECT_GT(removed[0], 0);
   EXPECT_EQ(removed[1], removed[0]);
   EXPECT_EQ(hashes[1], hashes[0]);
+}
+
+TEST(FusedPass, RenumberedModelMatches) {
+  // Renumbered in walk order, the pass reads and writes the filter state in place (with its
+  // rollback copy on the way) instead of through the element ids.
+  const Model model = ReorderForLocality(Slab());
+  Workspace probe = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  State s = Deformed(model);
+  Step(model, s, probe, ToolInput{});
+  ASSERT_TRUE(probe.full.identity);
+  for (const Integrator integrator : {Integrator::kExplicitEuler, Integrator::kSymplecticEuler}) {
+    for (const bool at_rest : {false, true}) {  // at rest: degenerate home elements, restart marks
+      const State start = at_rest ? MakeState(model) : Deformed(model);
+      const auto [general, fused] = RunBoth(model, start, FullNoCheck(integrator), 400, true);
+      EXPECT_EQ(fused.hash, general.hash) << IntegratorName(integrator) << " at rest " << at_rest;
+      EXPECT_EQ(fused.force_bits, general.force_bits);
+      EXPECT_EQ(general.warnings, 0);
+    }
+  }
+}
+
+TEST(FusedPass, RenumberedModelFailsLikeTheGeneralPath) {
+  // Renumbered, the pass restores the filter state through the copy it made in place.
+  ExpectDivergenceAlike(ReorderForLocality(Slab(0.0)));
+  ExpectNanRepairedAlike(ReorderForLocality(Slab()));
 }
 
 TEST(FusedPass, SnapshotReplayGivesSameBits) {
@@ -317,6 +349,46 @@ TEST(FusedPass, AllocatesNothing) {
   for (int i = 0; i < 10; ++i) Step(model, s, ws, ToolInput{});
   EXPECT_EQ(test::AllocationCount() - before, 0);
   EXPECT_TRUE(ws.full.live);
+}
+
+TEST(FusedPass, HugePageInteriorIsTheWholeAlignedPagesInside) {
+  constexpr uintptr_t kHuge = uintptr_t{2} << 20;
+  auto at = [](uintptr_t a) { return reinterpret_cast<const void*>(a); };
+  internal::HugeRange r = internal::HugePageInterior(at(8 * kHuge), kHuge + 1);
+  EXPECT_EQ(r.begin, 8 * kHuge);
+  EXPECT_EQ(r.length, kHuge);
+  // 16 bytes past a boundary (where glibc's large blocks start), three pages long: two inside.
+  r = internal::HugePageInterior(at(8 * kHuge + 16), 3 * kHuge);
+  EXPECT_EQ(r.begin, 9 * kHuge);
+  EXPECT_EQ(r.length, 2 * kHuge);
+  // A page's length that straddles a boundary covers no whole page; nor does a short array.
+  EXPECT_EQ(internal::HugePageInterior(at(8 * kHuge + 16), kHuge).length, 0u);
+  EXPECT_EQ(internal::HugePageInterior(at(8 * kHuge), kHuge - 1).length, 0u);
+  EXPECT_EQ(internal::HugePageInterior(nullptr, 10 * kHuge).length, 0u);
+}
+
+// A slab whose arrays span whole 2 MiB pages (2 x 10^5 atoms): the huge-page advice changes no
+// bits, follows the State's arrays when they move, and reports whole pages only.
+TEST(FusedPass, HugePagesChangeNoBitsAndFollowTheState) {
+  SlabOptions so;
+  so.rows = so.cols = 260;
+  const Model model = GenerateSlab(so);
+  ASSERT_GT(3 * sizeof(Real) * model.num_atoms, size_t{4} << 20);
+  State on = Deformed(model), off = Deformed(model);
+  Workspace ws_on = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  Workspace ws_off = MakeWorkspace(model, FullNoCheck(Integrator::kSymplecticEuler));
+  ws_off.full.huge_pages = false;
+  for (int i = 0; i < 20; ++i) Step(model, on, ws_on, ToolInput{}), Step(model, off, ws_off, ToolInput{});
+  EXPECT_EQ(HashState(on), HashState(off));
+  EXPECT_EQ(ws_on.full.huge_state, on.atom_pos.data());
+  EXPECT_EQ(ws_off.full.huge_state, nullptr);
+  EXPECT_EQ(ws_off.full.huge_bytes, 0);
+  EXPECT_EQ(ws_on.full.huge_bytes % (int64_t{2} << 20), 0);  // 0 where the kernel declines
+  // A copy of the State has its own arrays: advised at its first tick, and still the same bits.
+  State copy = on;
+  Step(model, copy, ws_on, ToolInput{}), Step(model, off, ws_off, ToolInput{});
+  EXPECT_EQ(ws_on.full.huge_state, copy.atom_pos.data());
+  EXPECT_EQ(HashState(copy), HashState(off));
 }
 
 }  // namespace

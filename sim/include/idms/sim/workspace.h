@@ -65,11 +65,23 @@ struct FullPass {
   int32_t restart_marks = -1;
   std::vector<int32_t> group_end;  // (num_atoms) by active slot: one past its last element
   std::vector<int32_t> other;      // (num_elems) endpoint that is not the group's atom; ~id if fixed
+  std::vector<int32_t> elem_g;     // (num_elems) the group's atom (the lower free endpoint)
   std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
   std::vector<Real> atom_mass;                 // (num_atoms) by active slot
+  std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / atom_mass
+  Real t_over_m_of = 0;                        // the substep T of atom_t_over_m; 0 = not computed
   // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
   std::vector<Real> force;
   std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
+  // May ask the kernel (Linux, madvise MADV_COLLAPSE) to back the 2 MiB-aligned inside of the
+  // arrays the pass streams, the State's included, with huge pages, once when the pass goes live
+  // and again when the State's arrays move: a 10^6-atom pass crosses a 4 KiB page every few
+  // hundred elements in each of its ~20 streams, and each crossing can cost a page walk. The
+  // contents do not change; off, or where the kernel declines, nothing else changes either.
+  bool huge_pages = true;
+  bool huge_workspace_done = false;   // the workspace's arrays were advised
+  const Real* huge_state = nullptr;   // State::atom_pos.data() when the State's were advised
+  int64_t huge_bytes = 0;             // bytes the kernel moved to huge pages so far
   // Stable step of the configured integrator without tools (the minimum over free atoms), and
   // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
   double dt_free = 0;

@@ -1,0 +1,75 @@
+// Full mode's fused pass inside: what full_step.cc shares with its vectorised phase
+// (full_step_batch.cc). Nobody else includes it.
+#pragma once
+
+#include <bit>
+#include <cstdint>
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+#include "idms/sim/state.h"
+
+namespace idms::internal {
+
+// Where the eq. 4.8 length rate comes from in this pass.
+enum class Rate : uint8_t {
+  kNone,             // no element has b > 0: no rate, no filter
+  kAnalytic,         // s^ . (v1 - v0)
+  kFiltered,         // eq. 4.6; every element was updated in the previous substep, none degenerate
+  kFilteredMarked,   // eq. 4.6; as kFiltered, but some carry a restart mark (kFilterRestart)
+  kFilteredStamped,  // eq. 4.6, freshness read from each element's stamp (first fused substep)
+};
+
+constexpr bool IsFiltered(Rate rate) {
+  return rate == Rate::kFiltered || rate == Rate::kFilteredMarked || rate == Rate::kFilteredStamped;
+}
+
+// Elements per batch: the batch's temporaries (16 values per element) stay in L1. 64 rather
+// than 128: +10% in double at 10^6 atoms, float unchanged or better at 10^4 and 10^6
+// (idms-step-throughput-bench, alternating builds); padding the temporaries apart instead gave
+// nothing, 32 was no better. (256 was 16% slower than 128 at 10^6 atoms: the scratch's parts then
+// start at the same offset of a 4 KiB page; see ForceMultiple in full_step_batch.cc.)
+constexpr int32_t kBatch = 64;
+constexpr int32_t kMaskWords = (kBatch + 63) / 64;
+
+// Phase 2's inputs and outputs for a batch of n elements: views at the batch's first element.
+// len and rate hold the eq. 4.6 state in place (direct input; kFilterRestart marks a filter to
+// restart, looked for only with kFilteredMarked) or receive it (inputs then come gathered, with
+// fresh = 0 restarting the filter: l_{n-1} = l, l'_{n-1} = 0).
+struct BatchIo {
+  int32_t n;
+  Real inv_t, lambda;
+  const Real *k, *b, *leq;  // (n) model values
+  const Real* s4;           // (n x 4) rows: s' = p_other - p_g; lane 3 is not read
+  const Real* dv4;          // (n x 4) rows: v_other - v_g (analytic rate)
+  const Real *prev_len, *prev_rate, *fresh;  // (n) gathered eq. 4.6 inputs
+  Real *len, *rate;                          // (n) eq. 4.6 state
+  // (n) the rollback copy of len and rate, written on the way (direct input), or null.
+  Real *backup_len, *backup_rate;
+  Real *ex, *ey, *ez;  // (n) the element's force on g (eq. 4.9, g's frame)
+  // (kMaskWords) bit j: element j is degenerate (l <= kMinLength; its force is not used).
+  uint64_t* degenerate;
+};
+
+// Phase 2: eqs. 4.4-4.9 for a batch, vectorised, with the AVX2 code where allow_avx2 and the
+// CPU has it (the same bits either way). direct_in: len and rate are read in place.
+void BatchForces(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io);
+
+// The rollback copy is written once and read only after a failure: non-temporal stores keep it
+// from evicting the arrays the pass is still working on, and skip the read-for-ownership.
+template <class T>
+inline void StreamStore(T* dst, T value) {
+#if defined(__SSE2__)
+  if constexpr (sizeof(T) == 4) {
+    _mm_stream_si32(reinterpret_cast<int*>(dst), std::bit_cast<int>(value));
+  } else {
+    static_assert(sizeof(T) == 8);
+    _mm_stream_si64(reinterpret_cast<long long*>(dst), std::bit_cast<long long>(value));
+  }
+#else
+  *dst = value;
+#endif
+}
+
+}  // namespace idms::internal
