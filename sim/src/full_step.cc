@@ -144,7 +144,8 @@ struct Progress {
 // falls behind 24- and 32-byte rows), float loses 3-6% at 10^5 and gains nothing at 10^6
 // (idms-step-throughput-bench, alternating builds; 16 to 64 atoms ahead gave the same).
 constexpr int32_t kPrefetchAtoms = 32;
-inline bool WantPrefetch(const Model& m) { return sizeof(Real) == 8 && m.num_atoms >= (int32_t{1} << 16); }
+constexpr bool kPrefetchReal = sizeof(Real) == 8;
+inline bool WantPrefetch(const Model& m) { return kPrefetchReal && m.num_atoms >= (int32_t{1} << 16); }
 
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
 // endpoint is atom g = active[i]; they are visited after every earlier group, so once group i is
@@ -269,7 +270,7 @@ class Substep {
     int32_t hi = 0;  // the highest atom the batch reads (the front of the pass's window)
     for (int32_t j = 0; j < nb; ++j) {
       const int32_t raw = other[j], g = group_atom[j];
-      hi = std::max(hi, raw);
+      if constexpr (kPrefetchReal) hi = std::max(hi, raw);
       const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
       StoreRow(s4 + 4 * j, LoadAtom(pos, o, last) - LoadAtom(pos, g, last));
       if constexpr (kRate == Rate::kAnalytic) StoreRow(dv4 + 4 * j, LoadAtom(vel, o, last) - LoadAtom(vel, g, last));
