@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs dependencies, builds, and runs the demo of what exists today: the thesis's hex
 # fragment (figure 3-1) is generated, validated and compared with the shipped model library,
-# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/.
+# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/, and the
+# device agent runs its 1 kHz loop on a scripted palpation for two seconds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,4 +32,7 @@ done
 "$bin/idms-sim" run --model models/hex_4x5_home --script palpate --fit-plot "$out/palpate-fit.png" --json
 echo "== 6. the haptic window's stability (thesis 4.2) at the nominal parameters"
 "$bin/idms-sim" stability --k 15 --b 0.45 --m 0.002 --dt 0.001
-echo "plots: $out/*.png"
+echo "== 7. the device agent's 1 kHz DSM loop, offline (--server none), 2 s of scripted palpation"
+"$bin/idms-agent" --server none --model-file models/hex_4x5_home --device scripted:palpate \
+  --scene models/palpate.scene --duration 2 --summary-json "$out/agent.json"
+echo "plots: $out/*.png; the agent's figures: $out/agent.json"
