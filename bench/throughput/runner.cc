@@ -25,8 +25,10 @@ double StreamedBytes(const idms::Model& m, const idms::Workspace& ws) {
   const bool filter = ws.any_damping;
   const double per_elem = 4 + 4 + (ws.full.identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
   // Per free atom: slot -> atom id and group end (int32 each), mass; position and velocity read
-  // and written; the 4-wide force accumulator read and written; position and velocity copied.
-  const double per_free = 4 + 4 + r + 2 * 3 * r + 2 * 3 * r + 2 * 4 * r + 2 * 3 * r;
+  // and written; the 4-wide force accumulator read and written; position and velocity copied
+  // (as two 4-wide rows where the pass writes them so: FullPass::backup_rows).
+  const double copy = ws.full.backup_rows.empty() ? 2 * 3 * r : 2 * 4 * r;
+  const double per_free = 4 + 4 + r + 2 * 3 * r + 2 * 3 * r + 2 * 4 * r + copy;
   // Per fixed atom that some element ties to a free one: its position, read.
   int64_t fixed_used = 0;
   for (int32_t a = 0; a < m.num_atoms; ++a) fixed_used += m.atom_fixed[a] && m.atom_elem_num[a] > 0;

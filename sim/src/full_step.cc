@@ -147,6 +147,14 @@ constexpr int32_t kPrefetchAtoms = 32;
 constexpr bool kPrefetchReal = sizeof(Real) == 8;
 inline bool WantPrefetch(const Model& m) { return kPrefetchReal && m.num_atoms >= (int32_t{1} << 16); }
 
+// Float builds on SSE write the atoms' rollback copy as two 4-wide rows per slot
+// (FullPass::backup_rows), one non-temporal vector store each.
+#if defined(IDMS_SIM_REAL_FLOAT) && defined(__SSE__)
+constexpr bool kRowBackup = true;
+#else
+constexpr bool kRowBackup = false;
+#endif
+
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
 // endpoint is atom g = active[i]; they are visited after every earlier group, so once group i is
 // done g has all of its forces (no later element touches g) and is integrated in place. Element
@@ -382,12 +390,13 @@ class Substep {
     Real *pos, *vel, *force;
     const Real* t_over_m;             // by slot
     Real *backup_pos, *backup_vel;    // by slot; null: no rollback copy in this substep
+    Real* backup_rows;                // by slot, 8 each (kRowBackup); null as backup_pos
     Real T;
     int32_t last;
   };
   AtomIo MakeAtomIo() const {
     return {pos_,  vel_, force_, fp_.atom_t_over_m.data(), backup_ ? ws_.backup_pos.data() : nullptr,
-            ws_.backup_vel.data(), T_, last_};
+            ws_.backup_vel.data(), backup_ ? ws_.full.backup_rows.data() : nullptr, T_, last_};
   }
 
   static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check) {
@@ -402,7 +411,16 @@ class Substep {
       nv = v + t_over_m * acc;
     }
     check += (np - np) + (nv - nv);
-    if (io.backup_pos) StreamStore3(io.backup_pos + 3 * i, p), StreamStore3(io.backup_vel + 3 * i, v);
+    if constexpr (kRowBackup) {
+#if defined(IDMS_SIM_REAL_FLOAT) && defined(__SSE__)
+      if (io.backup_rows) {
+        _mm_stream_ps(io.backup_rows + 8 * i, std::bit_cast<__m128>(p));
+        _mm_stream_ps(io.backup_rows + 8 * i + 4, std::bit_cast<__m128>(v));
+      }
+#endif
+    } else if (io.backup_pos) {
+      StreamStore3(io.backup_pos + 3 * i, p), StreamStore3(io.backup_vel + 3 * i, v);
+    }
     Store3(io.pos + 3 * g, np);
     Store3(io.vel + 3 * g, nv);
     // Cleared for the next tick, whose field forces are then zero unless the scene has some.
@@ -462,7 +480,11 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
   for (int32_t i = 0; i < atoms; ++i) {
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c)
-      s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
+      if constexpr (kRowBackup) {
+        s.atom_pos[3 * a + c] = ws.full.backup_rows[8 * i + c], s.atom_vel[3 * a + c] = ws.full.backup_rows[8 * i + 4 + c];
+      } else {
+        s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
+      }
   }
   if (!filter) return;
   for (int32_t w = 0; w < elems; ++w) {
@@ -542,6 +564,7 @@ void SizeFullPass(const Model& m, Workspace& ws) {
   fp.elem_leq.assign(m.num_elems, Real(0));
   fp.force.assign(4 * static_cast<size_t>(m.num_atoms), Real(0));
   fp.scratch.assign(kScratchPerElement * kBatch, Real(0));
+  if constexpr (kRowBackup) fp.backup_rows.assign(8 * static_cast<size_t>(m.num_atoms), Real(0));
 }
 
 HugeRange HugePageInterior(const void* data, size_t bytes) {
@@ -582,7 +605,8 @@ void AdviseHugePages(State& s, Workspace& ws) {
     fp.huge_bytes += AdviseHuge(fp.other) + AdviseHuge(fp.elem_k) + AdviseHuge(fp.elem_b) + AdviseHuge(fp.elem_leq) +
                      AdviseHuge(fp.force) + AdviseHuge(fp.group_end) + AdviseHuge(fp.atom_t_over_m) +
                      AdviseHuge(ws.active) + AdviseHuge(ws.elems) + AdviseHuge(ws.backup_pos) +
-                     AdviseHuge(ws.backup_vel) + AdviseHuge(ws.backup_elem_len) + AdviseHuge(ws.backup_elem_rate);
+                     AdviseHuge(ws.backup_vel) + AdviseHuge(ws.backup_elem_len) + AdviseHuge(ws.backup_elem_rate) +
+                     AdviseHuge(fp.backup_rows);
   }
   fp.huge_state = s.atom_pos.data();
   fp.huge_bytes += AdviseHuge(s.atom_pos) + AdviseHuge(s.atom_vel) + AdviseHuge(s.elem_len) + AdviseHuge(s.elem_rate);

@@ -73,6 +73,10 @@ struct FullPass {
   // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
   std::vector<Real> force;
   std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
+  // Float builds: the rollback copy of the atoms as two 4-wide rows per slot (position, velocity;
+  // lane 3 not used), written with one non-temporal vector store each (else Workspace::backup_pos
+  // and backup_vel).
+  std::vector<Real> backup_rows;
   // May ask the kernel (Linux, madvise MADV_COLLAPSE) to back the 2 MiB-aligned inside of the
   // arrays the pass streams, the State's included, with huge pages, once when the pass goes live
   // and again when the State's arrays move: a 10^6-atom pass crosses a 4 KiB page every few
