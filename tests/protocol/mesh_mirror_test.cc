@@ -62,6 +62,24 @@ double MaxErrorSteps(const MeshMirror& mirror, const std::vector<double>& truth)
   return err;
 }
 
+// The stroke's encoder (topology 1) and a viewer's mirror, for the tests of what the mirror
+// refuses. Apply(t) encodes the stroke at t into env and applies it.
+class StrokedMirror : public ::testing::Test {
+ protected:
+  StrokedMirror() { encoder.SetTopology(1, stroke.tris()); }
+
+  MirrorStatus Apply(double t) {
+    if (!encoder.Encode(t, stroke.At(t), &env, &error)) return MirrorStatus::kInvalid;
+    return mirror.Apply(env, &error);
+  }
+
+  const Stroke stroke;
+  MeshEncoder encoder;
+  MeshMirror mirror;
+  v1::Envelope env;
+  std::string error;
+};
+
 TEST(MeshMirror, FollowsManyFramesOfMotionWithinOneStep) {
   const Stroke stroke;
   MeshEncoder encoder;
@@ -95,15 +113,10 @@ TEST(MeshMirror, FollowsManyFramesOfMotionWithinOneStep) {
   EXPECT_EQ(std::vector<int32_t>(mirror.triangles().begin(), mirror.triangles().end()), stroke.tris());
 }
 
-TEST(MeshMirror, DeltaBeforeKeyframeIsAGap) {
-  const Stroke stroke;
-  MeshEncoder encoder;
-  encoder.SetTopology(1, stroke.tris());
+TEST_F(StrokedMirror, DeltaBeforeKeyframeIsAGap) {
   v1::Envelope key, delta;
-  std::string error;
   ASSERT_TRUE(encoder.Encode(0, stroke.At(0), &key, &error));
   ASSERT_TRUE(encoder.Encode(0.5, stroke.At(0.5), &delta, &error));
-  MeshMirror mirror;
   EXPECT_EQ(mirror.Apply(delta, &error), MirrorStatus::kGap);
   EXPECT_NE(error.find("no keyframe"), std::string::npos) << error;
   EXPECT_FALSE(mirror.has_keyframe());
@@ -111,13 +124,7 @@ TEST(MeshMirror, DeltaBeforeKeyframeIsAGap) {
   EXPECT_EQ(mirror.Apply(delta, &error), MirrorStatus::kOk) << error;
 }
 
-TEST(MeshMirror, LostDeltaIsAGapUntilTheNextKeyframe) {
-  const Stroke stroke;
-  MeshEncoder encoder;
-  encoder.SetTopology(1, stroke.tris());
-  MeshMirror mirror;
-  v1::Envelope env;
-  std::string error;
+TEST_F(StrokedMirror, LostDeltaIsAGapUntilTheNextKeyframe) {
   std::vector<float> shown;
   for (int f = 0; f < 40; ++f) {
     const double t = 1.0 + f / 60.0;
@@ -144,16 +151,10 @@ TEST(MeshMirror, LostDeltaIsAGapUntilTheNextKeyframe) {
   EXPECT_LE(MaxErrorSteps(mirror, stroke.At(1.0 + 39 / 60.0)), 0.55);
 }
 
-TEST(MeshMirror, StaleOrRepeatedDeltaIsAGap) {
-  const Stroke stroke;
-  MeshEncoder encoder;
-  encoder.SetTopology(1, stroke.tris());
-  MeshMirror mirror;
-  v1::Envelope env, old_delta;
-  std::string error;
+TEST_F(StrokedMirror, StaleOrRepeatedDeltaIsAGap) {
+  v1::Envelope old_delta;
   for (int f = 0; f < 5; ++f) {
-    ASSERT_TRUE(encoder.Encode(1 + f / 60.0, stroke.At(1 + f / 60.0), &env, &error));
-    ASSERT_EQ(mirror.Apply(env, &error), MirrorStatus::kOk) << error;
+    ASSERT_EQ(Apply(1 + f / 60.0), MirrorStatus::kOk) << error;
     if (f == 2) old_delta = env;
   }
   EXPECT_EQ(mirror.Apply(old_delta, &error), MirrorStatus::kGap);
@@ -162,15 +163,8 @@ TEST(MeshMirror, StaleOrRepeatedDeltaIsAGap) {
   EXPECT_EQ(mirror.sequence(), 5u);
 }
 
-TEST(MeshMirror, MalformedDeltaLeavesStateUntouched) {
-  const Stroke stroke;
-  MeshEncoder encoder;
-  encoder.SetTopology(1, stroke.tris());
-  MeshMirror mirror;
-  v1::Envelope env;
-  std::string error;
-  ASSERT_TRUE(encoder.Encode(1, stroke.At(1), &env, &error));
-  ASSERT_EQ(mirror.Apply(env, &error), MirrorStatus::kOk);
+TEST_F(StrokedMirror, MalformedDeltaLeavesStateUntouched) {
+  ASSERT_EQ(Apply(1), MirrorStatus::kOk) << error;
   ASSERT_TRUE(encoder.Encode(1.1, stroke.At(1.1), &env, &error));
   ASSERT_TRUE(env.has_mesh_delta());
   ASSERT_GT(env.mesh_delta().num_changed(), 0u);
@@ -246,15 +240,8 @@ TEST(MeshMirror, KeyframeFromMirrorResynchronisesALateJoiner) {
   EXPECT_FALSE(empty.MakeKeyframe(&key, &error));
 }
 
-TEST(MeshMirror, RejectsMalformedKeyframeAndKeepsState) {
-  const Stroke stroke;
-  MeshEncoder encoder;
-  encoder.SetTopology(1, stroke.tris());
-  MeshMirror mirror;
-  v1::Envelope env;
-  std::string error;
-  ASSERT_TRUE(encoder.Encode(0, stroke.At(0), &env, &error));
-  ASSERT_EQ(mirror.Apply(env, &error), MirrorStatus::kOk);
+TEST_F(StrokedMirror, RejectsMalformedKeyframeAndKeepsState) {
+  ASSERT_EQ(Apply(0), MirrorStatus::kOk) << error;
   v1::MeshKeyframe bad = env.mesh_keyframe();
   bad.set_num_vertices(bad.num_vertices() + 1);
   bad.set_sequence(99);
