@@ -151,8 +151,10 @@ inline bool WantPrefetch(const Model& m) { return kPrefetchReal && m.num_atoms >
 // (FullPass::backup_rows), one non-temporal vector store each.
 #if defined(IDMS_SIM_REAL_FLOAT) && defined(__SSE__)
 constexpr bool kRowBackup = true;
+inline void StreamRow(Real* dst, V4 v) { _mm_stream_ps(dst, std::bit_cast<__m128>(v)); }  // dst 16-byte aligned
 #else
 constexpr bool kRowBackup = false;
+inline void StreamRow(Real* dst, V4 v) { StreamStore3(dst, v); }  // not called: kRowBackup is off
 #endif
 
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
@@ -412,12 +414,7 @@ class Substep {
     }
     check += (np - np) + (nv - nv);
     if constexpr (kRowBackup) {
-#if defined(IDMS_SIM_REAL_FLOAT) && defined(__SSE__)
-      if (io.backup_rows) {
-        _mm_stream_ps(io.backup_rows + 8 * i, std::bit_cast<__m128>(p));
-        _mm_stream_ps(io.backup_rows + 8 * i + 4, std::bit_cast<__m128>(v));
-      }
-#endif
+      if (io.backup_rows) StreamRow(io.backup_rows + 8 * i, p), StreamRow(io.backup_rows + 8 * i + 4, v);
     } else if (io.backup_pos) {
       StreamStore3(io.backup_pos + 3 * i, p), StreamStore3(io.backup_vel + 3 * i, v);
     }
@@ -522,14 +519,13 @@ void BuildFullPass(const Model& m, Workspace& ws) {
   }
   int32_t end = 0;
   for (int32_t i = 0; i < n; ++i) end += fp.group_end[i], fp.group_end[i] = end;
-  // Masses by slot, and the minimum stable step without tools (extra_k is 0 between steps).
+  // The minimum stable step without tools (extra_k is 0 between steps).
   const Integrator integrator = ws.options.integrator;
   const LengthRate rate = UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   fp.dt_free = std::numeric_limits<double>::infinity();
   fp.dt_free_count = 0;
   for (int32_t i = 0; i < n; ++i) {
     const int32_t a = ws.active[i];
-    fp.atom_mass[i] = static_cast<Real>(m.atom_mass[a]);
     const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
                           ws.atom_damp[a] + ws.options.air_damping};
     const double dt = StableDt(integrator, bound, rate, ws.options.lambda);
@@ -555,7 +551,6 @@ bool FusedEligible(const Model& m, const Workspace& ws) {
 void SizeFullPass(const Model& m, Workspace& ws) {
   FullPass& fp = ws.full;
   fp.group_end.assign(m.num_atoms, 0);
-  fp.atom_mass.assign(m.num_atoms, Real(0));
   fp.atom_t_over_m.assign(m.num_atoms, Real(0));
   fp.other.assign(m.num_elems, 0);
   fp.elem_g.assign(m.num_elems, 0);
@@ -604,9 +599,9 @@ void AdviseHugePages(State& s, Workspace& ws) {
     fp.huge_workspace_done = true;
     fp.huge_bytes += AdviseHuge(fp.other) + AdviseHuge(fp.elem_k) + AdviseHuge(fp.elem_b) + AdviseHuge(fp.elem_leq) +
                      AdviseHuge(fp.force) + AdviseHuge(fp.group_end) + AdviseHuge(fp.atom_t_over_m) +
-                     AdviseHuge(ws.active) + AdviseHuge(ws.elems) + AdviseHuge(ws.backup_pos) +
-                     AdviseHuge(ws.backup_vel) + AdviseHuge(ws.backup_elem_len) + AdviseHuge(ws.backup_elem_rate) +
-                     AdviseHuge(fp.backup_rows);
+                     AdviseHuge(ws.active) + AdviseHuge(ws.elems) + AdviseHuge(ws.backup_elem_len) +
+                     AdviseHuge(ws.backup_elem_rate) +
+                     (kRowBackup ? AdviseHuge(fp.backup_rows) : AdviseHuge(ws.backup_pos) + AdviseHuge(ws.backup_vel));
   }
   fp.huge_state = s.atom_pos.data();
   fp.huge_bytes += AdviseHuge(s.atom_pos) + AdviseHuge(s.atom_vel) + AdviseHuge(s.elem_len) + AdviseHuge(s.elem_rate);
@@ -683,7 +678,9 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
   // T / m by slot: one division per atom when T changes rather than in every substep.
   if (ws.full.t_over_m_of != T) {
-    for (int32_t i = 0; i < ws.num_active; ++i) ws.full.atom_t_over_m[i] = T / ws.full.atom_mass[i];
+    for (int32_t i = 0; i < ws.num_active; ++i) {
+      ws.full.atom_t_over_m[i] = T / static_cast<Real>(m.atom_mass[ws.active[i]]);
+    }
     ws.full.t_over_m_of = T;
   }
   for (int32_t k = 0; k < substeps; ++k) {

@@ -67,8 +67,7 @@ struct FullPass {
   std::vector<int32_t> other;      // (num_elems) endpoint that is not the group's atom; ~id if fixed
   std::vector<int32_t> elem_g;     // (num_elems) the group's atom (the lower free endpoint)
   std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
-  std::vector<Real> atom_mass;                 // (num_atoms) by active slot
-  std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / atom_mass
+  std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / Model::atom_mass
   Real t_over_m_of = 0;                        // the substep T of atom_t_over_m; 0 = not computed
   // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
   std::vector<Real> force;
