@@ -154,7 +154,7 @@ constexpr bool kRowBackup = true;
 inline void StreamRow(Real* dst, V4 v) { _mm_stream_ps(dst, std::bit_cast<__m128>(v)); }  // dst 16-byte aligned
 #else
 constexpr bool kRowBackup = false;
-inline void StreamRow(Real* dst, V4 v) { StreamStore3(dst, v); }  // not called: kRowBackup is off
+[[maybe_unused]] inline void StreamRow(Real* dst, V4 v) { StreamStore3(dst, v); }  // kRowBackup is off
 #endif
 
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
