@@ -85,7 +85,7 @@ inline bool Finite3(V4 diff) {
 }
 
 // Lanes 0-2 of v to dst with non-temporal stores (floats: one 8-byte and one 4-byte store).
-inline void StreamStore3(Real* dst, V4 v) {
+[[maybe_unused]] inline void StreamStore3(Real* dst, V4 v) {
 #if defined(__SSE2__) && defined(IDMS_SIM_REAL_FLOAT)
   const __m128i bits = _mm_castps_si128(std::bit_cast<__m128>(v));
   _mm_stream_si64(reinterpret_cast<long long*>(dst), _mm_cvtsi128_si64(bits));
