@@ -1,0 +1,95 @@
+// The HTTP API without sockets: a route table (pattern -> permission, body limit, handler), the
+// admission of a request header (target, route, token or cookie, role, Origin, size) before any
+// body is read, and handlers as plain functions from an admitted request to a response. The
+// connection code (server.cc) calls Admit, reads the body, then runs the handler on a worker.
+#pragma once
+
+#include <boost/beast/http.hpp>
+#include <chrono>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "idms/server/auth.h"
+#include "idms/server/library.h"
+#include "idms/server/metrics.h"
+#include "idms/server/options.h"
+
+namespace idms::server {
+
+namespace http = boost::beast::http;
+
+using ApiResponse = http::response<http::string_body>;
+
+// Beast 1.74's string_view is Boost's; ours is std's.
+inline std::string_view Sv(boost::beast::string_view s) { return {s.data(), s.size()}; }
+
+// Everything a handler may use. Owned by the server; shared by all connections.
+struct ApiContext {
+  const ServerOptions* options = nullptr;
+  Library* library = nullptr;
+  LoginSessions* logins = nullptr;
+  Metrics* metrics = nullptr;
+  std::function<std::shared_ptr<const TokenTable>()> tokens;  // the table in force
+  std::function<void(std::string)> publish_library_event;     // a JSON text to /ws/library watchers
+  std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
+  std::string version = "0.1.0";
+};
+
+struct ApiRequest {
+  http::request<http::string_body> message;  // headers and (once read) body
+  std::string path;                          // decoded, without the query
+  std::map<std::string, std::string> query;
+  std::vector<std::string> params;           // the route's {...} captures, in order
+  Role role = Role::kNone;
+  bool via_cookie = false;
+  Digest token_digest{};
+  bool tls = false;
+  std::string peer;
+};
+
+using Handler = std::function<ApiResponse(ApiContext&, ApiRequest&)>;
+
+struct Route {
+  http::verb method;
+  std::string pattern;                   // "/api/models/{name}/{file}"; also the metrics label
+  std::optional<Permission> permission;  // nullopt: no token needed
+  bool upload = false;                   // body up to --max-upload-mb, else the small limit
+  bool websocket = false;                // a WebSocket upgrade (the connection code takes over)
+  Handler handler;                       // empty for WebSocket routes
+};
+
+// The routes of this server, in match order.
+std::vector<Route> MakeRoutes();
+
+// What admission decided: either a response to send at once (error set) or the route to run.
+struct Admission {
+  std::optional<ApiResponse> error;  // 4xx / 5xx, already complete
+  const Route* route = nullptr;
+  uint64_t body_limit = 0;
+};
+
+// Checks a request header: target, route and method, authentication (Bearer token, else the
+// login cookie), permission, Origin (for cookie-authenticated writes and every WebSocket upgrade
+// that carries one), Content-Length against the route's limit. Fills req's path, query, params,
+// role. Pure apart from reading the token table and login sessions.
+Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req);
+
+// A JSON error response: {"error": message} plus any extra fields.
+ApiResponse JsonError(const ApiRequest& req, http::status status, const std::string& message);
+ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::string& json_text);
+
+// Handlers of the model library (models_api.cc).
+ApiResponse ListModels(ApiContext& ctx, ApiRequest& req);
+ApiResponse GetModel(ApiContext& ctx, ApiRequest& req);
+ApiResponse GetModelFile(ApiContext& ctx, ApiRequest& req);
+ApiResponse PutModel(ApiContext& ctx, ApiRequest& req);
+ApiResponse DeleteModel(ApiContext& ctx, ApiRequest& req);
+
+// The login cookie's name.
+inline constexpr const char* kSessionCookie = "idms_session";
+
+}  // namespace idms::server

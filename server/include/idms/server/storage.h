@@ -1,0 +1,82 @@
+// What idms-server keeps, behind small interfaces of its own: file contents by SHA-256
+// (BlobStore) and the model library's metadata (ModelStore). The HTTP code sees only these, so a
+// PostgreSQL / object-storage pair can replace the SQLite / directory pair without touching it.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace idms::server {
+
+// Content-addressed files. Thread-safe.
+class BlobStore {
+ public:
+  virtual ~BlobStore() = default;
+  // Stores `bytes` (no-op when already present) and returns its SHA-256 as 64 lowercase hex
+  // digits in *sha. Durable on return: written to a temporary file, fsync'ed and renamed.
+  virtual bool Put(std::string_view bytes, std::string* sha, std::string* error) = 0;
+  // The whole blob; false when absent or unreadable.
+  virtual bool Get(const std::string& sha, std::string* bytes) const = 0;
+  virtual bool Has(const std::string& sha) const = 0;
+  virtual void Remove(const std::string& sha) = 0;
+  // Every stored hash (for garbage collection at start-up).
+  virtual std::vector<std::string> List() const = 0;
+};
+
+// Everything the library says about one version of a model.
+struct ModelVersion {
+  std::string name;
+  int64_t version = 0;        // 1, 2, ...: never reused for a name, even after a delete
+  std::string description;
+  std::string created;        // UTC, ISO 8601 ("2026-11-23T19:04:05Z")
+  int64_t atoms = 0, elements = 0, triangles = 0;
+  int64_t bytes = 0;          // fem + plg
+  std::string fem_sha256, plg_sha256, obj_sha256;
+};
+
+// A model and its versions, oldest first.
+struct ModelRecord {
+  std::string name;
+  std::vector<ModelVersion> versions;
+  const ModelVersion& latest() const { return versions.back(); }
+};
+
+// The library's metadata. Thread-safe. Blobs named here must already be durable in the
+// BlobStore when AddVersion is called (the crash-safety order: blob, then row).
+class ModelStore {
+ public:
+  virtual ~ModelStore() = default;
+  // Every model with at least one version, by name, each with only its latest version.
+  virtual std::vector<ModelVersion> ListLatest() = 0;
+  virtual std::optional<ModelRecord> Get(const std::string& name) = 0;
+  // Adds the next version of `v.name` in one transaction; sets v.version and returns it.
+  virtual bool AddVersion(ModelVersion* v, std::string* error) = 0;
+  // Deletes one version (version > 0) or the whole model (version 0). False when absent.
+  virtual bool Delete(const std::string& name, int64_t version) = 0;
+  // Whether any version still names `sha` (as fem, plg or obj).
+  virtual bool BlobReferenced(const std::string& sha) = 0;
+  virtual int64_t NumModels() = 0;
+  virtual int64_t LibraryBytes() = 0;  // fem + plg bytes over all stored versions
+};
+
+// The data directory's stores: DIR/idms.db (SQLite, WAL) and DIR/blobs/. Creates what is
+// missing; removes stray temporary files and blobs no row names (what a crash can leave).
+struct Storage {
+  std::unique_ptr<BlobStore> blobs;
+  std::unique_ptr<ModelStore> models;
+};
+bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
+
+// The directory store alone (tests, tools).
+std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error);
+// The SQLite store alone.
+std::unique_ptr<ModelStore> OpenSqliteModelStore(const std::string& db_path, std::string* error);
+
+// SHA-256 of bytes as 64 lowercase hex digits (OpenSSL).
+std::string Sha256Hex(std::string_view bytes);
+
+}  // namespace idms::server

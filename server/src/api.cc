@@ -1,0 +1,219 @@
+// The route table, admission (target, auth, role, Origin, size) and the small handlers: health,
+// metrics, login, logout, whoami.
+#include "idms/server/api.h"
+
+#include <algorithm>
+#include <boost/beast/websocket/rfc6455.hpp>
+#include <nlohmann/json.hpp>
+
+#include "idms/server/http_parse.h"
+
+namespace idms::server {
+namespace {
+
+using json = nlohmann::json;
+
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+// Matches "/api/models/{name}" against a path, capturing the {...} segments.
+bool MatchPattern(const std::string& pattern, const std::string& path, std::vector<std::string>* params) {
+  const std::vector<std::string_view> p = PathSegments(pattern), s = PathSegments(path);
+  if (p.size() != s.size() || (path.size() > 1 && path.back() == '/')) return false;
+  std::vector<std::string> captured;
+  for (size_t i = 0; i < p.size(); ++i) {
+    if (p[i].size() > 2 && p[i].front() == '{') {
+      captured.emplace_back(s[i]);
+    } else if (p[i] != s[i]) {
+      return false;
+    }
+  }
+  *params = std::move(captured);
+  return true;
+}
+
+// The server's own origin as a browser writes it, from the Host header.
+std::string OwnOrigin(const ApiRequest& req) {
+  return std::string(req.tls ? "https://" : "http://") + Lower(std::string(req.message[http::field::host]));
+}
+
+bool OriginAllowed(const ApiContext& ctx, const ApiRequest& req, std::string_view origin) {
+  std::string o = Lower(std::string(origin));
+  while (!o.empty() && o.back() == '/') o.pop_back();
+  if (o == OwnOrigin(req)) return true;
+  for (std::string allowed : ctx.options->allowed_origins) {
+    allowed = Lower(allowed);
+    while (!allowed.empty() && allowed.back() == '/') allowed.pop_back();
+    if (o == allowed) return true;
+  }
+  return false;
+}
+
+bool IsSafeMethod(http::verb v) { return v == http::verb::get || v == http::verb::head || v == http::verb::options; }
+
+ApiResponse Health(ApiContext& ctx, ApiRequest& req) {
+  const double uptime =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
+  return JsonResponse(req, http::status::ok,
+                      json{{"status", "ok"}, {"version", ctx.version}, {"uptime_s", uptime}}.dump());
+}
+
+ApiResponse MetricsText(ApiContext& ctx, ApiRequest& req) {
+  const double uptime =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
+  ApiResponse res{http::status::ok, req.message.version()};
+  res.set(http::field::content_type, "text/plain; version=0.0.4; charset=utf-8");
+  res.body() = ctx.metrics->Render(ctx.library->models().NumModels(), ctx.library->models().LibraryBytes(), uptime);
+  return res;
+}
+
+ApiResponse Login(ApiContext& ctx, ApiRequest& req) {
+  std::string token;
+  try {
+    const json body = json::parse(req.message.body());
+    token = body.at("token").get<std::string>();
+  } catch (const std::exception&) {
+    return JsonError(req, http::status::bad_request, "expected a JSON body {\"token\": \"...\"}");
+  }
+  const Digest digest = DigestOf(token);
+  const Role role = ctx.tokens()->LookupDigest(digest);
+  if (role == Role::kNone) return JsonError(req, http::status::unauthorized, "unknown token");
+  const std::string cookie = ctx.logins->Create(digest);
+  ApiResponse res = JsonResponse(req, http::status::ok, json{{"role", RoleName(role)}}.dump());
+  res.set(http::field::set_cookie, std::string(kSessionCookie) + "=" + cookie +
+                                       "; Path=/; HttpOnly; SameSite=Strict; Max-Age=" +
+                                       std::to_string(ctx.logins->lifetime().count()) + (req.tls ? "; Secure" : ""));
+  return res;
+}
+
+ApiResponse Logout(ApiContext& ctx, ApiRequest& req) {
+  if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie)) ctx.logins->Remove(*cookie);
+  ApiResponse res = JsonResponse(req, http::status::ok, json{{"logged_out", true}}.dump());
+  res.set(http::field::set_cookie, std::string(kSessionCookie) + "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0" +
+                                       (req.tls ? "; Secure" : ""));
+  return res;
+}
+
+ApiResponse WhoAmI(ApiContext&, ApiRequest& req) {
+  return JsonResponse(req, http::status::ok,
+                      json{{"role", RoleName(req.role)}, {"via", req.via_cookie ? "cookie" : "token"}}.dump());
+}
+
+}  // namespace
+
+ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::string& json_text) {
+  ApiResponse res{status, req.message.version()};
+  res.set(http::field::content_type, "application/json");
+  res.set(http::field::cache_control, "no-store");
+  res.body() = json_text;
+  return res;
+}
+
+ApiResponse JsonError(const ApiRequest& req, http::status status, const std::string& message) {
+  return JsonResponse(req, status, json{{"error", message}}.dump());
+}
+
+std::vector<Route> MakeRoutes() {
+  using P = Permission;
+  using V = http::verb;
+  return {
+      {V::get, "/api/health", std::nullopt, false, false, Health},
+      {V::post, "/api/login", std::nullopt, false, false, Login},
+      {V::post, "/api/logout", P::kRead, false, false, Logout},
+      {V::get, "/api/whoami", P::kRead, false, false, WhoAmI},
+      {V::get, "/metrics", P::kRead, false, false, MetricsText},
+      {V::get, "/api/models", P::kRead, false, false, ListModels},
+      {V::get, "/api/models/{name}", P::kRead, false, false, GetModel},
+      {V::put, "/api/models/{name}", P::kWrite, true, false, PutModel},
+      {V::delete_, "/api/models/{name}", P::kWrite, false, false, DeleteModel},
+      {V::get, "/api/models/{name}/{file}", P::kRead, false, false, GetModelFile},
+      {V::get, "/ws/library", P::kRead, false, true, nullptr},
+  };
+}
+
+Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req) {
+  Admission a;
+  auto fail = [&](http::status status, const std::string& message) {
+    a.error = JsonError(req, status, message);
+    return a;
+  };
+  // Target and route.
+  if (!ParseTarget(Sv(req.message.target()), &req.path, &req.query))
+    return fail(http::status::bad_request, "malformed request target");
+  bool path_known = false;
+  std::string allow;
+  for (const Route& r : routes) {
+    std::vector<std::string> params;
+    if (!MatchPattern(r.pattern, req.path, &params)) continue;
+    path_known = true;
+    allow += (allow.empty() ? "" : ", ") + std::string(http::to_string(r.method));
+    if (r.method != req.message.method()) continue;
+    a.route = &r;
+    req.params = std::move(params);
+    break;
+  }
+  if (a.route == nullptr) {
+    if (!path_known) return fail(http::status::not_found, "no such resource: " + req.path);
+    fail(http::status::method_not_allowed, std::string(req.message.method_string()) + " is not allowed on " +
+                                               req.path + " (allowed: " + allow + ")");
+    a.error->set(http::field::allow, allow);
+    return a;
+  }
+  const Route& route = *a.route;
+  const bool upgrade = boost::beast::websocket::is_upgrade(req.message);
+  if (route.websocket != upgrade)
+    return fail(http::status::bad_request, route.websocket ? req.path + " is a WebSocket endpoint"
+                                                           : req.path + " does not speak WebSocket");
+  // Authentication: a bearer token, else the login cookie.
+  const std::shared_ptr<const TokenTable> tokens = ctx.tokens();
+  const auto authorization = req.message.find(http::field::authorization);
+  if (authorization != req.message.end()) {
+    const auto token = BearerToken(Sv(authorization->value()));
+    if (!token) return fail(http::status::unauthorized, "Authorization must be 'Bearer TOKEN'");
+    req.token_digest = DigestOf(*token);
+    req.role = tokens->LookupDigest(req.token_digest);
+    if (req.role == Role::kNone) return fail(http::status::unauthorized, "unknown token");
+  } else if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie)) {
+    if (const auto digest = ctx.logins->Find(*cookie)) {
+      req.token_digest = *digest;
+      req.role = tokens->LookupDigest(*digest);  // kNone once the token left the file
+      req.via_cookie = req.role != Role::kNone;
+    }
+  }
+  if (route.permission) {
+    if (req.role == Role::kNone)
+      return fail(http::status::unauthorized, "missing or expired credentials: send 'Authorization: Bearer TOKEN' "
+                                              "or log in with POST /api/login");
+    if (!Allows(req.role, *route.permission))
+      return fail(http::status::forbidden, std::string("role ") + RoleName(req.role) + " may not " +
+                                               std::string(req.message.method_string()) + " " + route.pattern);
+  }
+  // Origin: cookie-authenticated writes, the login itself, and every upgrade that carries one.
+  const auto origin = req.message.find(http::field::origin);
+  const bool needs_origin = (req.via_cookie && !IsSafeMethod(req.message.method())) || route.pattern == "/api/login";
+  if (origin != req.message.end() && (needs_origin || upgrade) && !OriginAllowed(ctx, req, Sv(origin->value())))
+    return fail(http::status::forbidden, "origin " + std::string(origin->value()) + " is not allowed");
+  if (origin == req.message.end() && req.via_cookie && !IsSafeMethod(req.message.method()))
+    return fail(http::status::forbidden, "a cookie-authenticated " + std::string(req.message.method_string()) +
+                                             " must carry an Origin header");
+  // Size, before any of the body is read.
+  a.body_limit = static_cast<uint64_t>(route.upload ? ctx.options->max_upload_bytes
+                                                    : ctx.options->max_small_body_bytes);
+  if (const auto length = req.message.payload_size(); length && *length > a.body_limit)
+    return fail(http::status::payload_too_large, "body of " + std::to_string(*length) + " bytes exceeds the limit of " +
+                                                     std::to_string(a.body_limit) + " bytes");
+  if (route.upload) {
+    MediaType type;
+    const auto ct = req.message.find(http::field::content_type);
+    if (ct == req.message.end() || !ParseMediaType(Sv(ct->value()), &type) ||
+        (type.type != "application/json" && type.type != "multipart/form-data"))
+      return fail(http::status::unsupported_media_type,
+                  "upload as application/json {\"fem\", \"plg\", \"description\"} or as multipart/form-data with "
+                  "parts fem, plg, description");
+  }
+  return a;
+}
+
+}  // namespace idms::server

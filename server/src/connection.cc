@@ -1,0 +1,427 @@
+// One HTTP session per connection, in the shape of Beast's advanced server: DoRead/OnRead and
+// DoWrite/OnWrite on the connection's strand, one request at a time, one write in flight, the
+// header admitted (route, auth, Origin, size) before any of the body is read, handlers run on the
+// worker pool. A WebSocket upgrade hands the stream to a WebSocket session with a bounded
+// send queue. The same code serves plain TCP and TLS (Stream = tcp_stream or ssl_stream).
+#include <boost/asio/dispatch.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/ssl/stream.hpp>
+#include <boost/asio/strand.hpp>
+#include <boost/asio/write.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/ssl.hpp>
+#include <boost/beast/websocket.hpp>
+#include <boost/beast/websocket/ssl.hpp>
+#include <cmath>
+#include <deque>
+
+#include "idms/server/log.h"
+#include "server_internal.h"
+
+namespace idms::server {
+namespace {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace websocket = beast::websocket;
+using tcp = asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+constexpr uint64_t kLargeBody = 1 << 20;     // bodies above this take an upload slot
+constexpr size_t kMaxQueuedMessages = 64;  // per WebSocket; the oldest is dropped beyond
+
+template <class Stream>
+constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
+
+std::string PeerOf(const tcp::socket& s) {
+  beast::error_code ec;
+  const tcp::endpoint ep = s.remote_endpoint(ec);
+  return ec ? "?" : ep.address().to_string() + ":" + std::to_string(ep.port());
+}
+
+// Errors that mean "the peer went away or we closed it": not worth a warning.
+bool Quiet(const beast::error_code& ec) {
+  return ec == asio::error::operation_aborted || ec == beast::error::timeout || ec == http::error::end_of_stream ||
+         ec == asio::error::eof || ec == asio::error::connection_reset || ec == asio::error::broken_pipe ||
+         ec == websocket::error::closed || ec == asio::ssl::error::stream_truncated;
+}
+
+// ---------------------------------------------------------------------------------------------
+// WebSocket: /ws/library sends library events (model added or deleted) as JSON text; it takes no
+// messages, so anything a client sends closes it with a policy error. Issue 10's session routes
+// build on the same class.
+template <class Stream>
+class WsSession : public Connection, public TextSink, public std::enable_shared_from_this<WsSession<Stream>> {
+ public:
+  WsSession(ServerCore& core, Stream&& stream, std::string peer)
+      : core_(core), ws_(std::move(stream)), peer_(std::move(peer)) {
+    ++core_.metrics.open_websockets;
+  }
+  ~WsSession() override {
+    --core_.metrics.open_websockets;
+    core_.Unsubscribe(this);
+    core_.Unregister(this);
+  }
+
+  void Run(http::request<http::string_body> req) {
+    beast::get_lowest_layer(ws_).expires_never();  // the WebSocket's own timeouts from here on
+    ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+    ws_.set_option(websocket::stream_base::decorator(
+        [](websocket::response_type& res) { res.set(http::field::server, "idms-server"); }));
+    ws_.read_message_max(static_cast<uint64_t>(core_.options.max_ws_message_bytes));
+    ws_.async_accept(req, beast::bind_front_handler(&WsSession::OnAccept, this->shared_from_this()));
+  }
+
+  void Send(std::shared_ptr<const std::string> text) override {
+    asio::post(ws_.get_executor(), [self = this->shared_from_this(), text = std::move(text)]() mutable {
+      // Latest wins: a slow watcher loses the oldest events, never blocks anyone.
+      if (self->queue_.size() >= kMaxQueuedMessages) self->queue_.erase(self->queue_.begin() + 1);
+      self->queue_.push_back(std::move(text));
+      if (self->queue_.size() == 1) self->DoWrite();
+    });
+  }
+
+  void Drain() override {
+    asio::post(ws_.get_executor(), [self = this->shared_from_this()] {
+      if (!self->open_) return;
+      self->open_ = false;
+      self->ws_.async_close(websocket::close_code::going_away, [self](beast::error_code) {});
+    });
+  }
+
+ private:
+  void OnAccept(beast::error_code ec) {
+    if (ec) return Fail(ec, "accept");
+    open_ = true;
+    core_.Register(this, this->weak_from_this());
+    core_.Subscribe(this, this->weak_from_this());
+    Send(std::make_shared<const std::string>(R"({"event":"hello","endpoint":"/ws/library"})"));
+    DoRead();
+  }
+
+  void DoRead() { ws_.async_read(buffer_, beast::bind_front_handler(&WsSession::OnRead, this->shared_from_this())); }
+
+  void OnRead(beast::error_code ec, size_t) {
+    if (ec) return Fail(ec, "read");
+    // This endpoint only sends: a client message is a protocol violation.
+    buffer_.consume(buffer_.size());
+    open_ = false;
+    ws_.async_close(websocket::close_reason(websocket::close_code::policy_error, "/ws/library accepts no messages"),
+                    [self = this->shared_from_this()](beast::error_code) {});
+  }
+
+  void DoWrite() {
+    if (!open_) return queue_.clear();
+    ws_.text(true);
+    ws_.async_write(asio::buffer(*queue_.front()),
+                    beast::bind_front_handler(&WsSession::OnWrite, this->shared_from_this()));
+  }
+
+  void OnWrite(beast::error_code ec, size_t bytes) {
+    if (ec) return Fail(ec, "write");
+    core_.metrics.AddBytesOut(bytes);
+    queue_.erase(queue_.begin());
+    if (!queue_.empty()) DoWrite();
+  }
+
+  void Fail(beast::error_code ec, const char* what) {
+    open_ = false;
+    queue_.clear();
+    if (!Quiet(ec) && ec != websocket::error::message_too_big)
+      Log(LogLevel::kWarn, "websocket", {{"what", what}, {"error", ec.message()}, {"peer", peer_}});
+  }
+
+  ServerCore& core_;
+  websocket::stream<Stream> ws_;
+  beast::flat_buffer buffer_;
+  std::deque<std::shared_ptr<const std::string>> queue_;
+  std::string peer_;
+  bool open_ = false;
+};
+
+// ---------------------------------------------------------------------------------------------
+template <class Stream>
+class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession<Stream>> {
+ public:
+  template <class... Args>
+  HttpSession(ServerCore& core, std::string peer, Args&&... stream_args)
+      : core_(core), stream_(std::forward<Args>(stream_args)...), peer_(std::move(peer)) {
+    ++core_.metrics.open_connections;
+  }
+  ~HttpSession() override {
+    ReleaseUploadSlot();
+    --core_.metrics.open_connections;
+    core_.Unregister(this);
+  }
+
+  void Run() {
+    core_.Register(this, this->weak_from_this());
+    asio::dispatch(stream_.get_executor(), [self = this->shared_from_this()] {
+      if constexpr (kIsTls<Stream>) {
+        beast::get_lowest_layer(self->stream_).expires_after(self->core_.options.header_timeout);
+        self->stream_.async_handshake(asio::ssl::stream_base::server,
+                                      beast::bind_front_handler(&HttpSession::OnHandshake, self));
+      } else {
+        self->DoRead();
+      }
+    });
+  }
+
+  void Drain() override {
+    asio::post(stream_.get_executor(), [self = this->shared_from_this()] {
+      // Idle (waiting for a request): close now; busy: the response says Connection: close.
+      if (!self->busy_) beast::get_lowest_layer(self->stream_).socket().cancel();
+    });
+  }
+
+ private:
+  void OnHandshake(beast::error_code ec) {
+    if (ec) return Fail(ec, "tls handshake");
+    DoRead();
+  }
+
+  void DoRead() {
+    busy_ = false;
+    if (core_.draining) return DoClose();
+    parser_.emplace();
+    parser_->header_limit(core_.options.max_header_bytes);
+    // Beast checks Content-Length against this as the header is parsed; admission then applies
+    // the route's own limit (413 before any of the body is read).
+    parser_->body_limit(static_cast<uint64_t>(std::max(core_.options.max_upload_bytes, core_.options.max_small_body_bytes)));
+    // One deadline for the whole header: a client sending a byte a second is cut off.
+    beast::get_lowest_layer(stream_).expires_after(core_.options.header_timeout);
+    http::async_read_header(stream_, buffer_, *parser_,
+                            beast::bind_front_handler(&HttpSession::OnReadHeader, this->shared_from_this()));
+  }
+
+  void OnReadHeader(beast::error_code ec, size_t bytes) {
+    if (ec == http::error::end_of_stream) return DoClose();
+    if (ec == http::error::header_limit) return req_ = ApiRequest{}, Refuse(http::status::request_header_fields_too_large, "header too large");
+    if (ec == http::error::body_limit) return req_ = ApiRequest{}, Refuse(http::status::payload_too_large, "body too large");
+    if (ec) return Fail(ec, "read header");
+    busy_ = true;
+    started_ = Clock::now();
+    bytes_in_ = bytes;
+    req_ = ApiRequest{};
+    req_.message = parser_->get();
+    req_.tls = kIsTls<Stream>;
+    req_.peer = peer_;
+    admission_ = Admit(core_.ctx, core_.routes, req_);
+    if (admission_.error) {
+      // The body (if any) stays unread, so the connection cannot be reused.
+      const bool has_body = req_.message.chunked() || req_.message.payload_size().value_or(0) > 0;
+      return Write(std::move(*admission_.error), has_body);
+    }
+    if (admission_.route->websocket) return Upgrade();
+    // Large bodies are bounded in number, so a burst of uploads cannot exhaust memory.
+    const uint64_t announced = req_.message.payload_size().value_or(req_.message.chunked() ? kLargeBody + 1 : 0);
+    if (announced > kLargeBody) {
+      if (++core_.uploads_in_flight > core_.options.max_concurrent_uploads) {
+        --core_.uploads_in_flight;
+        ApiResponse res = JsonError(req_, http::status::service_unavailable, "too many uploads in progress; retry");
+        res.set(http::field::retry_after, "5");
+        return Write(std::move(res), true);
+      }
+      holds_upload_slot_ = true;
+    }
+    parser_->body_limit(admission_.body_limit);
+    beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
+                                                   std::chrono::seconds(announced >> 20));
+    if (beast::iequals(req_.message[http::field::expect], "100-continue")) {
+      continue_.emplace(http::status::continue_, req_.message.version());
+      http::async_write(stream_, *continue_, [self = this->shared_from_this()](beast::error_code ec2, size_t) {
+        if (ec2) return self->Fail(ec2, "write 100-continue");
+        self->DoReadBody();
+      });
+      return;
+    }
+    DoReadBody();
+  }
+
+  void DoReadBody() {
+    http::async_read(stream_, buffer_, *parser_,
+                     beast::bind_front_handler(&HttpSession::OnReadBody, this->shared_from_this()));
+  }
+
+  void OnReadBody(beast::error_code ec, size_t bytes) {
+    bytes_in_ += bytes;
+    if (ec == http::error::body_limit)
+      return Refuse(http::status::payload_too_large,
+                    "body exceeds the limit of " + std::to_string(admission_.body_limit) + " bytes");
+    if (ec) return Fail(ec, "read body");
+    req_.message = parser_->release();
+    // The handler may parse, hash and touch the disk: on a worker, never on an I/O thread.
+    asio::post(core_.workers, [self = this->shared_from_this()] {
+      ApiResponse res;
+      try {
+        res = self->admission_.route->handler(self->core_.ctx, self->req_);
+      } catch (const std::exception& e) {
+        Log(LogLevel::kError, "handler threw", {{"route", self->admission_.route->pattern}, {"error", e.what()}});
+        res = JsonError(self->req_, http::status::internal_server_error, "internal error");
+      }
+      asio::post(self->stream_.get_executor(),
+                 [self, res = std::move(res)]() mutable { self->Write(std::move(res), false); });
+    });
+  }
+
+  void Upgrade() {
+    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_), peer_);
+    AccessLog(101, 0);
+    ws->Run(parser_->release());
+  }
+
+  // A response to a request whose body could not be read: sent, then the connection closes.
+  void Refuse(http::status status, const std::string& message) {
+    busy_ = true;
+    Write(JsonError(req_, status, message), true);
+  }
+
+  void Write(ApiResponse res, bool close_after) {
+    res.set(http::field::server, "idms-server");
+    res.keep_alive(!close_after && !core_.draining && req_.message.keep_alive());
+    res.prepare_payload();
+    response_ = std::make_shared<ApiResponse>(std::move(res));
+    beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
+                                                   std::chrono::seconds(response_->body().size() >> 20));
+    http::async_write(stream_, *response_,
+                      beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
+  }
+
+  void OnWrite(beast::error_code ec, size_t bytes) {
+    AccessLog(response_->result_int(), bytes);
+    ReleaseUploadSlot();
+    if (ec) return Fail(ec, "write");
+    const bool close = !response_->keep_alive();
+    response_.reset();
+    if (close) return DoClose();
+    DoRead();
+  }
+
+  void AccessLog(unsigned status, size_t bytes_out) {
+    const double seconds = std::chrono::duration<double>(Clock::now() - started_).count();
+    const std::string route = admission_.route != nullptr ? admission_.route->pattern : "(none)";
+    const std::string method(req_.message.method_string());
+    core_.metrics.CountRequest(method, route, static_cast<int>(status), seconds, bytes_in_, bytes_out);
+    // The path only: no query string, no header, so no secret can reach the log.
+    Log(LogLevel::kInfo, "request",
+        {{"method", method}, {"path", req_.path.empty() ? "?" : req_.path}, {"route", route}, {"status", status},
+         {"bytes", bytes_out}, {"ms", std::round(seconds * 1e4) / 10}, {"peer", peer_}});
+    admission_ = Admission{};
+  }
+
+  void ReleaseUploadSlot() {
+    if (holds_upload_slot_) --core_.uploads_in_flight;
+    holds_upload_slot_ = false;
+  }
+
+  void DoClose() {
+    if constexpr (kIsTls<Stream>) {
+      beast::get_lowest_layer(stream_).expires_after(std::chrono::seconds(5));
+      stream_.async_shutdown([self = this->shared_from_this()](beast::error_code) {});
+    } else {
+      beast::error_code ignored;
+      stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+    }
+  }
+
+  void Fail(beast::error_code ec, const char* what) {
+    if (Quiet(ec) || ec == http::error::partial_message) return;
+    // Garbage on the socket: this connection closes, nobody else notices.
+    Log(LogLevel::kWarn, "connection", {{"what", what}, {"error", ec.message()}, {"peer", peer_}});
+  }
+
+  ServerCore& core_;
+  Stream stream_;
+  beast::flat_buffer buffer_;
+  std::string peer_;
+  std::optional<http::request_parser<http::string_body>> parser_;
+  std::optional<http::response<http::empty_body>> continue_;
+  ApiRequest req_;
+  Admission admission_;
+  std::shared_ptr<ApiResponse> response_;
+  Clock::time_point started_ = Clock::now();
+  size_t bytes_in_ = 0;
+  bool busy_ = false;
+  bool holds_upload_slot_ = false;
+};
+
+// Beyond the connection limit: a canned 503 (plain) or a close (TLS), without a session.
+void RejectBusy(ServerCore& core, tcp::socket socket) {
+  ++core.metrics.rejected_connections;
+  if (core.tls) return;
+  static const std::string kBusy =
+      "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
+      "Retry-After: 1\r\nContent-Length: 40\r\n\r\n{\"error\":\"too many connections; retry\"}\n";
+  auto s = std::make_shared<tcp::socket>(std::move(socket));
+  asio::async_write(*s, asio::buffer(kBusy), [s](beast::error_code, size_t) {
+    beast::error_code ignored;
+    s->shutdown(tcp::socket::shutdown_both, ignored);
+  });
+}
+
+}  // namespace
+
+void Launch(ServerCore& core, tcp::socket socket) {
+  if (core.metrics.open_connections.load() >= core.options.max_connections) return RejectBusy(core, std::move(socket));
+  std::string peer = PeerOf(socket);
+  if (core.tls) {
+    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(peer), std::move(socket),
+                                                                          *core.tls)
+        ->Run();
+  } else {
+    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(peer), std::move(socket))->Run();
+  }
+}
+
+void ServerCore::Register(Connection* c, std::weak_ptr<Connection> w) {
+  std::lock_guard lock(mu_);
+  connections_[c] = std::move(w);
+}
+
+void ServerCore::Unregister(Connection* c) {
+  std::function<void()> last;
+  {
+    std::lock_guard lock(mu_);
+    if (connections_.erase(c) == 0) return;
+    if (draining && connections_.empty()) last = on_last_connection_closed;
+  }
+  if (last) last();
+}
+
+void ServerCore::DrainAll() {
+  std::vector<std::shared_ptr<Connection>> live;
+  {
+    std::lock_guard lock(mu_);
+    for (auto& [ptr, weak] : connections_) {
+      if (auto c = weak.lock()) live.push_back(std::move(c));
+    }
+    if (connections_.empty() && on_last_connection_closed) asio::post(ioc, on_last_connection_closed);
+  }
+  for (auto& c : live) c->Drain();
+}
+
+void ServerCore::Subscribe(TextSink* s, std::weak_ptr<TextSink> w) {
+  std::lock_guard lock(mu_);
+  sinks_[s] = std::move(w);
+}
+
+void ServerCore::Unsubscribe(TextSink* s) {
+  std::lock_guard lock(mu_);
+  sinks_.erase(s);
+}
+
+void ServerCore::Publish(const std::string& text) {
+  // One immutable message shared by every watcher.
+  auto message = std::make_shared<const std::string>(text);
+  std::vector<std::shared_ptr<TextSink>> live;
+  {
+    std::lock_guard lock(mu_);
+    for (auto& [ptr, weak] : sinks_) {
+      if (auto s = weak.lock()) live.push_back(std::move(s));
+    }
+  }
+  for (auto& s : live) s->Send(message);
+}
+
+}  // namespace idms::server

@@ -1,0 +1,58 @@
+// Text or JSON lines through spdlog's stderr logger (thread-safe, one write per line).
+#include "idms/server/log.h"
+
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <chrono>
+#include <ctime>
+
+namespace idms::server {
+namespace {
+
+std::atomic<bool> g_json{false};
+
+spdlog::logger& Logger() {
+  static std::shared_ptr<spdlog::logger> logger = [] {
+    auto l = spdlog::stderr_logger_mt("idms-server");
+    l->set_pattern("%v");
+    l->flush_on(spdlog::level::info);
+    return l;
+  }();
+  return *logger;
+}
+
+std::string Timestamp() {
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t t = std::chrono::system_clock::to_time_t(now);
+  const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[40];
+  const size_t n = std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%S", &tm);
+  std::snprintf(buf + n, sizeof buf - n, ".%03dZ", static_cast<int>(ms));
+  return buf;
+}
+
+}  // namespace
+
+void SetLogFormat(const std::string& format) { g_json = format == "json"; }
+
+void Log(LogLevel level, const std::string& message, const nlohmann::ordered_json& fields) {
+  const char* name = level == LogLevel::kInfo ? "info" : level == LogLevel::kWarn ? "warn" : "error";
+  std::string line;
+  if (g_json) {
+    nlohmann::ordered_json j{{"time", Timestamp()}, {"level", name}, {"msg", message}};
+    for (const auto& [k, v] : fields.items()) j[k] = v;
+    line = j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  } else {
+    line = Timestamp() + " " + name + " " + message;
+    for (const auto& [k, v] : fields.items()) {
+      line += " " + k + "=" + (v.is_string() ? v.get<std::string>() : v.dump());
+    }
+  }
+  Logger().info(line);
+}
+
+}  // namespace idms::server

@@ -1,0 +1,122 @@
+// idms-server: the session server's command line. `idms-server [options]` serves;
+// `idms-server token create ROLE --tokens FILE` adds a token to a tokens file.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <iostream>
+
+#include "idms/server/auth.h"
+#include "idms/server/log.h"
+#include "idms/server/server.h"
+
+namespace {
+
+using idms::server::ServerOptions;
+
+// "HOST:PORT" or "[V6]:PORT".
+bool SplitListen(const std::string& text, std::string* host, uint16_t* port) {
+  const size_t colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0) return false;
+  std::string h = text.substr(0, colon);
+  if (h.size() > 2 && h.front() == '[' && h.back() == ']') h = h.substr(1, h.size() - 2);
+  try {
+    const int p = std::stoi(text.substr(colon + 1));
+    if (p < 0 || p > 65535 || text.substr(colon + 1).find_first_not_of("0123456789") != std::string::npos) return false;
+    *host = h;
+    *port = static_cast<uint16_t>(p);
+  } catch (const std::exception&) {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ServerOptions o;
+  std::string listen = "127.0.0.1:8740";
+  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30;
+
+  CLI::App app{
+      "idms-server: the idms session server. HTTP and WebSocket on one port (TLS optional): the model library "
+      "(REST), tokens and roles, /metrics, /api/health.\n"
+      "Started on an empty data directory it imports the shipped models/ and, without --tokens, writes one token "
+      "per role (admin, agent, observer) to DATA/tokens (mode 0600) and prints that file's path.\n"
+      "Signals: SIGTERM/SIGINT stop gracefully (requests in flight finish); SIGHUP reloads the tokens file."};
+  app.add_option("--listen", listen, "HOST:PORT to listen on (port 0: any free port)")->capture_default_str();
+  app.add_option("--data", o.data_dir, "Data directory: idms.db (SQLite), blobs/, tokens")->capture_default_str();
+  app.add_option("--tokens", o.tokens_file,
+                 "Tokens file: 'ROLE TOKEN' or 'ROLE sha256:HEX' per line, # comments (default DATA/tokens)");
+  app.add_option("--tls-cert", o.tls_cert, "PEM certificate chain: serve HTTPS and WSS on the same port");
+  app.add_option("--tls-key", o.tls_key, "PEM private key for --tls-cert");
+  app.add_option("--allowed-origin", o.allowed_origins,
+                 "A browser origin besides the server's own that may use cookies and WebSockets (repeatable)");
+  app.add_option("--threads", o.threads, "I/O threads (0: the number of cores)")->capture_default_str();
+  app.add_option("--workers", o.workers, "Threads for handlers that parse, hash or touch the disk")
+      ->capture_default_str();
+  app.add_option("--log-format", o.log_format, "text or json")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->capture_default_str();
+  app.add_option("--models-dir", o.models_dir,
+                 "Models imported into an empty library (default: the shipped models/; 'none': no import)");
+  app.add_option("--max-upload-mb", max_upload_mb, "Largest request body, MiB (413 beyond, before it is read)")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  app.add_option("--max-ws-message-mb", max_ws_mb, "Largest WebSocket message, MiB")
+      ->check(CLI::Range(1, 1 << 12))
+      ->capture_default_str();
+  app.add_option("--max-connections", o.max_connections, "Open connections beyond which new ones get 503")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  app.add_option("--header-timeout", header_timeout_s, "Seconds for a whole request header, and keep-alive idle")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
+  app.add_option("--body-timeout", body_timeout_s, "Seconds for a request body, plus one per MiB announced")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
+
+  // idms-server token create ROLE --tokens FILE
+  CLI::App* token = app.add_subcommand("token", "Manage tokens");
+  CLI::App* create = token->add_subcommand("create", "Append a new random token's hash to FILE and print the token once");
+  std::string role_text, token_file;
+  create->add_option("ROLE", role_text, "admin, agent or observer")
+      ->required()
+      ->check(CLI::IsMember({"admin", "agent", "observer"}));
+  create->add_option("--tokens", token_file, "Tokens file (created with mode 0600 when missing)")->required();
+  token->require_subcommand(1);
+
+  CLI11_PARSE(app, argc, argv);
+
+  if (create->parsed()) {
+    std::string error;
+    const std::string t = idms::server::AppendNewToken(token_file, idms::server::ParseRole(role_text), &error);
+    if (t.empty()) {
+      std::fprintf(stderr, "idms-server: %s\n", error.c_str());
+      return 1;
+    }
+    std::printf("%s\n", t.c_str());
+    return 0;
+  }
+
+  if (!SplitListen(listen, &o.host, &o.port)) {
+    std::fprintf(stderr, "idms-server: --listen '%s': expected HOST:PORT\n", listen.c_str());
+    return 2;
+  }
+  o.max_upload_bytes = int64_t{max_upload_mb} << 20;
+  o.max_ws_message_bytes = int64_t{max_ws_mb} << 20;
+  o.header_timeout = std::chrono::seconds(header_timeout_s);
+  o.body_timeout = std::chrono::seconds(body_timeout_s);
+  idms::server::SetLogFormat(o.log_format);
+
+  idms::server::Server server(o);
+  std::string error;
+  if (!server.Start(&error)) {
+    std::fprintf(stderr, "idms-server: %s\n", error.c_str());
+    return 1;
+  }
+  const char* scheme = o.tls_cert.empty() ? "http" : "https";
+  // Machine-readable first line (tests and scripts wait for it), then where the tokens are.
+  std::printf("idms-server listening on %s://%s:%u\n", scheme, o.host.c_str(), server.port());
+  std::printf("tokens: %s\n", server.tokens_path().c_str());
+  std::fflush(stdout);
+  return server.Run();
+}

@@ -1,0 +1,223 @@
+// The server's life: data directory and library import, tokens (created on first start, reloaded
+// on SIGHUP), TLS, the listener, the I/O threads, and a graceful stop on SIGTERM / SIGINT.
+#include "idms/server/server.h"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+#include <boost/beast/core/error.hpp>
+#include <filesystem>
+#include <thread>
+
+#include "idms/server/log.h"
+#include "server_internal.h"
+
+namespace idms::server {
+
+namespace asio = boost::asio;
+namespace fs = std::filesystem;
+using tcp = asio::ip::tcp;
+
+struct Server::Impl {
+  explicit Impl(const ServerOptions& o)
+      : core(o, ResolveThreads(o.threads), std::max(1, o.workers)),
+        logins(core.options.login_lifetime),
+        acceptor(asio::make_strand(core.ioc)),
+        signals(core.ioc, SIGINT, SIGTERM, SIGHUP),
+        grace(core.ioc) {}
+
+  static int ResolveThreads(int n) { return n > 0 ? n : std::max(1u, std::thread::hardware_concurrency()); }
+
+  bool Start(std::string* error);
+  bool LoadTokens(std::string* error);
+  void DoAccept();
+  void WaitSignal();
+  void Stop();
+
+  ServerCore core;
+  Storage storage;
+  std::unique_ptr<Library> library;
+  LoginSessions logins;
+  std::mutex tokens_mu;
+  std::shared_ptr<const TokenTable> tokens = std::make_shared<TokenTable>();
+  std::string tokens_path;
+  tcp::acceptor acceptor;
+  asio::signal_set signals;
+  asio::steady_timer grace;
+  uint16_t port = 0;
+  int threads = 1;
+};
+
+namespace {
+
+// The shipped models/ directory: $IDMS_MODELS_DIR, beside the build (build/bin/../../models), an
+// installed share/idms/models, or the source tree this binary was built from.
+std::string FindShippedModels() {
+  if (const char* env = std::getenv("IDMS_MODELS_DIR"); env != nullptr && *env != '\0') return env;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  std::vector<fs::path> candidates;
+  if (!ec) {
+    candidates.push_back(exe.parent_path() / ".." / ".." / "models");
+    candidates.push_back(exe.parent_path() / ".." / "share" / "idms" / "models");
+  }
+#ifdef IDMS_SOURCE_MODELS_DIR
+  candidates.emplace_back(IDMS_SOURCE_MODELS_DIR);
+#endif
+  for (const fs::path& c : candidates) {
+    if (fs::exists(c / "hex_4x5_home.fem", ec)) return fs::weakly_canonical(c, ec).string();
+  }
+  return {};
+}
+
+}  // namespace
+
+bool Server::Impl::LoadTokens(std::string* error) {
+  auto table = std::make_shared<TokenTable>();
+  if (!TokenTable::Load(tokens_path, table.get(), error)) return false;
+  std::lock_guard lock(tokens_mu);
+  tokens = std::move(table);
+  return true;
+}
+
+bool Server::Impl::Start(std::string* error) {
+  const ServerOptions& o = core.options;
+  // Storage, and the shipped library on first start.
+  if (!OpenStorage(o.data_dir, &storage, error)) return false;
+  library = std::make_unique<Library>(storage.blobs.get(), storage.models.get());
+  if (storage.models->NumModels() == 0 && o.models_dir != "none") {
+    const std::string dir = o.models_dir.empty() ? FindShippedModels() : o.models_dir;
+    if (!dir.empty()) {
+      const int n = library->ImportDirectory(dir, error);
+      if (n < 0) return false;
+      Log(LogLevel::kInfo, "imported the shipped models", {{"count", n}, {"from", dir}});
+    } else {
+      Log(LogLevel::kWarn, "no shipped models found to import (set --models-dir)");
+    }
+  }
+  // Tokens: the given file, else DATA/tokens (created with one token per role).
+  tokens_path = o.tokens_file.empty() ? (fs::path(o.data_dir) / "tokens").string() : o.tokens_file;
+  if (o.tokens_file.empty() && !fs::exists(tokens_path)) {
+    if (!CreateDefaultTokens(tokens_path, error)) return false;
+    Log(LogLevel::kInfo, "created one token per role (admin, agent, observer)", {{"file", tokens_path}});
+  }
+  if (!LoadTokens(error)) return false;
+  // TLS on the same port when asked.
+  if (o.tls_cert.empty() != o.tls_key.empty()) {
+    *error = "--tls-cert and --tls-key go together";
+    return false;
+  }
+  if (!o.tls_cert.empty()) {
+    core.tls.emplace(asio::ssl::context::tls_server);
+    boost::system::error_code ec;
+    core.tls->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                          asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                          asio::ssl::context::no_tlsv1_1);
+    if (core.tls->use_certificate_chain_file(o.tls_cert, ec); ec) {
+      *error = "--tls-cert " + o.tls_cert + ": " + ec.message();
+      return false;
+    }
+    if (core.tls->use_private_key_file(o.tls_key, asio::ssl::context::pem, ec); ec) {
+      *error = "--tls-key " + o.tls_key + ": " + ec.message();
+      return false;
+    }
+  }
+  // The API context.
+  core.ctx.options = &core.options;
+  core.ctx.library = library.get();
+  core.ctx.logins = &logins;
+  core.ctx.metrics = &core.metrics;
+  core.ctx.tokens = [this] {
+    std::lock_guard lock(tokens_mu);
+    return tokens;
+  };
+  core.ctx.publish_library_event = [this](std::string text) { core.Publish(text); };
+  core.routes = MakeRoutes();
+  core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
+  // Bind.
+  boost::system::error_code ec;
+  const auto address = asio::ip::make_address(o.host, ec);
+  if (ec) {
+    *error = "--listen: '" + o.host + "' is not an IP address";
+    return false;
+  }
+  const tcp::endpoint endpoint(address, o.port);
+  acceptor.open(endpoint.protocol(), ec);
+  if (!ec) acceptor.set_option(asio::socket_base::reuse_address(true), ec);
+  if (!ec) acceptor.bind(endpoint, ec);
+  if (!ec) acceptor.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec) {
+    *error = "cannot listen on " + o.host + ":" + std::to_string(o.port) + ": " + ec.message();
+    return false;
+  }
+  port = acceptor.local_endpoint().port();
+  threads = ResolveThreads(o.threads);
+  return true;
+}
+
+void Server::Impl::DoAccept() {
+  acceptor.async_accept(asio::make_strand(core.ioc), [this](boost::system::error_code ec, tcp::socket socket) {
+    if (ec == asio::error::operation_aborted || !acceptor.is_open()) return;
+    if (!ec) Launch(core, std::move(socket));
+    // EMFILE and the like: keep accepting; the peer saw a reset.
+    DoAccept();
+  });
+}
+
+void Server::Impl::WaitSignal() {
+  signals.async_wait([this](boost::system::error_code ec, int signal) {
+    if (ec) return;
+    if (signal == SIGHUP) {
+      std::string error;
+      if (LoadTokens(&error)) {
+        Log(LogLevel::kInfo, "reloaded the tokens file", {{"file", tokens_path}});
+      } else {
+        Log(LogLevel::kError, "tokens file not reloaded; the previous tokens stay in force", {{"error", error}});
+      }
+      return WaitSignal();
+    }
+    Log(LogLevel::kInfo, "stopping", {{"signal", signal == SIGINT ? "SIGINT" : "SIGTERM"}});
+    Stop();
+  });
+}
+
+void Server::Impl::Stop() {
+  asio::post(acceptor.get_executor(), [this] {
+    if (core.draining.exchange(true)) return;
+    boost::system::error_code ignored;
+    acceptor.close(ignored);
+    signals.cancel(ignored);
+    // Requests in flight get the grace period; then the I/O threads stop regardless.
+    grace.expires_after(core.options.shutdown_grace);
+    grace.async_wait([this](boost::system::error_code ec) {
+      if (!ec) core.ioc.stop();
+    });
+    core.DrainAll();
+  });
+}
+
+Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>(std::move(options))) {}
+Server::~Server() = default;
+
+bool Server::Start(std::string* error) { return impl_->Start(error); }
+uint16_t Server::port() const { return impl_->port; }
+const std::string& Server::tokens_path() const { return impl_->tokens_path; }
+void Server::Stop() { impl_->Stop(); }
+
+int Server::Run() {
+  impl_->DoAccept();
+  impl_->WaitSignal();
+  std::vector<std::thread> extra;
+  for (int i = 1; i < impl_->threads; ++i) extra.emplace_back([this] { impl_->core.ioc.run(); });
+  impl_->core.ioc.run();
+  for (std::thread& t : extra) t.join();
+  // Handlers still on a worker finish before the database closes.
+  impl_->core.workers.join();
+  Log(LogLevel::kInfo, "stopped");
+  return 0;
+}
+
+}  // namespace idms::server

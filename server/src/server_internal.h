@@ -1,0 +1,70 @@
+// What the connections share with the server: the API context and routes, the worker pool,
+// limits, the registry used to drain connections on shutdown, and the /ws/library fan-out.
+#pragma once
+
+#include <atomic>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/ssl/context.hpp>
+#include <boost/asio/thread_pool.hpp>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "idms/server/api.h"
+
+namespace idms::server {
+
+// A live connection, as the registry sees it. Drain() asks it to finish what is in flight and
+// close; any thread (it posts to the connection's strand).
+class Connection {
+ public:
+  virtual ~Connection() = default;
+  virtual void Drain() = 0;
+};
+
+// A text message watcher of /ws/library; Send is thread-safe and never blocks.
+class TextSink {
+ public:
+  virtual ~TextSink() = default;
+  virtual void Send(std::shared_ptr<const std::string> text) = 0;
+};
+
+struct ServerCore {
+  ServerOptions options;
+  ApiContext ctx;
+  std::vector<Route> routes;
+  Metrics metrics;
+  boost::asio::io_context ioc;
+  boost::asio::thread_pool workers;
+  std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
+  std::atomic<bool> draining{false};
+  std::atomic<int> uploads_in_flight{0};
+
+  ServerCore(ServerOptions o, int io_threads, int worker_threads)
+      : options(std::move(o)), ioc(io_threads), workers(static_cast<size_t>(worker_threads)) {}
+
+  // Registry of connections (for Drain) and of /ws/library watchers.
+  void Register(Connection* c, std::weak_ptr<Connection> w);
+  void Unregister(Connection* c);
+  void DrainAll();
+  void Subscribe(TextSink* s, std::weak_ptr<TextSink> w);
+  void Unsubscribe(TextSink* s);
+  void Publish(const std::string& text);
+  std::function<void()> on_last_connection_closed;  // while draining
+
+ private:
+  std::mutex mu_;
+  std::unordered_map<Connection*, std::weak_ptr<Connection>> connections_;
+  std::unordered_map<TextSink*, std::weak_ptr<TextSink>> sinks_;
+};
+
+// Takes an accepted socket: enforces the connection limit, then runs an HTTP session (plain or
+// TLS) on its own strand.
+void Launch(ServerCore& core, boost::asio::ip::tcp::socket socket);
+
+}  // namespace idms::server
