@@ -1,0 +1,122 @@
+// The blob directory and the SQLite model store: content addressing, crash leftovers collected at
+// start-up, version numbers never reused, deletes.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "child_process.h"
+#include "idms/server/storage.h"
+
+namespace idms::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+ModelVersion Version(const std::string& name, const std::string& fem_sha) {
+  ModelVersion v;
+  v.name = name;
+  v.description = "d";
+  v.atoms = 3;
+  v.bytes = 10;
+  v.fem_sha256 = fem_sha;
+  v.plg_sha256 = std::string(64, 'b');
+  v.obj_sha256 = std::string(64, 'c');
+  return v;
+}
+
+TEST(BlobDirectory, StoresByContentHashAndReadsBack) {
+  const std::string dir = test::TempDir("blobs");
+  std::string error, sha;
+  auto blobs = OpenBlobDirectory(dir, &error);
+  ASSERT_TRUE(blobs) << error;
+  ASSERT_TRUE(blobs->Put("hello", &sha, &error)) << error;
+  EXPECT_EQ(sha, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");  // sha256("hello")
+  std::string back;
+  ASSERT_TRUE(blobs->Get(sha, &back));
+  EXPECT_EQ(back, "hello");
+  EXPECT_TRUE(blobs->Has(sha));
+  EXPECT_EQ(blobs->List(), std::vector<std::string>{sha});
+  // A second Put of the same bytes is the same blob.
+  std::string again;
+  ASSERT_TRUE(blobs->Put("hello", &again, &error));
+  EXPECT_EQ(again, sha);
+  EXPECT_EQ(blobs->List().size(), 1u);
+  blobs->Remove(sha);
+  EXPECT_FALSE(blobs->Has(sha));
+  // Not a hash: never a path.
+  EXPECT_FALSE(blobs->Get("../../etc/passwd", &back));
+}
+
+TEST(Storage, StartUpRemovesTemporaryFilesAndBlobsNoRowNames) {
+  const std::string dir = test::TempDir("storage-gc");
+  std::string error, kept, orphan;
+  {
+    Storage s;
+    ASSERT_TRUE(OpenStorage(dir, &s, &error)) << error;
+    ASSERT_TRUE(s.blobs->Put("kept", &kept, &error));
+    ASSERT_TRUE(s.blobs->Put("orphan", &orphan, &error));
+    ModelVersion v = Version("m", kept);
+    ASSERT_TRUE(s.models->AddVersion(&v, &error)) << error;
+  }
+  // What a SIGKILL mid-upload leaves: a temporary file.
+  std::ofstream(fs::path(dir) / "blobs" / "tmp" / "partial.123") << "half";
+  Storage s;
+  ASSERT_TRUE(OpenStorage(dir, &s, &error)) << error;
+  EXPECT_TRUE(s.blobs->Has(kept));
+  EXPECT_FALSE(s.blobs->Has(orphan));
+  EXPECT_TRUE(fs::is_empty(fs::path(dir) / "blobs" / "tmp"));
+}
+
+TEST(SqliteModelStore, VersionsCountUpAndAreNeverReusedAfterDelete) {
+  const std::string dir = test::TempDir("sqlite-versions");
+  std::string error;
+  auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
+  ASSERT_TRUE(store) << error;
+  ModelVersion a = Version("m", std::string(64, '1')), b = Version("m", std::string(64, '2'));
+  ASSERT_TRUE(store->AddVersion(&a, &error));
+  ASSERT_TRUE(store->AddVersion(&b, &error));
+  EXPECT_EQ(a.version, 1);
+  EXPECT_EQ(b.version, 2);
+  ASSERT_TRUE(store->Get("m"));
+  EXPECT_EQ(store->Get("m")->versions.size(), 2u);
+  EXPECT_EQ(store->Get("m")->latest().fem_sha256, std::string(64, '2'));
+  EXPECT_EQ(store->NumModels(), 1);
+  EXPECT_EQ(store->LibraryBytes(), 20);
+  // Delete one version, then the model; the next upload is version 3, not 1.
+  EXPECT_TRUE(store->Delete("m", 2));
+  EXPECT_FALSE(store->Delete("m", 2));
+  EXPECT_EQ(store->Get("m")->latest().version, 1);
+  EXPECT_TRUE(store->BlobReferenced(std::string(64, '1')));
+  EXPECT_FALSE(store->BlobReferenced(std::string(64, '2')));
+  EXPECT_TRUE(store->Delete("m", 0));
+  EXPECT_FALSE(store->Get("m"));
+  EXPECT_TRUE(store->ListLatest().empty());
+  ModelVersion c = Version("m", std::string(64, '3'));
+  ASSERT_TRUE(store->AddVersion(&c, &error));
+  EXPECT_EQ(c.version, 3);
+}
+
+TEST(SqliteModelStore, SurvivesReopenAndListsLatestByName) {
+  const std::string dir = test::TempDir("sqlite-reopen");
+  std::string error;
+  {
+    auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
+    ASSERT_TRUE(store) << error;
+    for (const char* n : {"zeta", "alpha", "alpha"}) {
+      ModelVersion v = Version(n, std::string(64, 'a'));
+      ASSERT_TRUE(store->AddVersion(&v, &error));
+    }
+  }
+  auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
+  ASSERT_TRUE(store) << error;
+  const std::vector<ModelVersion> list = store->ListLatest();
+  ASSERT_EQ(list.size(), 2u);
+  EXPECT_EQ(list[0].name, "alpha");
+  EXPECT_EQ(list[0].version, 2);
+  EXPECT_EQ(list[1].name, "zeta");
+  EXPECT_FALSE(list[0].created.empty());
+}
+
+}  // namespace
+}  // namespace idms::server
