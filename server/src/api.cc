@@ -57,7 +57,7 @@ ApiResponse Health(ApiContext& ctx, ApiRequest& req) {
   const double uptime =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
   return JsonResponse(req, http::status::ok,
-                      json{{"status", "ok"}, {"version", ctx.version}, {"uptime_s", uptime}}.dump());
+                      JsonText(json{{"status", "ok"}, {"version", ctx.version}, {"uptime_s", uptime}}));
 }
 
 ApiResponse MetricsText(ApiContext& ctx, ApiRequest& req) {
@@ -81,7 +81,7 @@ ApiResponse Login(ApiContext& ctx, ApiRequest& req) {
   const Role role = ctx.tokens()->LookupDigest(digest);
   if (role == Role::kNone) return JsonError(req, http::status::unauthorized, "unknown token");
   const std::string cookie = ctx.logins->Create(digest);
-  ApiResponse res = JsonResponse(req, http::status::ok, json{{"role", RoleName(role)}}.dump());
+  ApiResponse res = JsonResponse(req, http::status::ok, JsonText(json{{"role", RoleName(role)}}));
   res.set(http::field::set_cookie, std::string(kSessionCookie) + "=" + cookie +
                                        "; Path=/; HttpOnly; SameSite=Strict; Max-Age=" +
                                        std::to_string(ctx.logins->lifetime().count()) + (req.tls ? "; Secure" : ""));
@@ -90,7 +90,7 @@ ApiResponse Login(ApiContext& ctx, ApiRequest& req) {
 
 ApiResponse Logout(ApiContext& ctx, ApiRequest& req) {
   if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie)) ctx.logins->Remove(*cookie);
-  ApiResponse res = JsonResponse(req, http::status::ok, json{{"logged_out", true}}.dump());
+  ApiResponse res = JsonResponse(req, http::status::ok, JsonText(json{{"logged_out", true}}));
   res.set(http::field::set_cookie, std::string(kSessionCookie) + "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0" +
                                        (req.tls ? "; Secure" : ""));
   return res;
@@ -98,10 +98,12 @@ ApiResponse Logout(ApiContext& ctx, ApiRequest& req) {
 
 ApiResponse WhoAmI(ApiContext&, ApiRequest& req) {
   return JsonResponse(req, http::status::ok,
-                      json{{"role", RoleName(req.role)}, {"via", req.via_cookie ? "cookie" : "token"}}.dump());
+                      JsonText(json{{"role", RoleName(req.role)}, {"via", req.via_cookie ? "cookie" : "token"}}));
 }
 
 }  // namespace
+
+std::string JsonText(const json& j) { return j.dump(-1, ' ', false, json::error_handler_t::replace); }
 
 ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::string& json_text) {
   ApiResponse res{status, req.message.version()};
@@ -112,7 +114,7 @@ ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::
 }
 
 ApiResponse JsonError(const ApiRequest& req, http::status status, const std::string& message) {
-  return JsonResponse(req, status, json{{"error", message}}.dump());
+  return JsonResponse(req, status, JsonText(json{{"error", message}}));
 }
 
 std::vector<Route> MakeRoutes() {

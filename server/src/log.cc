@@ -35,6 +35,21 @@ std::string Timestamp() {
   return buf;
 }
 
+// Text fields: control characters (a decoded %0A in a path, say) escaped, so one event is one line.
+std::string Escaped(const std::string& v) {
+  std::string out;
+  for (unsigned char c : v) {
+    if (c < 0x20 || c == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", c);
+      out += buf;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 void SetLogFormat(const std::string& format) { g_json = format == "json"; }
@@ -49,7 +64,7 @@ void Log(LogLevel level, const std::string& message, const nlohmann::ordered_jso
   } else {
     line = Timestamp() + " " + name + " " + message;
     for (const auto& [k, v] : fields.items()) {
-      line += " " + k + "=" + (v.is_string() ? v.get<std::string>() : v.dump());
+      line += " " + k + "=" + Escaped(v.is_string() ? v.get<std::string>() : v.dump());
     }
   }
   Logger().info(line);

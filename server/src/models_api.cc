@@ -96,7 +96,7 @@ ApiResponse ListModels(ApiContext& ctx, ApiRequest& req) {
                       {"description", v.description},
                       {"created", v.created}});
   }
-  return JsonResponse(req, http::status::ok, json{{"models", models}}.dump());
+  return JsonResponse(req, http::status::ok, JsonText(json{{"models", models}}));
 }
 
 ApiResponse GetModel(ApiContext& ctx, ApiRequest& req) {
@@ -117,7 +117,7 @@ ApiResponse GetModel(ApiContext& ctx, ApiRequest& req) {
   json versions = json::array();
   for (const ModelVersion& v : rec->versions) versions.push_back(VersionJson(v));
   out["versions"] = versions;
-  return JsonResponse(req, http::status::ok, out.dump());
+  return JsonResponse(req, http::status::ok, JsonText(out));
 }
 
 ApiResponse GetModelFile(ApiContext& ctx, ApiRequest& req) {
@@ -164,11 +164,11 @@ ApiResponse PutModel(ApiContext& ctx, ApiRequest& req) {
   if (!v) {
     json body{{"error", error.message}};
     if (!error.file.empty()) body.update({{"file", error.file}, {"line", error.line}, {"column", error.column}});
-    return JsonResponse(req, static_cast<http::status>(error.status), body.dump());
+    return JsonResponse(req, static_cast<http::status>(error.status), JsonText(body));
   }
   if (ctx.publish_library_event)
-    ctx.publish_library_event(json{{"event", "model_added"}, {"model", VersionJson(*v)}}.dump());
-  ApiResponse res = JsonResponse(req, http::status::created, VersionJson(*v).dump());
+    ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", VersionJson(*v)}}));
+  ApiResponse res = JsonResponse(req, http::status::created, JsonText(VersionJson(*v)));
   res.set(http::field::location, "/api/models/" + name + "?version=" + std::to_string(v->version));
   return res;
 }
@@ -179,8 +179,8 @@ ApiResponse DeleteModel(ApiContext& ctx, ApiRequest& req) {
   if (version < 0) return BadVersion(req);
   if (!ctx.library->Delete(name, version)) return NotFound(req, name, version);
   if (ctx.publish_library_event)
-    ctx.publish_library_event(json{{"event", "model_deleted"}, {"name", name}, {"version", version}}.dump());
-  return JsonResponse(req, http::status::ok, json{{"deleted", name}, {"version", version}}.dump());
+    ctx.publish_library_event(JsonText(json{{"event", "model_deleted"}, {"name", name}, {"version", version}}));
+  return JsonResponse(req, http::status::ok, JsonText(json{{"deleted", name}, {"version", version}}));
 }
 
 }  // namespace idms::server

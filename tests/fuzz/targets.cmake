@@ -10,3 +10,6 @@ list(APPEND IDMS_FUZZ_TARGETS mcap_fuzz)
 set(IDMS_FUZZ_LIBS_mcap_fuzz idms_protocol)
 # Seconds each target runs inside the test suite (a longer run: scripts/fuzz.sh).
 set(IDMS_FUZZ_SECONDS 20)
+# The server's request path (Beast's parser, admission, handlers, multipart and JSON bodies).
+list(APPEND IDMS_FUZZ_TARGETS http_fuzz)
+set(IDMS_FUZZ_LIBS_http_fuzz idms_server_api)

@@ -210,6 +210,11 @@ TEST_F(ApiTest, TokensAndRoles) {
   EXPECT_EQ(r.result_int(), 405);
   EXPECT_EQ(r[http::field::allow], "GET");
   EXPECT_EQ(Call(http::verb::get, "/api/models/../tokens", kAdmin).result_int(), 400);
+  // Bytes that are not UTF-8 in a path or a name: a JSON error, never an exception (found by http_fuzz).
+  r = Call(http::verb::get, "/api/%FF%FE", kAdmin);
+  EXPECT_EQ(r.result_int(), 404);
+  EXPECT_NE(json::parse(r.body())["error"].get<std::string>().find("\xEF\xBF\xBD"), std::string::npos);
+  EXPECT_EQ(Upload("bad%FFname", fem_, plg_).result_int(), 400);
 }
 
 TEST_F(ApiTest, LoginCookieWorksOnlyFromAllowedOriginsForWrites) {

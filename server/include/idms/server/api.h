@@ -5,6 +5,7 @@
 #pragma once
 
 #include <boost/beast/http.hpp>
+#include <nlohmann/json.hpp>
 #include <chrono>
 #include <functional>
 #include <map>
@@ -78,7 +79,11 @@ struct Admission {
 // role. Pure apart from reading the token table and login sessions.
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req);
 
-// A JSON error response: {"error": message} plus any extra fields.
+// A JSON text for a response: bytes that are not UTF-8 (a client's path, a parser's quote of a
+// file) are replaced, never thrown on.
+std::string JsonText(const nlohmann::json& j);
+
+// A JSON error response: {"error": message}.
 ApiResponse JsonError(const ApiRequest& req, http::status status, const std::string& message);
 ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::string& json_text);
 
