@@ -12,6 +12,7 @@ packages=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
   gnuplot-nox hyperfine rt-tests
+  curl openssl wrk
 )
 
 missing=()

@@ -19,6 +19,7 @@ trap 'kill "$server_pid" 2>/dev/null || true; wait 2>/dev/null || true; rm -rf "
 "$bin/idms-server" --listen 127.0.0.1:0 --data "$tmp/data" --max-upload-mb 1024 > "$tmp/stdout" 2> "$tmp/server.log" &
 server_pid=$!
 for _ in $(seq 100); do grep -q listening "$tmp/stdout" 2>/dev/null && break; sleep 0.1; done
+[ -s "$tmp/stdout" ] || { echo "server_bench: the server did not start" >&2; cat "$tmp/server.log" >&2; exit 1; }
 port=$(sed -n 's/.*:\([0-9]*\)$/\1/p' "$tmp/stdout" | head -1)
 admin=$(awk '$1=="admin"{print $2}' "$tmp/data/tokens")
 observer=$(awk '$1=="observer"{print $2}' "$tmp/data/tokens")
@@ -42,8 +43,8 @@ run() {  # name path conns [extra header]
   rps=$(awk '/^Requests\/sec/{print $2}' "$tmp/wrk.txt")
   p50=$(awk '$1=="50%"{print $2}' "$tmp/wrk.txt" | to_ms)
   p99=$(awk '$1=="99%"{print $2}' "$tmp/wrk.txt" | to_ms)
-  if grep -q "Non-2xx" "$tmp/wrk.txt" && [ "$name" != "fem_304" ]; then
-    echo "server_bench: non-2xx answers on $path" >&2; cat "$tmp/wrk.txt" >&2
+  if [ -z "$rps" ] || [ -z "$p50" ] || [ -z "$p99" ] || { grep -q "Non-2xx" "$tmp/wrk.txt" && [ "$name" != "fem_304" ]; }; then
+    echo "server_bench: no figures or non-2xx answers on $path" >&2; cat "$tmp/wrk.txt" >&2; exit 1
   fi
   printf '%-34s %5d %12.0f %9s %9s\n' "$name" "$conns" "$rps" "$p50" "$p99"
   echo "$name,$conns,$rps,$p50,$p99" >> "$csv"
@@ -62,6 +63,7 @@ for i in 1 2 3; do
     -F "fem=@$tmp/big.fem" -F "plg=@$tmp/big.plg" "$base/api/models/big")
   times+=("$t")
 done
+[ ${#times[@]} -eq 3 ] || { echo "server_bench: an upload failed" >&2; exit 1; }
 median=$(printf '%s\n' "${times[@]}" | sort -g | sed -n 2p)
 # The server's own time for the same requests (body read, parse, validate, store), from its log.
 server_ms=$(grep 'method=PUT path=/api/models/big ' "$tmp/server.log" | sed -n 's/.* ms=\([0-9.]*\).*/\1/p' | sort -g | sed -n 2p)

@@ -151,7 +151,9 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
     if (!MatchPattern(r.pattern, req.path, &params)) continue;
     path_known = true;
     allow += (allow.empty() ? "" : ", ") + std::string(http::to_string(r.method));
-    if (r.method != req.message.method()) continue;
+    // HEAD is GET without the body (the connection drops it).
+    const bool head_of_get = r.method == http::verb::get && req.message.method() == http::verb::head && !r.websocket;
+    if (r.method != req.message.method() && !head_of_get) continue;
     a.route = &r;
     req.params = std::move(params);
     break;

@@ -281,6 +281,12 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     res.set(http::field::server, "idms-server");
     res.keep_alive(!close_after && !core_.draining && req_.message.keep_alive());
     res.prepare_payload();
+    // HEAD: the headers of the GET, Content-Length included, and no body.
+    if (req_.message.method() == http::verb::head) {
+      const size_t length = res.body().size();
+      res.body().clear();
+      res.content_length(length);
+    }
     response_ = std::make_shared<ApiResponse>(std::move(res));
     beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
                                                    std::chrono::seconds(response_->body().size() >> 20));

@@ -118,6 +118,14 @@ TEST(ServerIntegration, UploadVersionsDownloadWithEtagAndDelete) {
   EXPECT_EQ(again.status, 304);
   EXPECT_TRUE(again.body.empty());
   EXPECT_EQ(Get(port, "/api/models/hex/obj", observer).status, 200);
+  // HEAD: the GET's headers, its Content-Length, no body.
+  const std::string head = RawExchange(port,
+                                       "HEAD /api/models/hex/fem?version=1 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
+                                           observer + "\r\nConnection: close\r\n\r\n",
+                                       seconds(10));
+  EXPECT_EQ(head.rfind("HTTP/1.1 200", 0), 0u) << head;
+  EXPECT_NE(head.find("Content-Length: " + std::to_string(Fem("hex_4x5_home").size()) + "\r\n"), std::string::npos);
+  EXPECT_EQ(head.substr(head.find("\r\n\r\n") + 4), "");
   // Delete version 1, then all.
   auto del = [&](const std::string& target) {
     return Http(port, HttpCall{"DELETE", target, {{"Authorization", "Bearer " + admin}}, ""}).status;
