@@ -2,6 +2,7 @@
 #include "idms/server/library.h"
 
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <set>
 
@@ -17,7 +18,10 @@ bool ValidModelName(std::string_view name) {
 }
 
 std::optional<ModelVersion> Library::Upload(const std::string& name, std::string_view fem, std::string_view plg,
-                                            const std::string& description, UploadError* error) {
+                                            const std::string& description, UploadError* error,
+                                            UploadTimings* timings) {
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point t0 = Clock::now();
   if (!ValidModelName(name)) {
     *error = {400, "model name '" + name + "': expected 1-64 of [A-Za-z0-9_.-], not starting with '.', no '..'",
               "", 0, 0};
@@ -42,6 +46,7 @@ std::optional<ModelVersion> Library::Upload(const std::string& name, std::string
   v.triangles = model.num_tris;
   v.bytes = static_cast<int64_t>(fem.size() + plg.size());
   const std::string obj = WriteObj(model);
+  const Clock::time_point t1 = Clock::now();
   // Blobs durable first, then the row (under the write lock, so no delete collects them between).
   std::lock_guard lock(write_mu_);
   std::string storage_error;
@@ -49,6 +54,10 @@ std::optional<ModelVersion> Library::Upload(const std::string& name, std::string
       !blobs_->Put(obj, &v.obj_sha256, &storage_error) || !models_->AddVersion(&v, &storage_error)) {
     *error = {500, "storing " + name + ": " + storage_error, "", 0, 0};
     return std::nullopt;
+  }
+  if (timings != nullptr) {
+    timings->parse_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    timings->store_ms = std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
   }
   return v;
 }

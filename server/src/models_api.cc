@@ -1,10 +1,12 @@
 // The model library's REST handlers: list, metadata with versions, file downloads with ETag and
 // immutable caching, uploads (JSON or multipart) validated before anything is stored, deletes.
 #include <charconv>
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "idms/server/api.h"
 #include "idms/server/http_parse.h"
+#include "idms/server/log.h"
 
 namespace idms::server {
 namespace {
@@ -160,12 +162,16 @@ ApiResponse PutModel(ApiContext& ctx, ApiRequest& req) {
   ApiResponse refusal;
   if (!ReadUploadFields(req, &fem, &plg, &description, &refusal)) return refusal;
   UploadError error;
-  const std::optional<ModelVersion> v = ctx.library->Upload(name, fem, plg, description, &error);
+  UploadTimings timings;
+  const std::optional<ModelVersion> v = ctx.library->Upload(name, fem, plg, description, &error, &timings);
   if (!v) {
     json body{{"error", error.message}};
     if (!error.file.empty()) body.update({{"file", error.file}, {"line", error.line}, {"column", error.column}});
     return JsonResponse(req, static_cast<http::status>(error.status), JsonText(body));
   }
+  Log(LogLevel::kInfo, "model stored",
+      {{"name", name}, {"version", v->version}, {"atoms", v->atoms}, {"bytes", v->bytes},
+       {"parse_ms", std::round(timings.parse_ms * 10) / 10}, {"store_ms", std::round(timings.store_ms * 10) / 10}});
   if (ctx.publish_library_event)
     ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", VersionJson(*v)}}));
   ApiResponse res = JsonResponse(req, http::status::created, JsonText(VersionJson(*v)));

@@ -20,6 +20,12 @@ struct UploadError {
   int line = 0, column = 0;
 };
 
+// Where an upload's time went, for the log and the bench.
+struct UploadTimings {
+  double parse_ms = 0;  // fem + plg through the sim parsers, the surface check, the obj
+  double store_ms = 0;  // blobs hashed, written, fsync'ed, renamed; the row committed
+};
+
 // [A-Za-z0-9_.-]{1,64}, not starting with '.', without "..".
 bool ValidModelName(std::string_view name);
 
@@ -29,7 +35,8 @@ class Library {
 
   // Validates the pair (fem, plg sharing the surface) and stores it as the next version of `name`.
   std::optional<ModelVersion> Upload(const std::string& name, std::string_view fem, std::string_view plg,
-                                     const std::string& description, UploadError* error);
+                                     const std::string& description, UploadError* error,
+                                     UploadTimings* timings = nullptr);
   // One version (version > 0) or the whole model; blobs nobody names any more are removed.
   bool Delete(const std::string& name, int64_t version);
   // `version` 0 = the latest.
