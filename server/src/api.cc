@@ -128,9 +128,9 @@ std::vector<Route> MakeRoutes() {
       {V::get, "/metrics", P::kRead, false, false, MetricsText},
       {V::get, "/api/models", P::kRead, false, false, ListModels},
       {V::get, "/api/models/{name}", P::kRead, false, false, GetModel},
-      {V::put, "/api/models/{name}", P::kWrite, true, false, PutModel},
-      {V::delete_, "/api/models/{name}", P::kWrite, false, false, DeleteModel},
-      {V::get, "/api/models/{name}/{file}", P::kRead, false, false, GetModelFile},
+      {V::put, "/api/models/{name}", P::kWrite, true, false, PutModel, true},
+      {V::delete_, "/api/models/{name}", P::kWrite, false, false, DeleteModel, true},
+      {V::get, "/api/models/{name}/{file}", P::kRead, false, false, GetModelFile, true},
       {V::get, "/ws/library", P::kRead, false, true, nullptr},
   };
 }

@@ -251,18 +251,23 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
                     "body exceeds the limit of " + std::to_string(admission_.body_limit) + " bytes");
     if (ec) return Fail(ec, "read body");
     req_.message = parser_->release();
-    // The handler may parse, hash and touch the disk: on a worker, never on an I/O thread.
+    // Blocking handlers (parse, hash, file I/O, fsync) on a worker, never on an I/O thread; the
+    // others here, on the strand.
+    if (!admission_.route->blocking) return Write(RunHandler(), false);
     asio::post(core_.workers, [self = this->shared_from_this()] {
-      ApiResponse res;
-      try {
-        res = self->admission_.route->handler(self->core_.ctx, self->req_);
-      } catch (const std::exception& e) {
-        Log(LogLevel::kError, "handler threw", {{"route", self->admission_.route->pattern}, {"error", e.what()}});
-        res = JsonError(self->req_, http::status::internal_server_error, "internal error");
-      }
+      ApiResponse res = self->RunHandler();
       asio::post(self->stream_.get_executor(),
                  [self, res = std::move(res)]() mutable { self->Write(std::move(res), false); });
     });
+  }
+
+  ApiResponse RunHandler() {
+    try {
+      return admission_.route->handler(core_.ctx, req_);
+    } catch (const std::exception& e) {
+      Log(LogLevel::kError, "handler threw", {{"route", admission_.route->pattern}, {"error", e.what()}});
+      return JsonError(req_, http::status::internal_server_error, "internal error");
+    }
   }
 
   void Upgrade() {

@@ -110,26 +110,26 @@ std::string UtcNow() {
 
 class SqliteModelStore final : public ModelStore {
  public:
-  // close_v2 defers the close until the member statements are finalised just after.
-  ~SqliteModelStore() override { sqlite3_close_v2(db_); }
+  // close_v2 defers each close until the member statements are finalised just after.
+  ~SqliteModelStore() override {
+    sqlite3_close_v2(rdb_);
+    sqlite3_close_v2(db_);
+  }
 
   bool Open(const std::string& path, std::string* error) {
-    if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX,
-                        nullptr) != SQLITE_OK) {
-      *error = "cannot open the database " + path + ": " + (db_ ? sqlite3_errmsg(db_) : "out of memory");
-      return false;
-    }
-    sqlite3_busy_timeout(db_, 5000);
+    // Two connections: one writes (uploads, deletes), one reads. In WAL mode a reader never waits
+    // for the writer's commit and fsync, so listing the library stays fast during an upload.
+    if (!OpenConnection(path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, &db_, error)) return false;
     // WAL: readers never block the writer; synchronous FULL: a committed upload survives power loss.
     if (!Exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA foreign_keys=ON;", error) ||
-        !Exec(kSchema, error))
+        !Exec(kSchema, error) || !OpenConnection(path, SQLITE_OPEN_READONLY, &rdb_, error))
       return false;
     const std::string cols = kColumns;
-    return list_latest_.Prepare(db_,
+    return list_latest_.Prepare(rdb_,
                                 "SELECT " + cols + " FROM model_versions v WHERE version = "
                                 "(SELECT MAX(version) FROM model_versions w WHERE w.name = v.name) ORDER BY name",
                                 error) &&
-           get_.Prepare(db_, "SELECT " + cols + " FROM model_versions WHERE name = ?1 ORDER BY version", error) &&
+           get_.Prepare(rdb_, "SELECT " + cols + " FROM model_versions WHERE name = ?1 ORDER BY version", error) &&
            next_version_.Prepare(db_, "SELECT next_version FROM model_names WHERE name = ?1", error) &&
            upsert_name_.Prepare(db_,
                                 "INSERT INTO model_names(name, next_version) VALUES (?1, ?2) "
@@ -141,17 +141,17 @@ class SqliteModelStore final : public ModelStore {
                            error) &&
            delete_version_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1 AND version = ?2", error) &&
            delete_model_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1", error) &&
-           referenced_.Prepare(db_,
+           referenced_.Prepare(rdb_,
                                "SELECT 1 FROM model_versions WHERE fem_sha256 = ?1 OR plg_sha256 = ?1 OR "
                                "obj_sha256 = ?1 LIMIT 1",
                                error) &&
-           totals_.Prepare(db_, "SELECT COUNT(DISTINCT name), COALESCE(SUM(bytes), 0) FROM model_versions", error) &&
+           totals_.Prepare(rdb_, "SELECT COUNT(DISTINCT name), COALESCE(SUM(bytes), 0) FROM model_versions", error) &&
            begin_.Prepare(db_, "BEGIN IMMEDIATE", error) && commit_.Prepare(db_, "COMMIT", error) &&
            rollback_.Prepare(db_, "ROLLBACK", error);
   }
 
   std::vector<ModelVersion> ListLatest() override {
-    std::lock_guard lock(mu_);
+    std::lock_guard lock(read_mu_);
     ResetOnExit r{list_latest_};
     std::vector<ModelVersion> out;
     while (list_latest_.Step() == SQLITE_ROW) out.push_back(RowToVersion(list_latest_));
@@ -159,7 +159,7 @@ class SqliteModelStore final : public ModelStore {
   }
 
   std::optional<ModelRecord> Get(const std::string& name) override {
-    std::lock_guard lock(mu_);
+    std::lock_guard lock(read_mu_);
     ResetOnExit r{get_};
     get_.Bind(1, name);
     ModelRecord rec;
@@ -203,7 +203,7 @@ class SqliteModelStore final : public ModelStore {
   }
 
   bool BlobReferenced(const std::string& sha) override {
-    std::lock_guard lock(mu_);
+    std::lock_guard lock(read_mu_);
     ResetOnExit r{referenced_};
     referenced_.Bind(1, sha);
     return referenced_.Step() == SQLITE_ROW;
@@ -214,10 +214,19 @@ class SqliteModelStore final : public ModelStore {
 
  private:
   std::pair<int64_t, int64_t> Totals() {
-    std::lock_guard lock(mu_);
+    std::lock_guard lock(read_mu_);
     ResetOnExit r{totals_};
     if (totals_.Step() != SQLITE_ROW) return {0, 0};
     return {totals_.Int(0), totals_.Int(1)};
+  }
+
+  static bool OpenConnection(const std::string& path, int flags, sqlite3** db, std::string* error) {
+    if (sqlite3_open_v2(path.c_str(), db, flags | SQLITE_OPEN_NOMUTEX, nullptr) == SQLITE_OK) {
+      sqlite3_busy_timeout(*db, 5000);
+      return true;
+    }
+    *error = "cannot open the database " + path + ": " + (*db ? sqlite3_errmsg(*db) : "out of memory");
+    return false;
   }
 
   bool Exec(const char* sql, std::string* error) {
@@ -236,8 +245,10 @@ class SqliteModelStore final : public ModelStore {
     return false;
   }
 
-  std::mutex mu_;  // one connection: SQLite calls are serialised here (each is microseconds)
+  std::mutex mu_;       // the writing connection's statements
+  std::mutex read_mu_;  // the reading connection's statements (each call is microseconds)
   sqlite3* db_ = nullptr;
+  sqlite3* rdb_ = nullptr;
   Statement list_latest_, get_, next_version_, upsert_name_, insert_, delete_version_, delete_model_, referenced_,
       totals_, begin_, commit_, rollback_;
 };

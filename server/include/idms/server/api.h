@@ -61,6 +61,10 @@ struct Route {
   bool upload = false;                   // body up to --max-upload-mb, else the small limit
   bool websocket = false;                // a WebSocket upgrade (the connection code takes over)
   Handler handler;                       // empty for WebSocket routes
+  // Runs on the worker pool: it parses, hashes, reads a file or waits for an fsync. Otherwise it
+  // runs on the connection's strand (a few microseconds of SQLite read, no file I/O): a thread
+  // hand-off costs more than such a handler.
+  bool blocking = false;
 };
 
 // The routes of this server, in match order.
