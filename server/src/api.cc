@@ -3,6 +3,7 @@
 #include "idms/server/api.h"
 
 #include <algorithm>
+#include <charconv>
 #include <boost/beast/websocket/rfc6455.hpp>
 #include <nlohmann/json.hpp>
 
@@ -49,6 +50,17 @@ bool OriginAllowed(const ApiContext& ctx, const ApiRequest& req, std::string_vie
     if (o == allowed) return true;
   }
   return false;
+}
+
+// The announced Content-Length (not payload_size(), which is the body's size: empty before it is read).
+std::optional<uint64_t> ContentLength(const ApiRequest& req) {
+  const auto it = req.message.find(http::field::content_length);
+  if (it == req.message.end()) return std::nullopt;
+  uint64_t n = 0;
+  const std::string_view v = Sv(it->value());
+  const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
+  if (ec != std::errc() || end != v.data() + v.size()) return std::nullopt;
+  return n;
 }
 
 bool IsSafeMethod(http::verb v) { return v == http::verb::get || v == http::verb::head || v == http::verb::options; }
@@ -205,7 +217,7 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
   // Size, before any of the body is read.
   a.body_limit = static_cast<uint64_t>(route.upload ? ctx.options->max_upload_bytes
                                                     : ctx.options->max_small_body_bytes);
-  if (const auto length = req.message.payload_size(); length && *length > a.body_limit)
+  if (const auto length = ContentLength(req); length && *length > a.body_limit)
     return fail(http::status::payload_too_large, "body of " + std::to_string(*length) + " bytes exceeds the limit of " +
                                                      std::to_string(a.body_limit) + " bytes");
   if (route.upload) {

@@ -210,12 +210,13 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     admission_ = Admit(core_.ctx, core_.routes, req_);
     if (admission_.error) {
       // The body (if any) stays unread, so the connection cannot be reused.
-      const bool has_body = req_.message.chunked() || req_.message.payload_size().value_or(0) > 0;
+      const bool has_body = req_.message.chunked() || parser_->content_length().value_or(0) > 0;
       return Write(std::move(*admission_.error), has_body);
     }
     if (admission_.route->websocket) return Upgrade();
     // Large bodies are bounded in number, so a burst of uploads cannot exhaust memory.
-    const uint64_t announced = req_.message.payload_size().value_or(req_.message.chunked() ? kLargeBody + 1 : 0);
+    // The parser's Content-Length (the message's payload_size() is its body's, still empty here).
+    const uint64_t announced = parser_->content_length().value_or(req_.message.chunked() ? kLargeBody + 1 : 0);
     if (announced > kLargeBody) {
       if (++core_.uploads_in_flight > core_.options.max_concurrent_uploads) {
         --core_.uploads_in_flight;
@@ -226,6 +227,9 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
       holds_upload_slot_ = true;
     }
     parser_->body_limit(admission_.body_limit);
+    // Beast reads into the buffer's free capacity (512 bytes at least): a large body read in
+    // header-sized pieces is 40x slower than in 256 KiB ones (measured: 120 MB in 2.2 s).
+    if (announced > kLargeBody) buffer_.reserve(256 << 10);
     beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
                                                    std::chrono::seconds(announced >> 20));
     if (beast::iequals(req_.message[http::field::expect], "100-continue")) {
@@ -240,6 +244,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   }
 
   void DoReadBody() {
+    body_started_ = Clock::now();
     http::async_read(stream_, buffer_, *parser_,
                      beast::bind_front_handler(&HttpSession::OnReadBody, this->shared_from_this()));
   }
@@ -250,6 +255,8 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
       return Refuse(http::status::payload_too_large,
                     "body exceeds the limit of " + std::to_string(admission_.body_limit) + " bytes");
     if (ec) return Fail(ec, "read body");
+    read_ms_ = std::chrono::duration<double, std::milli>(Clock::now() - body_started_).count();
+    if (buffer_.capacity() > (64 << 10) && buffer_.size() == 0) buffer_.shrink_to_fit();
     req_.message = parser_->release();
     // Blocking handlers (parse, hash, file I/O, fsync) on a worker, never on an I/O thread; the
     // others here, on the strand.
@@ -318,7 +325,12 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     Log(LogLevel::kInfo, "request",
         {{"method", method}, {"path", req_.path.empty() ? "?" : req_.path}, {"route", route}, {"status", status},
          {"bytes", bytes_out}, {"ms", std::round(seconds * 1e4) / 10}, {"peer", peer_}});
+    if (read_ms_ >= 100) {
+      Log(LogLevel::kInfo, "large body", {{"path", req_.path}, {"bytes_in", bytes_in_},
+                                          {"read_ms", std::round(read_ms_ * 10) / 10}});
+    }
     admission_ = Admission{};
+    read_ms_ = 0;
   }
 
   void ReleaseUploadSlot() {
@@ -352,6 +364,8 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   Admission admission_;
   std::shared_ptr<ApiResponse> response_;
   Clock::time_point started_ = Clock::now();
+  Clock::time_point body_started_ = Clock::now();
+  double read_ms_ = 0;  // the body's read time, for the log
   size_t bytes_in_ = 0;
   bool busy_ = false;
   bool holds_upload_slot_ = false;

@@ -182,9 +182,22 @@ TEST_F(ApiTest, BadUploadsAreRefusedAtTheirLineAndChangeNothing) {
                  {{http::field::content_type, "multipart/form-data; boundary=zz"}}, "--zz\r\n\r\nx")
                 .result_int(),
             400);
-  // Over the upload limit: 413 from the announced length, before any body is read.
+  // Over the upload limit: 413 from the announced length, before any body is read (the header
+  // alone, as the connection admits it).
   options_.max_upload_bytes = 1000;
   EXPECT_EQ(Upload("hex", fem_, plg_).result_int(), 413);
+  {
+    ApiRequest header_only;
+    header_only.message = http::request<http::string_body>(http::verb::put, "/api/models/hex", 11);
+    header_only.message.set(http::field::authorization, "Bearer " + kAdmin);
+    header_only.message.set(http::field::content_type, "application/json");
+    header_only.message.set(http::field::content_length, "5000");
+    const Admission a = Admit(ctx_, routes_, header_only);
+    ASSERT_TRUE(a.error);
+    EXPECT_EQ(a.error->result_int(), 413);
+    header_only.message.set(http::field::content_length, "900");
+    EXPECT_FALSE(Admit(ctx_, routes_, header_only).error);
+  }
   EXPECT_EQ(Listing(), before);
   EXPECT_EQ(storage_.blobs->List(), blobs_before);
   EXPECT_EQ(events_.size(), 1u);
