@@ -3,8 +3,8 @@
 #include "idms/server/api.h"
 
 #include <algorithm>
-#include <charconv>
 #include <boost/beast/websocket/rfc6455.hpp>
+#include <charconv>
 #include <nlohmann/json.hpp>
 
 #include "idms/server/http_parse.h"
@@ -66,15 +66,13 @@ std::optional<uint64_t> ContentLength(const ApiRequest& req) {
 bool IsSafeMethod(http::verb v) { return v == http::verb::get || v == http::verb::head || v == http::verb::options; }
 
 ApiResponse Health(ApiContext& ctx, ApiRequest& req) {
-  const double uptime =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
+  const double uptime = std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
   return JsonResponse(req, http::status::ok,
                       JsonText(json{{"status", "ok"}, {"version", ctx.version}, {"uptime_s", uptime}}));
 }
 
 ApiResponse MetricsText(ApiContext& ctx, ApiRequest& req) {
-  const double uptime =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
+  const double uptime = std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
   ApiResponse res{http::status::ok, req.message.version()};
   res.set(http::field::content_type, "text/plain; version=0.0.4; charset=utf-8");
   res.body() = ctx.metrics->Render(ctx.library->models().NumModels(), ctx.library->models().LibraryBytes(), uptime);
@@ -101,7 +99,8 @@ ApiResponse Login(ApiContext& ctx, ApiRequest& req) {
 }
 
 ApiResponse Logout(ApiContext& ctx, ApiRequest& req) {
-  if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie)) ctx.logins->Remove(*cookie);
+  if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie))
+    ctx.logins->Remove(*cookie);
   ApiResponse res = JsonResponse(req, http::status::ok, JsonText(json{{"logged_out", true}}));
   res.set(http::field::set_cookie, std::string(kSessionCookie) + "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0" +
                                        (req.tls ? "; Secure" : ""));
@@ -172,16 +171,16 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
   }
   if (a.route == nullptr) {
     if (!path_known) return fail(http::status::not_found, "no such resource: " + req.path);
-    fail(http::status::method_not_allowed, std::string(req.message.method_string()) + " is not allowed on " +
-                                               req.path + " (allowed: " + allow + ")");
+    fail(http::status::method_not_allowed,
+         std::string(req.message.method_string()) + " is not allowed on " + req.path + " (allowed: " + allow + ")");
     a.error->set(http::field::allow, allow);
     return a;
   }
   const Route& route = *a.route;
   const bool upgrade = boost::beast::websocket::is_upgrade(req.message);
   if (route.websocket != upgrade)
-    return fail(http::status::bad_request, route.websocket ? req.path + " is a WebSocket endpoint"
-                                                           : req.path + " does not speak WebSocket");
+    return fail(http::status::bad_request,
+                route.websocket ? req.path + " is a WebSocket endpoint" : req.path + " does not speak WebSocket");
   // Authentication: a bearer token, else the login cookie.
   const std::shared_ptr<const TokenTable> tokens = ctx.tokens();
   const auto authorization = req.message.find(http::field::authorization);
@@ -200,8 +199,9 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
   }
   if (route.permission) {
     if (req.role == Role::kNone)
-      return fail(http::status::unauthorized, "missing or expired credentials: send 'Authorization: Bearer TOKEN' "
-                                              "or log in with POST /api/login");
+      return fail(http::status::unauthorized,
+                  "missing or expired credentials: send 'Authorization: Bearer TOKEN' "
+                  "or log in with POST /api/login");
     if (!Allows(req.role, *route.permission))
       return fail(http::status::forbidden, std::string("role ") + RoleName(req.role) + " may not " +
                                                std::string(req.message.method_string()) + " " + route.pattern);
@@ -212,11 +212,11 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
   if (origin != req.message.end() && (needs_origin || upgrade) && !OriginAllowed(ctx, req, Sv(origin->value())))
     return fail(http::status::forbidden, "origin " + std::string(origin->value()) + " is not allowed");
   if (origin == req.message.end() && req.via_cookie && !IsSafeMethod(req.message.method()))
-    return fail(http::status::forbidden, "a cookie-authenticated " + std::string(req.message.method_string()) +
-                                             " must carry an Origin header");
+    return fail(http::status::forbidden,
+                "a cookie-authenticated " + std::string(req.message.method_string()) + " must carry an Origin header");
   // Size, before any of the body is read.
-  a.body_limit = static_cast<uint64_t>(route.upload ? ctx.options->max_upload_bytes
-                                                    : ctx.options->max_small_body_bytes);
+  a.body_limit =
+      static_cast<uint64_t>(route.upload ? ctx.options->max_upload_bytes : ctx.options->max_small_body_bytes);
   if (const auto length = ContentLength(req); length && *length > a.body_limit)
     return fail(http::status::payload_too_large, "body of " + std::to_string(*length) + " bytes exceeds the limit of " +
                                                      std::to_string(a.body_limit) + " bytes");

@@ -59,10 +59,14 @@ bool AppendPrivate(const std::string& path, const std::string& text, bool trunca
 
 const char* RoleName(Role role) {
   switch (role) {
-    case Role::kAdmin: return "admin";
-    case Role::kAgent: return "agent";
-    case Role::kObserver: return "observer";
-    case Role::kNone: break;
+    case Role::kAdmin:
+      return "admin";
+    case Role::kAgent:
+      return "agent";
+    case Role::kObserver:
+      return "observer";
+    case Role::kNone:
+      break;
   }
   return "none";
 }
@@ -76,9 +80,12 @@ Role ParseRole(std::string_view text) {
 
 bool Allows(Role role, Permission permission) {
   switch (permission) {
-    case Permission::kRead: return role != Role::kNone;
-    case Permission::kPublish: return role == Role::kAgent || role == Role::kAdmin;
-    case Permission::kWrite: return role == Role::kAdmin;
+    case Permission::kRead:
+      return role != Role::kNone;
+    case Permission::kPublish:
+      return role == Role::kAgent || role == Role::kAdmin;
+    case Permission::kWrite:
+      return role == Role::kAdmin;
   }
   return false;
 }
@@ -183,7 +190,8 @@ std::string AppendNewToken(const std::string& path, Role role, std::string* erro
 bool CreateDefaultTokens(const std::string& path, std::string* error) {
   std::string text =
       "# idms-server tokens: ROLE TOKEN or ROLE sha256:HEX per line. SIGHUP reloads this file.\n"
-      "# Add one with: idms-server token create ROLE --tokens " + path + "\n";
+      "# Add one with: idms-server token create ROLE --tokens " +
+      path + "\n";
   for (Role r : {Role::kAdmin, Role::kAgent, Role::kObserver}) {
     const std::string token = NewToken();
     if (token.empty()) {

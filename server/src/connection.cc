@@ -28,7 +28,7 @@ namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
-constexpr uint64_t kLargeBody = 1 << 20;     // bodies above this take an upload slot
+constexpr uint64_t kLargeBody = 1 << 20;   // bodies above this take an upload slot
 constexpr size_t kMaxQueuedMessages = 64;  // per WebSocket; the oldest is dropped beyond
 
 template <class Stream>
@@ -188,7 +188,8 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     parser_->header_limit(core_.options.max_header_bytes);
     // Beast checks Content-Length against this as the header is parsed; admission then applies
     // the route's own limit (413 before any of the body is read).
-    parser_->body_limit(static_cast<uint64_t>(std::max(core_.options.max_upload_bytes, core_.options.max_small_body_bytes)));
+    parser_->body_limit(
+        static_cast<uint64_t>(std::max(core_.options.max_upload_bytes, core_.options.max_small_body_bytes)));
     // One deadline for the whole header: a client sending a byte a second is cut off.
     beast::get_lowest_layer(stream_).expires_after(core_.options.header_timeout);
     http::async_read_header(stream_, buffer_, *parser_,
@@ -197,8 +198,10 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
 
   void OnReadHeader(beast::error_code ec, size_t bytes) {
     if (ec == http::error::end_of_stream) return DoClose();
-    if (ec == http::error::header_limit) return req_ = ApiRequest{}, Refuse(http::status::request_header_fields_too_large, "header too large");
-    if (ec == http::error::body_limit) return req_ = ApiRequest{}, Refuse(http::status::payload_too_large, "body too large");
+    if (ec == http::error::header_limit)
+      return req_ = ApiRequest{}, Refuse(http::status::request_header_fields_too_large, "header too large");
+    if (ec == http::error::body_limit)
+      return req_ = ApiRequest{}, Refuse(http::status::payload_too_large, "body too large");
     if (ec) return Fail(ec, "read header");
     busy_ = true;
     started_ = Clock::now();
@@ -230,8 +233,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     // Beast reads into the buffer's free capacity (512 bytes at least): a large body read in
     // header-sized pieces is 40x slower than in 256 KiB ones (measured: 120 MB in 2.2 s).
     if (announced > kLargeBody) buffer_.reserve(256 << 10);
-    beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
-                                                   std::chrono::seconds(announced >> 20));
+    beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout + std::chrono::seconds(announced >> 20));
     if (beast::iequals(req_.message[http::field::expect], "100-continue")) {
       continue_.emplace(http::status::continue_, req_.message.version());
       http::async_write(stream_, *continue_, [self = this->shared_from_this()](beast::error_code ec2, size_t) {
@@ -302,8 +304,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     response_ = std::make_shared<ApiResponse>(std::move(res));
     beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
                                                    std::chrono::seconds(response_->body().size() >> 20));
-    http::async_write(stream_, *response_,
-                      beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
+    http::async_write(stream_, *response_, beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
   }
 
   void OnWrite(beast::error_code ec, size_t bytes) {
@@ -323,11 +324,16 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     core_.metrics.CountRequest(method, route, static_cast<int>(status), seconds, bytes_in_, bytes_out);
     // The path only: no query string, no header, so no secret can reach the log.
     Log(LogLevel::kInfo, "request",
-        {{"method", method}, {"path", req_.path.empty() ? "?" : req_.path}, {"route", route}, {"status", status},
-         {"bytes", bytes_out}, {"ms", std::round(seconds * 1e4) / 10}, {"peer", peer_}});
+        {{"method", method},
+         {"path", req_.path.empty() ? "?" : req_.path},
+         {"route", route},
+         {"status", status},
+         {"bytes", bytes_out},
+         {"ms", std::round(seconds * 1e4) / 10},
+         {"peer", peer_}});
     if (read_ms_ >= 100) {
-      Log(LogLevel::kInfo, "large body", {{"path", req_.path}, {"bytes_in", bytes_in_},
-                                          {"read_ms", std::round(read_ms_ * 10) / 10}});
+      Log(LogLevel::kInfo, "large body",
+          {{"path", req_.path}, {"bytes_in", bytes_in_}, {"read_ms", std::round(read_ms_ * 10) / 10}});
     }
     admission_ = Admission{};
     read_ms_ = 0;
@@ -392,7 +398,7 @@ void Launch(ServerCore& core, tcp::socket socket) {
   std::string peer = PeerOf(socket);
   if (core.tls) {
     std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(peer), std::move(socket),
-                                                                          *core.tls)
+                                                                        *core.tls)
         ->Run();
   } else {
     std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(peer), std::move(socket))->Run();

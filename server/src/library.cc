@@ -23,8 +23,8 @@ std::optional<ModelVersion> Library::Upload(const std::string& name, std::string
   using Clock = std::chrono::steady_clock;
   const Clock::time_point t0 = Clock::now();
   if (!ValidModelName(name)) {
-    *error = {400, "model name '" + name + "': expected 1-64 of [A-Za-z0-9_.-], not starting with '.', no '..'",
-              "", 0, 0};
+    *error = {400, "model name '" + name + "': expected 1-64 of [A-Za-z0-9_.-], not starting with '.', no '..'", "", 0,
+              0};
     return std::nullopt;
   }
   // Both files through the sim parsers, then the surface against the model.

@@ -76,7 +76,8 @@ int main(int argc, char** argv) {
 
   // idms-server token create ROLE --tokens FILE
   CLI::App* token = app.add_subcommand("token", "Manage tokens");
-  CLI::App* create = token->add_subcommand("create", "Append a new random token's hash to FILE and print the token once");
+  CLI::App* create =
+      token->add_subcommand("create", "Append a new random token's hash to FILE and print the token once");
   std::string role_text, token_file;
   create->add_option("ROLE", role_text, "admin, agent or observer")
       ->required()

@@ -37,8 +37,8 @@ std::string Metrics::Render(int64_t models, int64_t library_bytes, double uptime
     for (size_t i = 0; i < kBuckets.size(); ++i) {
       char le[32];
       std::snprintf(le, sizeof le, "%g", kBuckets[i]);
-      out << "idms_http_request_duration_seconds_bucket{route=\"" << route << "\",le=\"" << le << "\"} "
-          << h.counts[i] << "\n";
+      out << "idms_http_request_duration_seconds_bucket{route=\"" << route << "\",le=\"" << le << "\"} " << h.counts[i]
+          << "\n";
     }
     out << "idms_http_request_duration_seconds_bucket{route=\"" << route << "\",le=\"+Inf\"} " << h.count << "\n"
         << "idms_http_request_duration_seconds_sum{route=\"" << route << "\"} " << h.sum << "\n"

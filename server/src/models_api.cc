@@ -14,10 +14,17 @@ namespace {
 using json = nlohmann::json;
 
 json VersionJson(const ModelVersion& v) {
-  return json{{"name", v.name},           {"version", v.version},       {"description", v.description},
-              {"created", v.created},     {"atoms", v.atoms},           {"elements", v.elements},
-              {"triangles", v.triangles}, {"bytes", v.bytes},           {"fem_sha256", v.fem_sha256},
-              {"plg_sha256", v.plg_sha256}, {"obj_sha256", v.obj_sha256}};
+  return json{{"name", v.name},
+              {"version", v.version},
+              {"description", v.description},
+              {"created", v.created},
+              {"atoms", v.atoms},
+              {"elements", v.elements},
+              {"triangles", v.triangles},
+              {"bytes", v.bytes},
+              {"fem_sha256", v.fem_sha256},
+              {"plg_sha256", v.plg_sha256},
+              {"obj_sha256", v.obj_sha256}};
 }
 
 // ?version=N: 0 when absent, -1 when malformed.
@@ -52,8 +59,9 @@ bool ReadUploadFields(const ApiRequest& req, std::string* fem, std::string* plg,
     try {
       const json body = json::parse(req.message.body());
       if (!body.is_object() || !body.contains("fem") || !body.contains("plg")) {
-        *refusal = JsonError(req, http::status::bad_request, "expected {\"fem\": TEXT, \"plg\": TEXT, "
-                                                             "\"description\": TEXT}");
+        *refusal = JsonError(req, http::status::bad_request,
+                             "expected {\"fem\": TEXT, \"plg\": TEXT, "
+                             "\"description\": TEXT}");
         return false;
       }
       *fem = body.at("fem").get<std::string>();
@@ -148,8 +156,7 @@ ApiResponse GetModelFile(ApiContext& ctx, ApiRequest& req) {
   res.set(http::field::content_type, file == "obj" ? "model/obj" : "text/plain; charset=utf-8");
   res.set(http::field::etag, etag);
   res.set(http::field::cache_control, cache);
-  res.set(http::field::content_disposition,
-          "inline; filename=\"" + name + "." + file + "\"");
+  res.set(http::field::content_disposition, "inline; filename=\"" + name + "." + file + "\"");
   return res;
 }
 
@@ -170,8 +177,12 @@ ApiResponse PutModel(ApiContext& ctx, ApiRequest& req) {
     return JsonResponse(req, static_cast<http::status>(error.status), JsonText(body));
   }
   Log(LogLevel::kInfo, "model stored",
-      {{"name", name}, {"version", v->version}, {"atoms", v->atoms}, {"bytes", v->bytes},
-       {"parse_ms", std::round(timings.parse_ms * 10) / 10}, {"store_ms", std::round(timings.store_ms * 10) / 10}});
+      {{"name", name},
+       {"version", v->version},
+       {"atoms", v->atoms},
+       {"bytes", v->bytes},
+       {"parse_ms", std::round(timings.parse_ms * 10) / 10},
+       {"store_ms", std::round(timings.store_ms * 10) / 10}});
   if (ctx.publish_library_event)
     ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", VersionJson(*v)}}));
   ApiResponse res = JsonResponse(req, http::status::created, JsonText(VersionJson(*v)));

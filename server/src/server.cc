@@ -114,8 +114,7 @@ bool Server::Impl::Start(std::string* error) {
     core.tls.emplace(asio::ssl::context::tls_server);
     boost::system::error_code ec;
     core.tls->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
-                          asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
-                          asio::ssl::context::no_tlsv1_1);
+                          asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 | asio::ssl::context::no_tlsv1_1);
     if (core.tls->use_certificate_chain_file(o.tls_cert, ec); ec) {
       *error = "--tls-cert " + o.tls_cert + ": " + ec.message();
       return false;

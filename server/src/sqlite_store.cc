@@ -69,8 +69,9 @@ class Statement {
   int64_t Int(int col) const { return sqlite3_column_int64(stmt_, col); }
   std::string Text(int col) const {
     const unsigned char* t = sqlite3_column_text(stmt_, col);
-    return t == nullptr ? std::string() : std::string(reinterpret_cast<const char*>(t),
-                                                      static_cast<size_t>(sqlite3_column_bytes(stmt_, col)));
+    return t == nullptr
+               ? std::string()
+               : std::string(reinterpret_cast<const char*>(t), static_cast<size_t>(sqlite3_column_bytes(stmt_, col)));
   }
 
  private:
@@ -126,8 +127,9 @@ class SqliteModelStore final : public ModelStore {
       return false;
     const std::string cols = kColumns;
     return list_latest_.Prepare(rdb_,
-                                "SELECT " + cols + " FROM model_versions v WHERE version = "
-                                "(SELECT MAX(version) FROM model_versions w WHERE w.name = v.name) ORDER BY name",
+                                "SELECT " + cols +
+                                    " FROM model_versions v WHERE version = "
+                                    "(SELECT MAX(version) FROM model_versions w WHERE w.name = v.name) ORDER BY name",
                                 error) &&
            get_.Prepare(rdb_, "SELECT " + cols + " FROM model_versions WHERE name = ?1 ORDER BY version", error) &&
            next_version_.Prepare(db_, "SELECT next_version FROM model_names WHERE name = ?1", error) &&
@@ -135,10 +137,9 @@ class SqliteModelStore final : public ModelStore {
                                 "INSERT INTO model_names(name, next_version) VALUES (?1, ?2) "
                                 "ON CONFLICT(name) DO UPDATE SET next_version = excluded.next_version",
                                 error) &&
-           insert_.Prepare(db_,
-                           "INSERT INTO model_versions(" + cols +
-                               ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
-                           error) &&
+           insert_.Prepare(
+               db_, "INSERT INTO model_versions(" + cols + ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+               error) &&
            delete_version_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1 AND version = ?2", error) &&
            delete_model_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1", error) &&
            referenced_.Prepare(rdb_,

@@ -19,8 +19,8 @@ extern char** environ;
 
 namespace idms::test {
 
-ChildProcess::ChildProcess(const std::string& binary, const std::vector<std::string>& args,
-                           const std::string& log_path, bool capture_stdout)
+ChildProcess::ChildProcess(const std::string& binary, const std::vector<std::string>& args, const std::string& log_path,
+                           bool capture_stdout)
     : log_path_(log_path) {
   // argv: the binary, then args.
   std::vector<std::string> all = {binary};
@@ -86,7 +86,8 @@ std::optional<std::string> ChildProcess::ReadLine(std::chrono::milliseconds time
       return line;
     }
     if (stdout_fd_ < 0) return std::nullopt;
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) return std::nullopt;
     pollfd p{stdout_fd_, POLLIN, 0};
     if (poll(&p, 1, static_cast<int>(left.count())) <= 0) return std::nullopt;

@@ -1,11 +1,12 @@
 // The API without sockets: admission (routes, 401/403/404/405/413/415, Origin) and the library's
 // handlers, with the library checked unchanged after every refused upload.
+#include "idms/server/api.h"
+
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
 
 #include "child_process.h"
-#include "idms/server/api.h"
 
 namespace idms::server {
 namespace {
@@ -20,8 +21,8 @@ class ApiTest : public ::testing::Test {
  protected:
   void SetUp() override {
     std::string error;
-    ASSERT_TRUE(OpenStorage(test::TempDir(::testing::UnitTest::GetInstance()->current_test_info()->name()),
-                            &storage_, &error))
+    ASSERT_TRUE(
+        OpenStorage(test::TempDir(::testing::UnitTest::GetInstance()->current_test_info()->name()), &storage_, &error))
         << error;
     library_ = std::make_unique<Library>(storage_.blobs.get(), storage_.models.get());
     auto table = std::make_shared<TokenTable>();
@@ -130,9 +131,10 @@ TEST_F(ApiTest, UploadListGetDownloadDelete) {
 }
 
 TEST_F(ApiTest, MultipartUploadAsCurlSendsIt) {
-  const std::string body = "--B0undary\r\nContent-Disposition: form-data; name=\"fem\"; filename=\"h.fem\"\r\n\r\n" +
-                           fem_ + "\r\n--B0undary\r\nContent-Disposition: form-data; name=\"plg\"; filename=\"h.plg\"\r\n\r\n" +
-                           plg_ + "\r\n--B0undary\r\nContent-Disposition: form-data; name=\"description\"\r\n\r\nfrom a form\r\n--B0undary--\r\n";
+  const std::string body =
+      "--B0undary\r\nContent-Disposition: form-data; name=\"fem\"; filename=\"h.fem\"\r\n\r\n" + fem_ +
+      "\r\n--B0undary\r\nContent-Disposition: form-data; name=\"plg\"; filename=\"h.plg\"\r\n\r\n" + plg_ +
+      "\r\n--B0undary\r\nContent-Disposition: form-data; name=\"description\"\r\n\r\nfrom a form\r\n--B0undary--\r\n";
   ApiResponse r = Call(http::verb::put, "/api/models/formed", kAdmin,
                        {{http::field::content_type, "multipart/form-data; boundary=B0undary"}}, body);
   ASSERT_EQ(r.result_int(), 201) << r.body();
@@ -159,21 +161,22 @@ TEST_F(ApiTest, BadUploadsAreRefusedAtTheirLineAndChangeNothing) {
   EXPECT_EQ(r.result_int(), 400);
   EXPECT_EQ(json::parse(r.body())["file"], "hex.plg");
   // Names.
-  for (const std::string& name : std::vector<std::string>{".hidden", "a..b", std::string(65, 'n'), "sp%20ace", "semi;colon"}) {
+  for (const std::string& name :
+       std::vector<std::string>{".hidden", "a..b", std::string(65, 'n'), "sp%20ace", "semi;colon"}) {
     EXPECT_EQ(Upload(name, fem_, plg_).result_int(), 400) << name;
   }
   // Bodies and content types.
-  EXPECT_EQ(Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "application/json"}})
-                .result_int(),
-            400);
-  EXPECT_EQ(Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "text/plain"}}, "x")
-                .result_int(),
-            415);
+  EXPECT_EQ(
+      Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "application/json"}}).result_int(),
+      400);
+  EXPECT_EQ(
+      Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "text/plain"}}, "x").result_int(),
+      415);
   EXPECT_EQ(Call(http::verb::put, "/api/models/hex", kAdmin, {}, "x").result_int(), 415);
-  EXPECT_EQ(Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "application/json"}},
-                 "{\"fem\": 1")
-                .result_int(),
-            400);
+  EXPECT_EQ(
+      Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "application/json"}}, "{\"fem\": 1")
+          .result_int(),
+      400);
   EXPECT_EQ(Call(http::verb::put, "/api/models/hex", kAdmin, {{http::field::content_type, "application/json"}},
                  "{\"fem\": \"x\"}")
                 .result_int(),
@@ -269,8 +272,8 @@ TEST_F(ApiTest, LoginCookieWorksOnlyFromAllowedOriginsForWrites) {
   tokens_ = table;
   EXPECT_EQ(Call(http::verb::get, "/api/models", "", {{http::field::cookie, cookie}}).result_int(), 401);
   tokens_ = old;
-  EXPECT_EQ(Call(http::verb::post, "/api/logout", "", {{http::field::cookie, cookie},
-                                                        {http::field::origin, "http://idms.local:8740"}})
+  EXPECT_EQ(Call(http::verb::post, "/api/logout", "",
+                 {{http::field::cookie, cookie}, {http::field::origin, "http://idms.local:8740"}})
                 .result_int(),
             200);
   EXPECT_EQ(Call(http::verb::get, "/api/models", "", {{http::field::cookie, cookie}}).result_int(), 401);

@@ -1,12 +1,13 @@
 // Tokens files (plain and hashed, errors naming the line), role permissions, new tokens, login
 // sessions that expire and end with their token.
+#include "idms/server/auth.h"
+
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <thread>
 
 #include "child_process.h"
-#include "idms/server/auth.h"
 
 namespace idms::server {
 namespace {
@@ -72,7 +73,7 @@ TEST(Tokens, NewTokensAreRandomAndAppendedHashedToA0600File) {
   const std::string t1 = AppendNewToken(path, Role::kAgent, &error);
   const std::string t2 = AppendNewToken(path, Role::kAdmin, &error);
   ASSERT_FALSE(t1.empty()) << error;
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(stat(path.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   const std::string text = test::ReadText(path);
@@ -90,7 +91,7 @@ TEST(Tokens, DefaultFileHasOneTokenPerRole) {
   TokenTable table;
   ASSERT_TRUE(TokenTable::Load(path, &table, &error)) << error;
   EXPECT_EQ(table.size(), 3u);
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(stat(path.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
 }

@@ -1,7 +1,7 @@
 // Request targets, cookies, bearer tokens, media types and multipart bodies.
-#include <gtest/gtest.h>
-
 #include "idms/server/http_parse.h"
+
+#include <gtest/gtest.h>
 
 namespace idms::server {
 namespace {
@@ -63,8 +63,8 @@ TEST(Multipart, MalformedBodiesSayWhere) {
   std::string error;
   EXPECT_FALSE(ParseMultipart("no boundary here", "b", &parts, &error));
   EXPECT_NE(error.find("no '--b' delimiter"), std::string::npos);
-  EXPECT_FALSE(ParseMultipart("--b\r\nContent-Disposition: form-data; name=\"x\"\r\n\r\ndata never closed", "b",
-                              &parts, &error));
+  EXPECT_FALSE(ParseMultipart("--b\r\nContent-Disposition: form-data; name=\"x\"\r\n\r\ndata never closed", "b", &parts,
+                              &error));
   EXPECT_NE(error.find("closing boundary"), std::string::npos);
   EXPECT_FALSE(ParseMultipart("--b\r\nBroken header\r\n\r\nx\r\n--b--", "b", &parts, &error));
   EXPECT_NE(error.find("without ':'"), std::string::npos);

@@ -12,8 +12,8 @@
 #include <boost/beast/websocket.hpp>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "server_process.h"
@@ -35,14 +35,27 @@ std::string Fem(const std::string& name) { return ReadText(kModels + name + ".fe
 std::string Plg(const std::string& name) { return ReadText(kModels + name + ".plg"); }
 
 HttpReply PutJson(uint16_t port, const std::string& name, const std::string& body, const std::string& token) {
-  return Http(port, HttpCall{"PUT", "/api/models/" + name,
-                             {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}}, body});
+  return Http(port, HttpCall{"PUT",
+                             "/api/models/" + name,
+                             {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}},
+                             body});
 }
 
 // Runs a command to completion; its exit status.
 int RunCommand(const std::vector<std::string>& argv, const std::string& log) {
   ChildProcess p(argv[0], std::vector<std::string>(argv.begin() + 1, argv.end()), log);
   return p.Wait(seconds(120)).value_or(-1);
+}
+
+// Opens /ws/library with a bearer token and reads its hello.
+void WatchLibrary(websocket::stream<beast::tcp_stream>& ws, uint16_t port, const std::string& token) {
+  beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  beast::get_lowest_layer(ws).expires_after(seconds(30));
+  ws.set_option(websocket::stream_base::decorator(
+      [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
+  ws.handshake("127.0.0.1", "/ws/library");
+  beast::flat_buffer hello;
+  ws.read(hello);
 }
 
 // Polls `condition` until it holds or `timeout` passes (for effects of a signal, which have no
@@ -95,9 +108,9 @@ TEST(ServerIntegration, UploadVersionsDownloadWithEtagAndDelete) {
   EXPECT_EQ(json::parse(r.body)["version"], 1);
   // Multipart upload with curl -F, as a user would: version 2.
   const std::string out = TempDir("library-curl") + "/out.json";
-  ASSERT_EQ(RunCommand({"/usr/bin/curl", "-sS", "-o", out, "-X", "PUT", "-H", "Authorization: Bearer " + admin,
-                        "-F", "fem=@" + kModels + "hex_4x5_home.fem", "-F", "plg=@" + kModels + "hex_4x5_home.plg",
-                        "-F", "description=from curl", "http://127.0.0.1:" + server.port_string() + "/api/models/hex"},
+  ASSERT_EQ(RunCommand({"/usr/bin/curl", "-sS", "-o", out, "-X", "PUT", "-H", "Authorization: Bearer " + admin, "-F",
+                        "fem=@" + kModels + "hex_4x5_home.fem", "-F", "plg=@" + kModels + "hex_4x5_home.plg", "-F",
+                        "description=from curl", "http://127.0.0.1:" + server.port_string() + "/api/models/hex"},
                        out + ".log"),
             0);
   const json v2 = json::parse(ReadText(out));
@@ -113,17 +126,20 @@ TEST(ServerIntegration, UploadVersionsDownloadWithEtagAndDelete) {
   EXPECT_EQ(fem.body, Fem("hex_4x5_home"));
   EXPECT_EQ(fem.headers["etag"], "\"" + meta["versions"][0]["fem_sha256"].get<std::string>() + "\"");
   EXPECT_NE(fem.headers["cache-control"].find("immutable"), std::string::npos);
-  HttpReply again = Http(port, HttpCall{"GET", "/api/models/hex/fem?version=1",
-                                        {{"Authorization", "Bearer " + observer}, {"If-None-Match", fem.headers["etag"]}},
-                                        ""});
+  HttpReply again =
+      Http(port, HttpCall{"GET",
+                          "/api/models/hex/fem?version=1",
+                          {{"Authorization", "Bearer " + observer}, {"If-None-Match", fem.headers["etag"]}},
+                          ""});
   EXPECT_EQ(again.status, 304);
   EXPECT_TRUE(again.body.empty());
   EXPECT_EQ(Get(port, "/api/models/hex/obj", observer).status, 200);
   // HEAD: the GET's headers, its Content-Length, no body.
-  const std::string head = RawExchange(port,
-                                       "HEAD /api/models/hex/fem?version=1 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
-                                           observer + "\r\nConnection: close\r\n\r\n",
-                                       seconds(10));
+  const std::string head =
+      RawExchange(port,
+                  "HEAD /api/models/hex/fem?version=1 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + observer +
+                      "\r\nConnection: close\r\n\r\n",
+                  seconds(10));
   EXPECT_EQ(head.rfind("HTTP/1.1 200", 0), 0u) << head;
   EXPECT_NE(head.find("Content-Length: " + std::to_string(Fem("hex_4x5_home").size()) + "\r\n"), std::string::npos);
   EXPECT_EQ(head.substr(head.find("\r\n\r\n") + 4), "");
@@ -143,8 +159,7 @@ TEST(ServerIntegration, BadUploadsAndBadRequestsChangeNothing) {
   const std::string dir = TempDir("bad") + "/data";
   ServerProcess server(dir, {"--max-upload-mb", "1"});
   ASSERT_TRUE(server.ready()) << server.Log();
-  const std::string admin = server.Token("admin"), observer = server.Token("observer"),
-                    agent = server.Token("agent");
+  const std::string admin = server.Token("admin"), observer = server.Token("observer"), agent = server.Token("agent");
   const uint16_t port = server.port();
   const std::string before = Get(port, "/api/models", observer).body;
   const std::string hex_fem = Fem("hex_4x5_home"), hex_plg = Plg("hex_4x5_home");
@@ -164,16 +179,17 @@ TEST(ServerIntegration, BadUploadsAndBadRequestsChangeNothing) {
   EXPECT_EQ(PutJson(port, ".x", JsonUpload(hex_fem, hex_plg, ""), admin).status, 400);
   EXPECT_EQ(PutJson(port, "a..b", JsonUpload(hex_fem, hex_plg, ""), admin).status, 400);
   EXPECT_EQ(PutJson(port, "hex_4x5_home", "", admin).status, 400);
-  EXPECT_EQ(Http(port, HttpCall{"PUT", "/api/models/hex_4x5_home",
-                                {{"Authorization", "Bearer " + admin}, {"Content-Type", "text/plain"}}, "x"})
+  EXPECT_EQ(Http(port, HttpCall{"PUT",
+                                "/api/models/hex_4x5_home",
+                                {{"Authorization", "Bearer " + admin}, {"Content-Type", "text/plain"}},
+                                "x"})
                 .status,
             415);
   // Over --max-upload-mb: 413 from the header alone (the body is never sent here).
-  const std::string reply = RawExchange(
-      port,
-      "PUT /api/models/big HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + admin +
-          "\r\nContent-Type: application/json\r\nContent-Length: 1000000000\r\n\r\n",
-      seconds(20));
+  const std::string reply = RawExchange(port,
+                                        "PUT /api/models/big HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + admin +
+                                            "\r\nContent-Type: application/json\r\nContent-Length: 1000000000\r\n\r\n",
+                                        seconds(20));
   EXPECT_EQ(reply.rfind("HTTP/1.1 413", 0), 0u) << reply;
   // Tokens: missing, wrong, under-privileged, each with a JSON error.
   r = Get(port, "/api/models", "");
@@ -184,9 +200,9 @@ TEST(ServerIntegration, BadUploadsAndBadRequestsChangeNothing) {
   EXPECT_EQ(r.status, 403);
   EXPECT_NE(json::parse(r.body)["error"].get<std::string>().find("observer"), std::string::npos);
   EXPECT_EQ(PutJson(port, "hex_4x5_home", JsonUpload(hex_fem, hex_plg, ""), agent).status, 403);
-  EXPECT_EQ(Http(port, HttpCall{"DELETE", "/api/models/hex_4x5_home", {{"Authorization", "Bearer " + observer}}, ""})
-                .status,
-            403);
+  EXPECT_EQ(
+      Http(port, HttpCall{"DELETE", "/api/models/hex_4x5_home", {{"Authorization", "Bearer " + observer}}, ""}).status,
+      403);
   // Garbage on a socket closes that connection; the server carries on.
   const std::string garbage = RawExchange(port, std::string("\x16\x03\x01\x00\xff garbage\r\n\r\n", 18), seconds(20));
   EXPECT_TRUE(garbage.empty() || garbage.rfind("HTTP/1.1 400", 0) == 0) << garbage;
@@ -202,7 +218,9 @@ TEST(ServerIntegration, LoginCookieOriginAndLibraryWebSocket) {
   ASSERT_TRUE(server.ready()) << server.Log();
   const uint16_t port = server.port();
   const std::string own = "http://127.0.0.1:" + server.port_string();
-  HttpReply login = Http(port, HttpCall{"POST", "/api/login", {{"Content-Type", "application/json"}, {"Origin", own}},
+  HttpReply login = Http(port, HttpCall{"POST",
+                                        "/api/login",
+                                        {{"Content-Type", "application/json"}, {"Origin", own}},
                                         json{{"token", server.Token("admin")}}.dump()});
   ASSERT_EQ(login.status, 200) << login.body;
   const std::string cookie = login.headers["set-cookie"].substr(0, login.headers["set-cookie"].find(';'));
@@ -210,7 +228,8 @@ TEST(ServerIntegration, LoginCookieOriginAndLibraryWebSocket) {
   EXPECT_EQ(json::parse(login.body)["role"], "admin");
   // Cookie writes: own or allowed origin only.
   auto put = [&](const std::string& origin) {
-    return Http(port, HttpCall{"PUT", "/api/models/hex",
+    return Http(port, HttpCall{"PUT",
+                               "/api/models/hex",
                                {{"Cookie", cookie}, {"Origin", origin}, {"Content-Type", "application/json"}},
                                JsonUpload(Fem("hex_4x5_home"), Plg("hex_4x5_home"), "")})
         .status;
@@ -228,17 +247,12 @@ TEST(ServerIntegration, LoginCookieOriginAndLibraryWebSocket) {
   // A watcher sees an upload as it happens; a garbage frame closes only its own connection.
   asio::io_context io;
   websocket::stream<beast::tcp_stream> ws(io);
-  beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-  beast::get_lowest_layer(ws).expires_after(seconds(30));
-  ws.set_option(websocket::stream_base::decorator(
-      [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + server.Token("observer")); }));
-  ws.handshake("127.0.0.1", "/ws/library");
+  WatchLibrary(ws, port, server.Token("observer"));
   beast::flat_buffer buffer;
-  ws.read(buffer);  // hello
   buffer.consume(buffer.size());
-  ASSERT_EQ(PutJson(port, "watched", JsonUpload(Fem("hex_4x5_home"), Plg("hex_4x5_home"), ""), server.Token("admin"))
-                .status,
-            201);
+  ASSERT_EQ(
+      PutJson(port, "watched", JsonUpload(Fem("hex_4x5_home"), Plg("hex_4x5_home"), ""), server.Token("admin")).status,
+      201);
   ws.read(buffer);
   const json event = json::parse(beast::buffers_to_string(buffer.data()));
   EXPECT_EQ(event["event"], "model_added");
@@ -338,8 +352,9 @@ TEST(ServerIntegration, SighupReloadsTokensAndKeepsThemOnABadFile) {
   // A bad line: the error names it, and the tokens in force stay.
   std::ofstream(tokens, std::ios::app) << "superuser x-token-value-12345678\n";
   server.process().Signal(SIGHUP);
-  EXPECT_TRUE(Eventually([&] { return server.Log().find(tokens + ":3: unknown role 'superuser'") != std::string::npos; }))
-      << server.Log();
+  EXPECT_TRUE(Eventually([&] {
+    return server.Log().find(tokens + ":3: unknown role 'superuser'") != std::string::npos;
+  })) << server.Log();
   EXPECT_EQ(Get(port, "/api/models", *admin).status, 200);
   EXPECT_EQ(Get(port, "/api/models", "first-observer-token-1234").status, 200);
 }
@@ -351,19 +366,14 @@ TEST(ServerIntegration, JsonLogsHeaderAndMessageLimits) {
   const uint16_t port = server.port();
   ASSERT_EQ(Get(port, "/api/models/hex_4x5_home", server.Token("observer")).status, 200);
   // A header over 16 KiB: 431, and the server carries on.
-  const std::string big = RawExchange(port, "GET /api/health HTTP/1.1\r\nHost: x\r\nX-Big: " +
-                                                std::string(20000, 'a') + "\r\n\r\n", seconds(10));
+  const std::string big = RawExchange(
+      port, "GET /api/health HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'a') + "\r\n\r\n", seconds(10));
   EXPECT_EQ(big.rfind("HTTP/1.1 431", 0), 0u) << big.substr(0, 200);
   // A WebSocket message over --max-ws-message-mb closes that WebSocket (1009, too big).
   asio::io_context io;
   websocket::stream<beast::tcp_stream> ws(io);
-  beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-  beast::get_lowest_layer(ws).expires_after(seconds(30));
-  ws.set_option(websocket::stream_base::decorator(
-      [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + server.Token("observer")); }));
-  ws.handshake("127.0.0.1", "/ws/library");
+  WatchLibrary(ws, port, server.Token("observer"));
   beast::flat_buffer buffer;
-  ws.read(buffer);  // hello
   beast::error_code ec;
   ws.write(asio::buffer(std::string(2 << 20, 'x')), ec);
   buffer.consume(buffer.size());
@@ -402,13 +412,15 @@ TEST(ServerIntegration, SigtermFinishesTheRequestInFlightAndExitsZero) {
   beast::tcp_stream stream(io);
   stream.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
   stream.expires_after(seconds(30));
-  const std::string head = "PUT /api/models/late HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
-                           server.Token("admin") + "\r\nContent-Type: application/json\r\nContent-Length: " +
-                           std::to_string(body.size()) + "\r\n\r\n";
+  const std::string head =
+      "PUT /api/models/late HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + server.Token("admin") +
+      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n\r\n";
   asio::write(stream, asio::buffer(head + body.substr(0, body.size() / 2)));
   // Make sure the server is reading this request's body before the signal.
-  ASSERT_TRUE(Eventually([&] { return Get(server.port(), "/metrics", server.Token("admin")).body.find(
-                                          "idms_open_connections 2") != std::string::npos; }));
+  ASSERT_TRUE(Eventually([&] {
+    return Get(server.port(), "/metrics", server.Token("admin")).body.find("idms_open_connections 2") !=
+           std::string::npos;
+  }));
   server.process().Signal(SIGTERM);
   ASSERT_TRUE(Eventually([&] { return server.Log().find("stopping") != std::string::npos; }));
   asio::write(stream, asio::buffer(body.substr(body.size() / 2)));
@@ -513,8 +525,8 @@ TEST(ServerIntegration, RealAgentFetchesItsModelFromTheLibrary) {
 
   ChildProcess agent(IDMS_AGENT_BIN,
                      {"--server", url, "--token", server.Token("agent"), "--model", "hex_4x5_home@1", "--device",
-                      "scripted:palpate", "--duration", "0.2", "--no-realtime", "--cache-dir", cache,
-                      "--flush-timeout", "1", "--summary-json", tmp + "/summary.json"},
+                      "scripted:palpate", "--duration", "0.2", "--no-realtime", "--cache-dir", cache, "--flush-timeout",
+                      "1", "--summary-json", tmp + "/summary.json"},
                      tmp + "/agent.log");
   agent.Wait(seconds(60));
   // The files it cached are the library's, by content hash.

@@ -141,7 +141,8 @@ WsResult WsConnect(uint16_t port, const std::string& target,
       result.error = ec.message();
       // Beast 1.74 does not fill `res` on a declined upgrade: ask again as plain HTTP for the status.
       HttpCall call{"GET", target, headers, ""};
-      call.headers.insert(call.headers.end(), {{"Connection", "Upgrade"}, {"Upgrade", "websocket"},
+      call.headers.insert(call.headers.end(), {{"Connection", "Upgrade"},
+                                               {"Upgrade", "websocket"},
                                                {"Sec-WebSocket-Version", "13"},
                                                {"Sec-WebSocket-Key", "dGhlIHNhbXBsZSBub25jZQ=="}});
       result.status = Http(port, call, tls).status;

@@ -32,7 +32,7 @@ class ServerProcess {
 };
 
 struct HttpReply {
-  int status = 0;  // 0: no response (the connection failed or closed)
+  int status = 0;                              // 0: no response (the connection failed or closed)
   std::map<std::string, std::string> headers;  // names lower case
   std::string body;
   std::string error;
@@ -59,7 +59,8 @@ struct WsResult {
   std::string first_message;
   std::string error;
 };
-WsResult WsConnect(uint16_t port, const std::string& target, const std::vector<std::pair<std::string, std::string>>& headers,
+WsResult WsConnect(uint16_t port, const std::string& target,
+                   const std::vector<std::pair<std::string, std::string>>& headers,
                    boost::asio::ssl::context* tls = nullptr);
 
 // The file's text as a JSON string value.

@@ -1,12 +1,13 @@
 // The blob directory and the SQLite model store: content addressing, crash leftovers collected at
 // start-up, version numbers never reused, deletes.
+#include "idms/server/storage.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 
 #include "child_process.h"
-#include "idms/server/storage.h"
 
 namespace idms::server {
 namespace {

@@ -5,11 +5,11 @@
 #pragma once
 
 #include <boost/beast/http.hpp>
-#include <nlohmann/json.hpp>
 #include <chrono>
 #include <functional>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -44,7 +44,7 @@ struct ApiRequest {
   http::request<http::string_body> message;  // headers and (once read) body
   std::string path;                          // decoded, without the query
   std::map<std::string, std::string> query;
-  std::vector<std::string> params;           // the route's {...} captures, in order
+  std::vector<std::string> params;  // the route's {...} captures, in order
   Role role = Role::kNone;
   bool via_cookie = false;
   Digest token_digest{};

@@ -40,7 +40,6 @@ struct FormPart {
 };
 // Parses a multipart/form-data body (RFC 7578) with the given boundary. False with *error saying
 // what was expected where (byte offset) on a malformed body.
-bool ParseMultipart(std::string_view body, std::string_view boundary, std::vector<FormPart>* parts,
-                    std::string* error);
+bool ParseMultipart(std::string_view body, std::string_view boundary, std::vector<FormPart>* parts, std::string* error);
 
 }  // namespace idms::server

@@ -11,6 +11,7 @@ enum class LogLevel { kInfo, kWarn, kError };
 
 // "text" or "json"; text by default.
 void SetLogFormat(const std::string& format);
-void Log(LogLevel level, const std::string& message, const nlohmann::ordered_json& fields = nlohmann::ordered_json::object());
+void Log(LogLevel level, const std::string& message,
+         const nlohmann::ordered_json& fields = nlohmann::ordered_json::object());
 
 }  // namespace idms::server

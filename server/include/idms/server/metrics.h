@@ -14,8 +14,8 @@ namespace idms::server {
 class Metrics {
  public:
   // One finished HTTP request. `route` is the route's pattern (bounded cardinality), not the path.
-  void CountRequest(const std::string& method, const std::string& route, int status, double seconds,
-                    uint64_t bytes_in, uint64_t bytes_out);
+  void CountRequest(const std::string& method, const std::string& route, int status, double seconds, uint64_t bytes_in,
+                    uint64_t bytes_out);
   void AddBytesOut(uint64_t n) { bytes_out_ += n; }
   void AddBytesIn(uint64_t n) { bytes_in_ += n; }
 
@@ -36,7 +36,7 @@ class Metrics {
   };
   mutable std::mutex mu_;
   std::map<std::tuple<std::string, std::string, int>, uint64_t> requests_;  // method, route, status
-  std::map<std::string, Histogram> durations_;                             // by route
+  std::map<std::string, Histogram> durations_;                              // by route
   std::atomic<uint64_t> bytes_in_{0}, bytes_out_{0};
 };
 

@@ -10,25 +10,25 @@ namespace idms::server {
 
 struct ServerOptions {
   std::string host = "127.0.0.1";
-  uint16_t port = 8740;                   // 0: any free port (printed at start-up)
+  uint16_t port = 8740;  // 0: any free port (printed at start-up)
   std::string data_dir = "./idms-data";
-  std::string tokens_file;                // empty: DATA/tokens, created with one token per role
-  std::string tls_cert, tls_key;          // both or neither: TLS on the same port
+  std::string tokens_file;                   // empty: DATA/tokens, created with one token per role
+  std::string tls_cert, tls_key;             // both or neither: TLS on the same port
   std::vector<std::string> allowed_origins;  // besides the server's own, e.g. "https://lab.example"
-  int threads = 0;                        // I/O threads; 0: the number of cores
-  int workers = 4;                        // threads for handlers that parse, hash or touch the disk
-  std::string log_format = "text";        // text | json
-  std::string models_dir;                 // shipped models to import into an empty library; "none": never
+  int threads = 0;                           // I/O threads; 0: the number of cores
+  int workers = 4;                           // threads for handlers that parse, hash or touch the disk
+  std::string log_format = "text";           // text | json
+  std::string models_dir;                    // shipped models to import into an empty library; "none": never
   int64_t max_upload_bytes = int64_t{256} << 20;
   int64_t max_small_body_bytes = int64_t{64} << 10;  // every route but uploads
   int64_t max_ws_message_bytes = int64_t{16} << 20;
   uint32_t max_header_bytes = 16 << 10;
-  int max_connections = 1024;             // beyond: 503 and close
-  int max_concurrent_uploads = 2;         // bodies over 1 MiB at once; beyond: 503 + Retry-After
-  std::chrono::seconds header_timeout{15};   // a whole request header, and the keep-alive idle time
-  std::chrono::seconds body_timeout{30};     // plus 1 s per MiB of the announced body
+  int max_connections = 1024;               // beyond: 503 and close
+  int max_concurrent_uploads = 2;           // bodies over 1 MiB at once; beyond: 503 + Retry-After
+  std::chrono::seconds header_timeout{15};  // a whole request header, and the keep-alive idle time
+  std::chrono::seconds body_timeout{30};    // plus 1 s per MiB of the announced body
   std::chrono::seconds login_lifetime{12 * 3600};
-  std::chrono::seconds shutdown_grace{10};   // SIGTERM: requests in flight get this long
+  std::chrono::seconds shutdown_grace{10};  // SIGTERM: requests in flight get this long
 };
 
 }  // namespace idms::server

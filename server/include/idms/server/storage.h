@@ -30,11 +30,11 @@ class BlobStore {
 // Everything the library says about one version of a model.
 struct ModelVersion {
   std::string name;
-  int64_t version = 0;        // 1, 2, ...: never reused for a name, even after a delete
+  int64_t version = 0;  // 1, 2, ...: never reused for a name, even after a delete
   std::string description;
-  std::string created;        // UTC, ISO 8601 ("2026-11-23T19:04:05Z")
+  std::string created;  // UTC, ISO 8601 ("2026-11-23T19:04:05Z")
   int64_t atoms = 0, elements = 0, triangles = 0;
-  int64_t bytes = 0;          // fem + plg
+  int64_t bytes = 0;  // fem + plg
   std::string fem_sha256, plg_sha256, obj_sha256;
 };
 
