@@ -143,6 +143,8 @@ std::vector<Route> MakeRoutes() {
       {V::delete_, "/api/models/{name}", P::kWrite, false, false, DeleteModel, true},
       {V::get, "/api/models/{name}/{file}", P::kRead, false, false, GetModelFile, true},
       {V::get, "/ws/library", P::kRead, false, true, nullptr},
+      {V::get, "/ws/agent", P::kPublish, false, true, nullptr},
+      {V::get, "/ws/session/{id}", P::kRead, false, true, nullptr},
   };
 }
 

@@ -18,6 +18,7 @@
 
 #include "idms/server/log.h"
 #include "server_internal.h"
+#include "ws_endpoint.h"
 
 namespace idms::server {
 namespace {
@@ -29,7 +30,7 @@ using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 constexpr uint64_t kLargeBody = 1 << 20;   // bodies above this take an upload slot
-constexpr size_t kMaxQueuedMessages = 64;  // per WebSocket; the oldest is dropped beyond
+constexpr size_t kMaxQueuedMessages = 1024;  // per WebSocket; the oldest is dropped beyond (as Foxglove's SDK)
 
 template <class Stream>
 constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
@@ -48,19 +49,17 @@ bool Quiet(const beast::error_code& ec) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// WebSocket: /ws/library sends library events (model added or deleted) as JSON text; it takes no
-// messages, so anything a client sends closes it with a policy error. Issue 10's session routes
-// build on the same class.
+// A WebSocket connection: the stream, a bounded send queue (one write in flight), a read loop with
+// size and rate limits, and the endpoint (ws_endpoint.h) that gives the messages their meaning.
 template <class Stream>
-class WsSession : public Connection, public TextSink, public std::enable_shared_from_this<WsSession<Stream>> {
+class WsSession : public Connection, public WsPeer, public std::enable_shared_from_this<WsSession<Stream>> {
  public:
-  WsSession(ServerCore& core, Stream&& stream, std::string peer)
-      : core_(core), ws_(std::move(stream)), peer_(std::move(peer)) {
+  WsSession(ServerCore& core, Stream&& stream, std::string peer, std::shared_ptr<WsEndpoint> endpoint)
+      : core_(core), ws_(std::move(stream)), peer_(std::move(peer)), endpoint_(std::move(endpoint)) {
     ++core_.metrics.open_websockets;
   }
   ~WsSession() override {
     --core_.metrics.open_websockets;
-    core_.Unsubscribe(this);
     core_.Unregister(this);
   }
 
@@ -73,48 +72,68 @@ class WsSession : public Connection, public TextSink, public std::enable_shared_
     ws_.async_accept(req, beast::bind_front_handler(&WsSession::OnAccept, this->shared_from_this()));
   }
 
-  void Send(std::shared_ptr<const std::string> text) override {
-    asio::post(ws_.get_executor(), [self = this->shared_from_this(), text = std::move(text)]() mutable {
-      // Latest wins: a slow watcher loses the oldest events, never blocks anyone.
+  void Send(std::shared_ptr<const std::string> message, bool binary) override {
+    asio::post(ws_.get_executor(), [self = this->shared_from_this(), message = std::move(message), binary]() mutable {
+      if (!self->open_ || self->close_pending_) return;
+      // Bounded: the oldest queued message (never the one being written) goes first.
       if (self->queue_.size() >= kMaxQueuedMessages) self->queue_.erase(self->queue_.begin() + 1);
-      self->queue_.push_back(std::move(text));
+      self->queue_.push_back({std::move(message), binary});
+      self->queued_.store(self->queue_.size(), std::memory_order_relaxed);
       if (self->queue_.size() == 1) self->DoWrite();
     });
   }
 
-  void Drain() override {
-    asio::post(ws_.get_executor(), [self = this->shared_from_this()] {
-      if (!self->open_) return;
-      self->open_ = false;
-      self->ws_.async_close(websocket::close_code::going_away, [self](beast::error_code) {});
+  void Close(uint16_t code, std::string reason) override {
+    asio::post(ws_.get_executor(), [self = this->shared_from_this(), code, reason = std::move(reason)]() mutable {
+      if (!self->open_ || self->close_pending_) return;
+      self->close_pending_ = true;
+      self->close_reason_ = websocket::close_reason(static_cast<websocket::close_code>(code), reason);
+      if (self->queue_.empty()) self->DoClose();
     });
   }
 
+  size_t queued() const override { return queued_.load(std::memory_order_relaxed); }
+  const std::string& peer() const override { return peer_; }
+  void Drain() override { Close(static_cast<uint16_t>(websocket::close_code::going_away), "server shutting down"); }
+
  private:
+  struct Outgoing {
+    std::shared_ptr<const std::string> bytes;
+    bool binary;
+  };
+
   void OnAccept(beast::error_code ec) {
     if (ec) return Fail(ec, "accept");
     open_ = true;
     core_.Register(this, this->weak_from_this());
-    core_.Subscribe(this, this->weak_from_this());
-    Send(std::make_shared<const std::string>(R"({"event":"hello","endpoint":"/ws/library"})"));
+    window_start_ = Clock::now();
+    endpoint_->OnOpen(this->shared_from_this());
     DoRead();
   }
 
   void DoRead() { ws_.async_read(buffer_, beast::bind_front_handler(&WsSession::OnRead, this->shared_from_this())); }
 
-  void OnRead(beast::error_code ec, size_t) {
+  void OnRead(beast::error_code ec, size_t bytes) {
     if (ec) return Fail(ec, "read");
-    // This endpoint only sends: a client message is a protocol violation.
+    core_.metrics.AddBytesIn(bytes);
+    // Rate limit: messages per one-second window.
+    const Clock::time_point now = Clock::now();
+    if (now - window_start_ >= std::chrono::seconds(1)) window_start_ = now, window_count_ = 0;
+    if (++window_count_ > endpoint_->max_messages_per_s()) {
+      Close(static_cast<uint16_t>(websocket::close_code::policy_error),
+            "more than " + std::to_string(endpoint_->max_messages_per_s()) + " messages per second");
+      return;
+    }
+    const auto data = buffer_.data();
+    endpoint_->OnMessage(std::string_view(static_cast<const char*>(data.data()), data.size()), ws_.got_binary());
     buffer_.consume(buffer_.size());
-    open_ = false;
-    ws_.async_close(websocket::close_reason(websocket::close_code::policy_error, "/ws/library accepts no messages"),
-                    [self = this->shared_from_this()](beast::error_code) {});
+    if (open_) DoRead();
   }
 
   void DoWrite() {
-    if (!open_) return queue_.clear();
-    ws_.text(true);
-    ws_.async_write(asio::buffer(*queue_.front()),
+    if (!open_) return;
+    ws_.binary(queue_.front().binary);
+    ws_.async_write(asio::buffer(*queue_.front().bytes),
                     beast::bind_front_handler(&WsSession::OnWrite, this->shared_from_this()));
   }
 
@@ -122,22 +141,43 @@ class WsSession : public Connection, public TextSink, public std::enable_shared_
     if (ec) return Fail(ec, "write");
     core_.metrics.AddBytesOut(bytes);
     queue_.erase(queue_.begin());
-    if (!queue_.empty()) DoWrite();
+    queued_.store(queue_.size(), std::memory_order_relaxed);
+    if (!queue_.empty()) return DoWrite();
+    if (close_pending_) return DoClose();
+    endpoint_->OnDrained();
+  }
+
+  void DoClose() {
+    ws_.async_close(close_reason_, [self = this->shared_from_this()](beast::error_code) { self->Closed(); });
   }
 
   void Fail(beast::error_code ec, const char* what) {
-    open_ = false;
-    queue_.clear();
     if (!Quiet(ec) && ec != websocket::error::message_too_big)
       Log(LogLevel::kWarn, "websocket", {{"what", what}, {"error", ec.message()}, {"peer", peer_}});
+    Closed();
+  }
+
+  // Once, whichever side ended it: the endpoint lets go of this connection.
+  void Closed() {
+    queue_.clear();
+    queued_.store(0, std::memory_order_relaxed);
+    if (!open_) return;
+    open_ = false;
+    endpoint_->OnClose();
   }
 
   ServerCore& core_;
   websocket::stream<Stream> ws_;
   beast::flat_buffer buffer_;
-  std::deque<std::shared_ptr<const std::string>> queue_;
+  std::deque<Outgoing> queue_;
+  std::atomic<size_t> queued_{0};
   std::string peer_;
+  std::shared_ptr<WsEndpoint> endpoint_;
   bool open_ = false;
+  bool close_pending_ = false;
+  websocket::close_reason close_reason_;
+  Clock::time_point window_start_;
+  int window_count_ = 0;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -280,7 +320,11 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   }
 
   void Upgrade() {
-    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_), peer_);
+    std::string refusal;
+    std::shared_ptr<WsEndpoint> endpoint = MakeEndpoint(core_, req_, &refusal);
+    if (!endpoint) return Write(JsonError(req_, http::status::not_found, refusal), false);
+    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_),
+                                                   std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));
     AccessLog(101, 0);
     ws->Run(parser_->release());
   }

@@ -14,6 +14,7 @@
 
 #include "idms/server/log.h"
 #include "server_internal.h"
+#include "sessions.h"
 
 namespace idms::server {
 
@@ -40,6 +41,7 @@ struct Server::Impl {
   ServerCore core;
   Storage storage;
   std::unique_ptr<Library> library;
+  std::unique_ptr<SessionHub> hub;
   LoginSessions logins;
   std::mutex tokens_mu;
   std::shared_ptr<const TokenTable> tokens = std::make_shared<TokenTable>();
@@ -134,7 +136,11 @@ bool Server::Impl::Start(std::string* error) {
     return tokens;
   };
   core.ctx.publish_library_event = [this](std::string text) { core.Publish(text); };
+  hub = std::make_unique<SessionHub>(core, storage.sessions.get(), (fs::path(o.data_dir) / "recordings").string());
+  core.hub = hub.get();
+  hub->RecoverInterrupted();
   core.routes = MakeRoutes();
+  AppendSessionRoutes(core, &core.routes);
   core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
   // Bind.
   boost::system::error_code ec;
@@ -189,6 +195,9 @@ void Server::Impl::Stop() {
     boost::system::error_code ignored;
     acceptor.close(ignored);
     signals.cancel(ignored);
+    // Sessions first: their recordings are finished and they are marked interrupted (an agent
+    // may resume them after a restart); then every connection drains.
+    hub->StopAll();
     // Requests in flight get the grace period; then the I/O threads stop regardless.
     grace.expires_after(core.options.shutdown_grace);
     grace.async_wait([this](boost::system::error_code ec) {
@@ -215,6 +224,7 @@ int Server::Run() {
   for (std::thread& t : extra) t.join();
   // Handlers still on a worker finish before the database closes.
   impl_->core.workers.join();
+  impl_->core.recorder.join();  // recordings finished
   Log(LogLevel::kInfo, "stopped");
   return 0;
 }

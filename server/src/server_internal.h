@@ -27,6 +27,8 @@ class Connection {
   virtual void Drain() = 0;
 };
 
+class SessionHub;
+
 // A text message watcher of /ws/library; Send is thread-safe and never blocks.
 class TextSink {
  public:
@@ -44,6 +46,8 @@ struct ServerCore {
   std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
   std::atomic<bool> draining{false};
   std::atomic<int> uploads_in_flight{0};
+  SessionHub* hub = nullptr;                     // live sessions (sessions.cc)
+  boost::asio::thread_pool recorder{1};          // recordings' disk writes, off the network threads
 
   ServerCore(ServerOptions o, int io_threads, int worker_threads)
       : options(std::move(o)), ioc(io_threads), workers(static_cast<size_t>(worker_threads)) {}
@@ -62,6 +66,15 @@ struct ServerCore {
   std::unordered_map<Connection*, std::weak_ptr<Connection>> connections_;
   std::unordered_map<TextSink*, std::weak_ptr<TextSink>> sinks_;
 };
+
+class WsEndpoint;
+
+// The endpoint for an admitted WebSocket upgrade (by route: /ws/library, /ws/agent,
+// /ws/session/{id}); null with *refusal when there is nothing to connect to (an unknown session).
+std::shared_ptr<WsEndpoint> MakeEndpoint(ServerCore& core, const ApiRequest& req, std::string* refusal);
+
+// The sessions' REST routes (sessions_api.cc).
+void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes);
 
 // Takes an accepted socket: enforces the connection limit, then runs an HTTP session (plain or
 // TLS) on its own strand.

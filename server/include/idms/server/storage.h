@@ -63,18 +63,45 @@ class ModelStore {
   virtual int64_t LibraryBytes() = 0;  // fem + plg bytes over all stored versions
 };
 
+// One session as the index keeps it: what the session list shows, and what a resume needs.
+struct SessionRow {
+  std::string id;
+  std::string state;           // "live", "ended" or "interrupted" (the server stopped under it)
+  std::string model, device, identity;
+  std::string started;         // UTC, ISO 8601
+  double duration_s = 0;       // first to last recorded sample
+  int64_t samples = 0;         // device samples recorded
+  uint64_t next_tick = 0;      // the first tick not recorded yet (a resume starts there)
+  std::string resume_sha256;   // hex digest of the agent's resume token; the token itself is never stored
+  std::string recording;       // file name under DATA/recordings/
+  std::string summary_json;    // the session's summary figures (peak force, time in contact, ...)
+  std::string scene_text;      // the agent's scene, protobuf text format
+};
+
+// The session index. Thread-safe.
+class SessionIndex {
+ public:
+  virtual ~SessionIndex() = default;
+  virtual bool Put(const SessionRow& row, std::string* error) = 0;  // insert or replace by id
+  virtual std::optional<SessionRow> Get(const std::string& id) = 0;
+  virtual std::vector<SessionRow> List() = 0;  // newest first
+  virtual bool Delete(const std::string& id) = 0;
+};
+
 // The data directory's stores: DIR/idms.db (SQLite, WAL) and DIR/blobs/. Creates what is
 // missing; removes stray temporary files and blobs no row names (what a crash can leave).
 struct Storage {
   std::unique_ptr<BlobStore> blobs;
   std::unique_ptr<ModelStore> models;
+  std::unique_ptr<SessionIndex> sessions;
 };
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
 
 // The directory store alone (tests, tools).
 std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error);
-// The SQLite store alone.
+// The SQLite stores alone.
 std::unique_ptr<ModelStore> OpenSqliteModelStore(const std::string& db_path, std::string* error);
+std::unique_ptr<SessionIndex> OpenSqliteSessionIndex(const std::string& db_path, std::string* error);
 
 // SHA-256 of bytes as 64 lowercase hex digits (OpenSSL).
 std::string Sha256Hex(std::string_view bytes);
