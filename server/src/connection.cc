@@ -29,7 +29,7 @@ namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
-constexpr uint64_t kLargeBody = 1 << 20;   // bodies above this take an upload slot
+constexpr uint64_t kLargeBody = 1 << 20;     // bodies above this take an upload slot
 constexpr size_t kMaxQueuedMessages = 1024;  // per WebSocket; the oldest is dropped beyond (as Foxglove's SDK)
 
 template <class Stream>
@@ -324,7 +324,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     std::shared_ptr<WsEndpoint> endpoint = MakeEndpoint(core_, req_, &refusal);
     if (!endpoint) return Write(JsonError(req_, http::status::not_found, refusal), false);
     auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_),
-                                                   std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));
+                                                  std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));
     AccessLog(101, 0);
     ws->Run(parser_->release());
   }

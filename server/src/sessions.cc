@@ -3,6 +3,7 @@
 // kept for lists and resumes, across a restart too.
 #include "sessions.h"
 
+#include <google/protobuf/text_format.h>
 #include <openssl/crypto.h>
 #include <openssl/rand.h>
 
@@ -10,7 +11,6 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <google/protobuf/text_format.h>
 
 #include "idms/protocol/envelope.h"
 #include "idms/server/log.h"
@@ -294,7 +294,9 @@ void LiveSession::Tick() {
   });
 }
 
-void LiveSession::Record(std::shared_ptr<const v1::Envelope> envelope) { recorder_->Write(std::move(envelope), UnixNs()); }
+void LiveSession::Record(std::shared_ptr<const v1::Envelope> envelope) {
+  recorder_->Write(std::move(envelope), UnixNs());
+}
 
 void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer) {
   auto e = std::make_shared<v1::Envelope>();

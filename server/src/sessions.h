@@ -4,8 +4,8 @@
 // the recorder thread; the index (SQLite) keeps what a list or a resume after a restart needs.
 #pragma once
 
-#include <boost/asio/strand.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -25,15 +25,15 @@ class Recorder;
 
 // The session's figures, updated as samples arrive (on the session's strand).
 struct SessionSummary {
-  double peak_force = 0;           // |force| maximum, force units
+  double peak_force = 0;            // |force| maximum, force units
   double force_sum_in_contact = 0;  // for the mean contact force
   int64_t contact_samples = 0;
   double contact_time_s = 0;
-  double path_length = 0;          // of the tool centre, model units
+  double path_length = 0;  // of the tool centre, model units
   int64_t warnings = 0;
   uint64_t overruns = 0;
-  uint32_t tick_p99_us = 0;        // compute time p99 (the agent's LoopStats)
-  uint64_t samples_dropped = 0;    // lost to the agent's backlog while disconnected
+  uint32_t tick_p99_us = 0;      // compute time p99 (the agent's LoopStats)
+  uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
   double last_time_s = 0;

@@ -111,8 +111,9 @@ class SqliteSessionIndex final : public SessionIndex {
   }
   static std::string Col(sqlite3_stmt* s, int c) {
     const unsigned char* t = sqlite3_column_text(s, c);
-    return t == nullptr ? std::string()
-                        : std::string(reinterpret_cast<const char*>(t), static_cast<size_t>(sqlite3_column_bytes(s, c)));
+    return t == nullptr
+               ? std::string()
+               : std::string(reinterpret_cast<const char*>(t), static_cast<size_t>(sqlite3_column_bytes(s, c)));
   }
   static SessionRow Row(sqlite3_stmt* s) {
     SessionRow r;

@@ -1,6 +1,7 @@
 // Server process and synchronous Beast clients for the integration tests.
 #include "server_process.h"
 
+#include <algorithm>
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/ssl/rfc2818_verification.hpp>
@@ -57,7 +58,9 @@ HttpReply Exchange(Stream& stream, uint16_t port, const HttpCall& call) {
 }  // namespace
 
 ServerProcess::ServerProcess(const std::string& data_dir, const std::vector<std::string>& extra) : data_dir_(data_dir) {
-  std::vector<std::string> args = {"--listen", "127.0.0.1:0", "--data", data_dir};
+  std::vector<std::string> args = {"--data", data_dir};
+  if (std::find(extra.begin(), extra.end(), "--listen") == extra.end())
+    args.insert(args.end(), {"--listen", "127.0.0.1:0"});
   args.insert(args.end(), extra.begin(), extra.end());
   process_ = std::make_unique<ChildProcess>(IDMS_SERVER_BIN, args, data_dir + ".log", true);
   // "idms-server listening on http://127.0.0.1:PORT"

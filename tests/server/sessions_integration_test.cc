@@ -1,0 +1,328 @@
+// Live sessions with the real idms-server and idms-agent on loopback: several viewers whose
+// mirrors equal the agent's final surface, a late joiner served a keyframe at once, commands from
+// an admin relayed and an observer's refused, the recording downloaded and read back, and an
+// agent that resumes after the server is killed, with every tick in the recording exactly once.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
+#include <cmath>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "idms/protocol/envelope.h"
+#include "idms/protocol/mesh_mirror.h"
+#include "idms/protocol/recording.h"
+#include "server_process.h"
+
+namespace idms::test {
+namespace {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace websocket = beast::websocket;
+using json = nlohmann::json;
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+
+template <class F>
+bool Eventually(F condition, milliseconds timeout = milliseconds(20000)) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(milliseconds(20));
+  }
+  return condition();
+}
+
+// A viewer on its own thread: every frame kept, mesh frames applied to a mirror.
+class TestViewer {
+ public:
+  TestViewer(uint16_t port, const std::string& session, const std::string& token) {
+    ws_.set_option(websocket::stream_base::decorator(
+        [token](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
+    beast::get_lowest_layer(ws_).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+    ws_.handshake("127.0.0.1", "/ws/session/" + session);
+    thread_ = std::thread([this] { Read(); });
+  }
+  ~TestViewer() {
+    beast::error_code ec;
+    beast::get_lowest_layer(ws_).socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+    thread_.join();
+  }
+  void Send(const v1::Envelope& e) {
+    std::string bytes;
+    SerializeEnvelope(e, &bytes);
+    std::lock_guard lock(write_mu_);
+    ws_.binary(true);
+    beast::error_code ec;
+    ws_.write(asio::buffer(bytes), ec);
+  }
+  bool WaitClosed(milliseconds timeout) {
+    return Eventually([&] { return closed_.load(); }, timeout);
+  }
+  std::vector<v1::Envelope> Frames() {
+    std::lock_guard lock(mu_);
+    return frames_;
+  }
+  std::vector<float> Positions() {
+    std::lock_guard lock(mu_);
+    auto p = mirror_.positions();
+    return std::vector<float>(p.begin(), p.end());
+  }
+  double quant_step() {
+    std::lock_guard lock(mu_);
+    return mirror_.quant_step();
+  }
+  int gaps() const { return gaps_.load(); }
+
+ private:
+  void Read() {
+    beast::flat_buffer buffer;
+    while (true) {
+      beast::error_code ec;
+      ws_.read(buffer, ec);
+      if (ec) break;
+      v1::Envelope e;
+      std::string error;
+      const auto data = buffer.data();
+      if (ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error)) {
+        std::lock_guard lock(mu_);
+        if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+          if (mirror_.Apply(e, &error) != MirrorStatus::kOk) ++gaps_;
+        }
+        frames_.push_back(std::move(e));
+      }
+      buffer.consume(buffer.size());
+    }
+    closed_ = true;
+  }
+
+  asio::io_context io_;
+  websocket::stream<beast::tcp_stream> ws_{io_};
+  std::thread thread_;
+  std::mutex mu_, write_mu_;
+  std::vector<v1::Envelope> frames_;
+  MeshMirror mirror_;
+  std::atomic<bool> closed_{false};
+  std::atomic<int> gaps_{0};
+};
+
+// The agent's final surface (--dump-final): one "x y z" per vertex after a comment line.
+std::vector<double> ReadDump(const std::string& path) {
+  std::istringstream in(ReadText(path));
+  std::string line;
+  std::getline(in, line);
+  std::vector<double> out;
+  double v = 0;
+  while (in >> v) out.push_back(v);
+  return out;
+}
+
+json Sessions(uint16_t port, const std::string& token) {
+  const HttpReply r = Get(port, "/api/sessions", token);
+  return r.status == 200 ? json::parse(r.body)["sessions"] : json::array();
+}
+
+// Every device tick in a recording, in order.
+std::vector<uint64_t> RecordedTicks(const std::string& path) {
+  RecordingReader reader;
+  RecordingReaderOptions options;
+  options.mesh = options.events = false;
+  std::string error;
+  std::vector<uint64_t> ticks;
+  EXPECT_TRUE(reader.Open(path, options, &error)) << error;
+  RecordedMessage m;
+  while (reader.Next(&m, &error)) {
+    for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) ticks.push_back(s.tick());
+  }
+  EXPECT_EQ(error, "");
+  return ticks;
+}
+
+std::vector<std::string> AgentArgs(const ServerProcess& server, const std::string& dir, double duration) {
+  return {"--server",
+          "ws://127.0.0.1:" + server.port_string(),
+          "--token",
+          server.Token("agent"),
+          "--model",
+          "hex_4x5_home",
+          "--device",
+          "scripted:palpate",
+          "--duration",
+          std::to_string(duration),
+          "--no-realtime",
+          "--cache-dir",
+          dir + "/cache",
+          "--dump-final",
+          dir + "/final.txt",
+          "--summary-json",
+          dir + "/summary.json"};
+}
+
+TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) {
+  const std::string dir = TempDir("sessions-live");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const std::string observer = server.Token("observer"), admin = server.Token("admin");
+  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(server, dir, 4), dir + "/agent.log");
+  // The session appears, live.
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(port, observer);
+    if (s.empty() || s[0]["state"] != "live") return false;
+    id = s[0]["id"];
+    return true;
+  })) << server.Log();
+  TestViewer a(port, id, observer), b(port, id, admin);
+  // A late joiner: Welcome, then a keyframe from the server's mirror straight away.
+  ASSERT_TRUE(Eventually([&] { return Sessions(port, observer)[0]["samples"].get<int>() > 1500; }));
+  TestViewer late(port, id, observer);
+  ASSERT_TRUE(Eventually([&] { return late.Frames().size() >= 2; }));
+  const std::vector<v1::Envelope> first = late.Frames();
+  ASSERT_TRUE(first[0].has_welcome());
+  EXPECT_EQ(first[0].welcome().session_id(), id);
+  EXPECT_EQ(first[0].welcome().scene().model(), "hex_4x5_home");
+  EXPECT_TRUE(first[1].has_mesh_keyframe());
+  // Commands: an observer's is refused, an admin's reaches the agent.
+  v1::Envelope command;
+  command.mutable_command()->set_kind(v1::Command::KIND_KEYFRAME_REQUEST);
+  a.Send(command);
+  b.Send(command);
+  ASSERT_TRUE(Eventually([&] {
+    for (const v1::Envelope& e : a.Frames()) {
+      if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ERROR &&
+          e.session_event().message().find("only an admin") != std::string::npos)
+        return true;
+    }
+    return false;
+  }));
+  // The agent ends: every viewer is closed, and its mirror equals the agent's final surface.
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+  for (TestViewer* v : {&a, &b, &late}) {
+    ASSERT_TRUE(v->WaitClosed(seconds(20)));
+    EXPECT_EQ(v->gaps(), 0);
+    const std::vector<double> truth = ReadDump(dir + "/final.txt");
+    const std::vector<float> seen = v->Positions();
+    ASSERT_EQ(seen.size(), truth.size());
+    double worst = 0;
+    for (size_t i = 0; i < truth.size(); ++i) worst = std::max(worst, std::abs(seen[i] - truth[i]));
+    EXPECT_LE(worst, v->quant_step()) << "max |mirror - agent| over the surface";
+  }
+  const json summary = json::parse(ReadText(dir + "/summary.json"));
+  EXPECT_GE(summary["commands"].get<int>(), 1);
+  // The session is listed as ended, with its figures, and its recording reads back whole.
+  const json s = Sessions(port, observer)[0];
+  EXPECT_EQ(s["state"], "ended");
+  EXPECT_EQ(s["samples"], 4000);
+  EXPECT_GT(s["summary"]["peak_force"].get<double>(), 1.0);
+  EXPECT_GT(s["summary"]["contact_time_s"].get<double>(), 0.1);
+  const HttpReply rec = Get(port, "/api/sessions/" + id + "/recording.mcap", observer);
+  ASSERT_EQ(rec.status, 200);
+  std::ofstream(dir + "/rec.mcap", std::ios::binary) << rec.body;
+  std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
+  ASSERT_EQ(ticks.size(), 4000u);
+  for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  // Ranges: the file resumes.
+  const HttpReply part = Http(port, HttpCall{"GET",
+                                             "/api/sessions/" + id + "/recording.mcap",
+                                             {{"Authorization", "Bearer " + observer}, {"Range", "bytes=100-199"}},
+                                             ""});
+  EXPECT_EQ(part.status, 206);
+  EXPECT_EQ(part.body, rec.body.substr(100, 100));
+  const json detail = json::parse(Get(port, "/api/sessions/" + id, observer).body);
+  bool saw_joined = false;
+  for (const json& e : detail["events"]) saw_joined |= e["kind"] == "KIND_VIEWER_JOINED";
+  EXPECT_TRUE(saw_joined);
+  // A viewer of a session that is not live: 404.
+  EXPECT_EQ(WsConnect(port, "/ws/session/" + id, {{"Authorization", "Bearer " + observer}}).status, 404);
+  // Only an admin deletes a recording.
+  EXPECT_EQ(Http(port, HttpCall{"DELETE", "/api/sessions/" + id, {{"Authorization", "Bearer " + observer}}, ""}).status,
+            403);
+  EXPECT_EQ(Http(port, HttpCall{"DELETE", "/api/sessions/" + id, {{"Authorization", "Bearer " + admin}}, ""}).status,
+            200);
+  EXPECT_EQ(Get(port, "/api/sessions/" + id + "/recording.mcap", observer).status, 404);
+}
+
+TEST(Sessions, GarbageFromAnAgentClosesItWithAReason) {
+  const std::string dir = TempDir("sessions-garbage");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  asio::io_context io;
+  websocket::stream<beast::tcp_stream> ws(io);
+  beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
+  beast::get_lowest_layer(ws).expires_after(seconds(30));
+  const std::string agent = server.Token("agent");
+  ws.set_option(websocket::stream_base::decorator(
+      [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + agent); }));
+  ws.handshake("127.0.0.1", "/ws/agent");
+  ws.binary(true);
+  ws.write(asio::buffer(std::string("\xff\xff\xff garbage", 12)));
+  beast::flat_buffer buffer;
+  ws.read(buffer);
+  v1::Envelope e;
+  std::string error;
+  const auto data = buffer.data();
+  ASSERT_TRUE(ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error));
+  ASSERT_TRUE(e.has_session_event());
+  EXPECT_EQ(e.session_event().kind(), v1::SessionEvent::KIND_ERROR);
+  EXPECT_NE(e.session_event().message().find("malformed frame"), std::string::npos);
+  beast::error_code ec;
+  buffer.consume(buffer.size());
+  ws.read(buffer, ec);
+  EXPECT_EQ(ec, websocket::error::closed);
+  EXPECT_EQ(ws.reason().code, websocket::close_code::policy_error);
+  // Observers may not publish.
+  EXPECT_EQ(WsConnect(server.port(), "/ws/agent", {{"Authorization", "Bearer " + server.Token("observer")}}).status,
+            403);
+  EXPECT_EQ(Get(server.port(), "/api/health", "").status, 200);
+}
+
+// The server dies under a live session (SIGKILL, then SIGTERM); the agent reconnects to the
+// restarted server, resumes the same session, and the recording holds every tick once, in order.
+void ResumeAcrossRestart(int signal) {
+  const std::string dir = TempDir(signal == SIGKILL ? "resume-kill" : "resume-term");
+  auto server = std::make_unique<ServerProcess>(dir + "/data");
+  ASSERT_TRUE(server->ready()) << server->Log();
+  const std::string port = server->port_string(), observer = server->Token("observer");
+  std::vector<std::string> args = AgentArgs(*server, dir, 5);
+  ChildProcess agent(IDMS_AGENT_BIN, args, dir + "/agent.log");
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(server->port(), observer);
+    if (s.empty() || s[0]["samples"].get<int>() < 1500) return false;
+    id = s[0]["id"];
+    return true;
+  })) << server->Log();
+  server->process().Signal(signal);
+  ASSERT_TRUE(server->process().Wait(seconds(30)));
+  const std::string first_log = server->Log();
+  // The same address again (the agent knows no other).
+  server = std::make_unique<ServerProcess>(dir + "/data", std::vector<std::string>{"--listen", "127.0.0.1:" + port});
+  ASSERT_TRUE(server->ready()) << server->Log();
+  ASSERT_EQ(agent.Wait(seconds(90)), 0) << agent.Log();
+  const json summary = json::parse(ReadText(dir + "/summary.json"));
+  EXPECT_GE(summary["reconnects"].get<int>(), 1);
+  EXPECT_EQ(summary["session_id"], id);
+  EXPECT_EQ(summary["samples_dropped"], 0);
+  ASSERT_TRUE(Eventually([&] { return Sessions(server->port(), observer)[0]["state"] == "ended"; })) << server->Log();
+  const HttpReply rec = Get(server->port(), "/api/sessions/" + id + "/recording.mcap", observer);
+  ASSERT_EQ(rec.status, 200);
+  std::ofstream(dir + "/rec.mcap", std::ios::binary) << rec.body;
+  const std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
+  ASSERT_EQ(ticks.size(), 5000u) << first_log << server->Log();
+  for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+}
+
+TEST(Sessions, AgentResumesAfterTheServerIsKilledAndEveryTickIsRecordedOnce) { ResumeAcrossRestart(SIGKILL); }
+TEST(Sessions, AgentResumesAfterTheServerStopsAndEveryTickIsRecordedOnce) { ResumeAcrossRestart(SIGTERM); }
+
+}  // namespace
+}  // namespace idms::test
