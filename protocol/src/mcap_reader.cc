@@ -474,8 +474,9 @@ bool McapReader::Next(McapMessage* out, std::string* error) {
     const McapChunkInfo& chunk = r.chunks[r.next_chunk];
     if (!r.heap.empty() && chunk.message_start_ns > r.heap.top().message.log_time_ns) break;
     ++r.next_chunk;
+    // Skipped by time, and by channel when asked for some; never by count: a message index that
+    // under-counts must not lose the chunk's messages.
     if (chunk.message_end_ns < r.range_start || chunk.message_start_ns > r.range_end) continue;
-    if (chunk.num_messages == 0) continue;
     if (!r.wanted.empty() &&
         std::none_of(chunk.channels.begin(), chunk.channels.end(), [&](uint16_t id) { return r.wanted[id]; })) {
       continue;

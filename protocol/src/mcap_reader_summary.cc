@@ -375,7 +375,12 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
   if (!Read(start, location.length, &scratch, &block, error)) return false;
   std::map<uint64_t, uint16_t> found;  // record offset -> channel
   const auto record = [&](uint8_t op, std::string_view content, uint64_t pos) {
-    if (op != kMessageIndex) return true;
+    if (op != kMessageIndex) {
+      // Anything else here would be skipped by ReadUnindexed and never read: not indexed.
+      *why_not = std::string("a ") + OpName(op) + " record at byte " + std::to_string(pos) +
+                 " lies among the message indexes of the chunk at byte " + std::to_string(chunk.offset);
+      return false;
+    }
     const std::string where = "byte " + std::to_string(pos);
     Cursor c(content, pos + kRecordPrefix);
     uint16_t channel = 0;
