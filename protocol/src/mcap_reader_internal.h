@@ -150,7 +150,8 @@ struct McapReader::Impl {
   bool ReadUnindexed(uint64_t data_end, const std::vector<std::pair<uint64_t, uint64_t>>& covered,
                      std::map<uint64_t, uint64_t>* metadata_records, std::string* why_not, std::string* error);
   // A chunk's message indexes: its channels and message count, and per-channel figures. *why_not
-  // when one is for a channel the index route does not know (defined only inside chunks).
+  // when one is for a channel no record outside chunks defines, or a record other than a
+  // MessageIndex lies among them.
   bool ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexLocation& location,
                           std::map<uint16_t, McapChannelStats>& per_channel, std::string* why_not,
                           std::string* error);

@@ -88,7 +88,7 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, std::string* why_not,
   for (const auto& [id, channel] : channels) {
     if (channel.schema_id != 0 && schemas.count(channel.schema_id) == 0) {
       *why_not = "Channel " + std::to_string(id) + " (" + channel.topic + ") refers to schema " +
-                 std::to_string(channel.schema_id) + ", which is defined only inside chunks";
+                 std::to_string(channel.schema_id) + ", which no record outside chunks defines";
       return true;
     }
   }
@@ -203,7 +203,7 @@ std::string McapReader::Impl::CompareStatistics(const SummaryRecords& summary,
   for (const auto& [id, count] : summary.channel_counts) {
     if (channels.count(id) == 0) {
       return "the Statistics record counts messages on channel " + std::to_string(id) +
-             ", which is defined only inside chunks";
+             ", which no record outside chunks defines";
     }
     const auto it = per_channel.find(id);
     const uint64_t found = it == per_channel.end() ? 0 : it->second.num_messages;
@@ -396,7 +396,7 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
     }
     if (channels.count(channel) == 0) {
       *why_not = "the MessageIndex at " + where + " is for channel " + std::to_string(channel) +
-                 ", which is defined only inside chunks";
+                 ", which no record outside chunks defines";
       return false;
     }
     // Each entry lies in the chunk: its time in the chunk's range, its offset in its records.
