@@ -153,8 +153,8 @@ struct McapReader::Impl {
   // when one is for a channel no record outside chunks defines, or a record other than a
   // MessageIndex lies among them.
   bool ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexLocation& location,
-                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* why_not,
-                          std::string* error);
+                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* why_not, std::string* error);
+
   // mcap_reader_scan.cc
   // Reads the data section record by record. A finished file must be well formed; an unfinished
   // one keeps what precedes its first bad record (recovery_note says which).

@@ -26,8 +26,7 @@ uint32_t GetU32(const char* p) {
 // A map<uint16, uint64> field (`map_bytes` long, just read) entry by entry into add(key, value);
 // false with what is wrong when its length is not whole entries within the record.
 template <class Add>
-bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char* field, std::string* what,
-                   Add add) {
+bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char* field, std::string* what, Add add) {
   if (map_bytes % 10 != 0 || map_bytes > c.remaining()) {
     *what = std::string(record) + " record: " + field + " of " + std::to_string(map_bytes) +
             " bytes is not a whole number of entries within the record";
@@ -48,10 +47,10 @@ bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char
 // What the summary section holds, before it is checked against the data section.
 struct McapReader::Impl::SummaryRecords {
   uint64_t summary_start = 0;
-  std::vector<McapIndexLocation> locations;                      // one per chunk, in summary order
+  std::vector<McapIndexLocation> locations;                     // one per chunk, in summary order
   std::vector<std::pair<uint64_t, uint64_t>> metadata_indexes;  // offset, length
   bool has_statistics = false;
-  uint64_t message_count = 0;                     // Statistics.message_count
+  uint64_t message_count = 0;                   // Statistics.message_count
   std::map<uint16_t, uint64_t> channel_counts;  // Statistics.channel_message_counts
 };
 
@@ -105,10 +104,10 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, std::string* why_not,
   for (const auto& [offset, length] : summary.metadata_indexes) {
     const auto it = metadata_records.find(offset);
     if (it == metadata_records.end() || it->second != length) {
-      return Fail("byte " + std::to_string(offset),
-                  "a MetadataIndex points here, but no Metadata record of " + std::to_string(length) +
-                      " bytes starts here",
-                  error);
+      return Fail(
+          "byte " + std::to_string(offset),
+          "a MetadataIndex points here, but no Metadata record of " + std::to_string(length) + " bytes starts here",
+          error);
     }
   }
   return true;
@@ -197,8 +196,8 @@ std::string McapReader::Impl::CompareStatistics(const SummaryRecords& summary,
   uint64_t in_indexes = 0;
   for (const auto& [id, s] : per_channel) in_indexes += s.num_messages;
   if (summary.message_count != in_indexes) {
-    return "the Statistics record counts " + std::to_string(summary.message_count) +
-           " messages, the message indexes " + std::to_string(in_indexes);
+    return "the Statistics record counts " + std::to_string(summary.message_count) + " messages, the message indexes " +
+           std::to_string(in_indexes);
   }
   for (const auto& [id, count] : summary.channel_counts) {
     if (channels.count(id) == 0) {
@@ -267,8 +266,8 @@ bool McapReader::Impl::ReadUnindexed(uint64_t data_end, const std::vector<std::p
         // Definitions and metadata, read as a scan reads them.
         if (length > options.max_record_bytes) {
           return Fail(where,
-                      std::string(OpName(op)) + " record of " + std::to_string(length) + " bytes exceeds the limit of " +
-                          std::to_string(options.max_record_bytes),
+                      std::string(OpName(op)) + " record of " + std::to_string(length) +
+                          " bytes exceeds the limit of " + std::to_string(options.max_record_bytes),
                       error);
         }
         std::string_view record;
@@ -340,8 +339,7 @@ bool McapReader::Impl::ReadChunkIndex(std::string_view content, uint64_t pos, ui
   return true;
 }
 
-bool McapReader::Impl::ReadStatistics(std::string_view content, uint64_t pos, SummaryRecords* out,
-                                      std::string* error) {
+bool McapReader::Impl::ReadStatistics(std::string_view content, uint64_t pos, SummaryRecords* out, std::string* error) {
   // Only the counts are used (to check the message indexes); the rest is checked to be there.
   Cursor c(content, pos + kRecordPrefix);
   uint16_t schema_count = 0;

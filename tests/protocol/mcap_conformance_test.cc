@@ -77,9 +77,9 @@ Expected ReadExpected(const fs::path& path) {
                                  Bytes(fields["data"])};
     } else if (type == "Channel") {
       const auto id = static_cast<uint16_t>(Number(fields["id"]));
-      e.channels[id] = McapChannel{id, static_cast<uint16_t>(Number(fields["schema_id"])),
-                                   fields["topic"].get<std::string>(), fields["message_encoding"].get<std::string>(),
-                                   StringMap(fields["metadata"])};
+      e.channels[id] =
+          McapChannel{id, static_cast<uint16_t>(Number(fields["schema_id"])), fields["topic"].get<std::string>(),
+                      fields["message_encoding"].get<std::string>(), StringMap(fields["metadata"])};
     } else if (type == "Message") {
       e.messages.push_back(Msg{static_cast<uint16_t>(Number(fields["channel_id"])), "",
                                static_cast<uint32_t>(Number(fields["sequence"])), Number(fields["log_time"]),
@@ -90,7 +90,8 @@ Expected ReadExpected(const fs::path& path) {
   }
   // The reader's order: log time, ties in file order.
   for (Msg& m : e.messages) m.topic = e.channels.at(m.channel).topic;
-  std::stable_sort(e.messages.begin(), e.messages.end(), [](const Msg& a, const Msg& b) { return a.log_ns < b.log_ns; });
+  std::stable_sort(e.messages.begin(), e.messages.end(),
+                   [](const Msg& a, const Msg& b) { return a.log_ns < b.log_ns; });
   return e;
 }
 
@@ -124,7 +125,8 @@ void CheckFile(const fs::path& path, const Expected& expected, bool use_summary)
   McapMessage m;
   while (reader.Next(&m, &error)) {
     const McapChannel* channel = &reader.channels().at(m.channel_id);
-    read.push_back(Msg{m.channel_id, channel->topic, m.sequence, m.log_time_ns, m.publish_time_ns, std::string(m.data)});
+    read.push_back(
+        Msg{m.channel_id, channel->topic, m.sequence, m.log_time_ns, m.publish_time_ns, std::string(m.data)});
   }
   ASSERT_EQ(error, "");
   ASSERT_EQ(read.size(), expected.messages.size());
@@ -168,7 +170,8 @@ TEST(McapConformance, IndexedWhereTheSummaryLocatesEveryMessage) {
     McapReader reader;
     std::string error;
     ASSERT_TRUE(reader.Open(path.string(), McapReaderOptions{}, &error)) << error;
-    const bool complete = has("ch") && has("mx") && has("chx") && has("rch") && (has("rsh") || expected.schemas.empty());
+    const bool complete =
+        has("ch") && has("mx") && has("chx") && has("rch") && (has("rsh") || expected.schemas.empty());
     SCOPED_TRACE(path.filename().string());
     if (complete) {
       EXPECT_TRUE(reader.indexed()) << reader.index_note();
