@@ -118,21 +118,18 @@ bool McapReader::Impl::OpenSource(std::string* error) {
                   "the file ends with the MCAP magic but no 20-byte Footer record precedes it", error);
     }
   }
-  // The summary when there is one; else, or when it cannot locate the messages, the scan.
+  // The summary when it locates every message; else the scan.
   if (finished && options.use_summary) {
-    bool scan_instead = false;
-    if (!ReadSummary(footer_offset, &scan_instead, error)) return false;
-    if (!scan_instead) {
+    std::string why_not;
+    if (!ReadSummary(footer_offset, &why_not, error)) return false;
+    if (why_not.empty()) {
       indexed = true;
       SortChunks();
       ResetIteration();
       return true;
     }
-    schemas.clear();
-    channels.clear();
-    chunks.clear();
-    metadata.clear();
-    stats = {};
+    ClearFound();
+    index_note = why_not;
   }
   if (!Scan(finished, error)) return false;
   SortChunks();
@@ -195,7 +192,8 @@ bool McapReader::Impl::AddSchema(std::string_view content, const McapPlace& plac
   return true;
 }
 
-bool McapReader::Impl::AddChannel(std::string_view content, const McapPlace& place, uint64_t pos, std::string* error) {
+bool McapReader::Impl::AddChannel(std::string_view content, const McapPlace& place, uint64_t pos, std::string* error,
+                                  bool check_schema) {
   Cursor c(content, pos + kRecordPrefix);
   McapChannel ch;
   std::string_view t, e;
@@ -205,7 +203,7 @@ bool McapReader::Impl::AddChannel(std::string_view content, const McapPlace& pla
   }
   ch.topic = std::string(t);
   ch.message_encoding = std::string(e);
-  if (ch.schema_id != 0 && schemas.count(ch.schema_id) == 0) {
+  if (check_schema && ch.schema_id != 0 && schemas.count(ch.schema_id) == 0) {
     return Fail(place.At(pos),
                 "Channel " + std::to_string(ch.id) + " (" + ch.topic + ") refers to schema " +
                     std::to_string(ch.schema_id) + ", which no earlier Schema record defines",
@@ -367,6 +365,26 @@ void McapReader::Impl::SortChunks() {
   });
 }
 
+void McapReader::Impl::StatsFromChannels() {
+  stats.num_messages = 0;
+  stats.start_ns = stats.end_ns = 0;
+  bool any = false;
+  for (const auto& [id, s] : stats.channels) {
+    if (s.num_messages == 0) continue;
+    stats.num_messages += s.num_messages;
+    if (!any || s.start_ns < stats.start_ns) stats.start_ns = s.start_ns;
+    if (!any || s.end_ns > stats.end_ns) stats.end_ns = s.end_ns;
+    any = true;
+  }
+}
+void McapReader::Impl::ClearFound() {
+  schemas.clear();
+  channels.clear();
+  chunks.clear();
+  metadata.clear();
+  stats = {};
+}
+
 uint32_t McapReader::Impl::TakeSlot() {
   if (!free_slots.empty()) {
     const uint32_t slot = free_slots.back();
@@ -456,13 +474,12 @@ bool McapReader::Next(McapMessage* out, std::string* error) {
     const McapChunkInfo& chunk = r.chunks[r.next_chunk];
     if (!r.heap.empty() && chunk.message_start_ns > r.heap.top().message.log_time_ns) break;
     ++r.next_chunk;
+    // Skipped by time, and by channel when asked for some; never by count: a message index that
+    // under-counts must not lose the chunk's messages.
     if (chunk.message_end_ns < r.range_start || chunk.message_start_ns > r.range_end) continue;
-    if (chunk.channels_known) {
-      if (chunk.num_messages == 0) continue;
-      if (!r.wanted.empty() &&
-          std::none_of(chunk.channels.begin(), chunk.channels.end(), [&](uint16_t id) { return r.wanted[id]; })) {
-        continue;
-      }
+    if (!r.wanted.empty() &&
+        std::none_of(chunk.channels.begin(), chunk.channels.end(), [&](uint16_t id) { return r.wanted[id]; })) {
+      continue;
     }
     if (!r.LoadChunk(chunk, &r.iteration_error)) {
       r.heap = {};
@@ -490,6 +507,7 @@ const McapStatistics& McapReader::statistics() const { return impl_->stats; }
 const std::vector<McapChunkInfo>& McapReader::chunks() const { return impl_->chunks; }
 bool McapReader::indexed() const { return impl_->indexed; }
 const std::string& McapReader::recovery_note() const { return impl_->recovery_note; }
+const std::string& McapReader::index_note() const { return impl_->index_note; }
 
 const McapChannel* McapReader::FindChannel(std::string_view topic) const {
   for (const auto& [id, channel] : impl_->channels) {

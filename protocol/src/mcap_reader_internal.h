@@ -1,5 +1,6 @@
-// The inside of McapReader, shared by mcap_reader.cc (opening, chunks, iteration) and
-// mcap_reader_summary.cc (the summary and the scan).
+// The inside of McapReader, shared by mcap_reader.cc (opening, chunks, iteration),
+// mcap_reader_summary.cc (the summary and whether it can be trusted) and mcap_reader_scan.cc (the
+// scan).
 #pragma once
 
 #include <zstd.h>
@@ -50,6 +51,7 @@ struct McapReader::Impl {
   std::vector<McapChunkInfo> chunks;
   bool indexed = false;
   std::string recovery_note;
+  std::string index_note;  // why a finished file was scanned rather than read through its summary
 
   // A chunk held while its messages are merged; slots are reused so that buffers keep their capacity.
   struct Loaded {
@@ -99,7 +101,10 @@ struct McapReader::Impl {
   bool OpenSource(std::string* error);
   bool ReadHeader(std::string* error);
   bool AddSchema(std::string_view content, const McapPlace& place, uint64_t pos, std::string* error);
-  bool AddChannel(std::string_view content, const McapPlace& place, uint64_t pos, std::string* error);
+  // check_schema: the channel's schema must already be known (the data section's order); the
+  // summary and the index route check every channel's schema once all records are in.
+  bool AddChannel(std::string_view content, const McapPlace& place, uint64_t pos, std::string* error,
+                  bool check_schema = true);
   bool ParseMessage(std::string_view content, const McapPlace& place, uint64_t pos, McapMessage* out,
                     std::string* error) const;
   bool ParseMetadata(std::string_view content, uint64_t pos, std::string* error);
@@ -116,18 +121,41 @@ struct McapReader::Impl {
   void ReleaseSlot(uint32_t slot);
   void ResetIteration();
   void SortChunks();
+  // The file's totals from stats.channels.
+  void StatsFromChannels();
+  // Forgets what the summary gave, before a scan finds it again.
+  void ClearFound();
 
   // mcap_reader_summary.cc
-  // Reads the summary of a finished file. *scan_instead when it has none or it cannot locate
-  // messages (no chunk index, messages outside chunks).
-  bool ReadSummary(uint64_t footer_offset, bool* scan_instead, std::string* error);
+  // Reads the summary of a finished file and decides whether it can be trusted to locate every
+  // message. Returns false on a malformed or damaged summary (with *error); true with *why_not set
+  // when the file is valid but its summary does not index it completely (no summary, no message
+  // indexes, messages outside chunks, channels the summary does not define, statistics that
+  // disagree with the indexes): the caller then scans.
+  bool ReadSummary(uint64_t footer_offset, std::string* why_not, std::string* error);
+  struct SummaryRecords;
+  // The footer and the summary's records (*why_not when the file has no summary).
+  bool ReadSummaryRecords(uint64_t footer_offset, SummaryRecords* out, std::string* why_not, std::string* error);
   bool ReadChunkIndex(std::string_view content, uint64_t pos, uint64_t data_end,
                       std::vector<McapIndexLocation>* locations, std::string* error);
-  bool ReadStatistics(std::string_view content, uint64_t pos, std::map<uint16_t, uint64_t>* channel_counts,
-                      std::string* error);
+  bool ReadStatistics(std::string_view content, uint64_t pos, SummaryRecords* out, std::string* error);
+  // "" when the Statistics record's counts equal the message indexes', else how they differ.
+  std::string CompareStatistics(const SummaryRecords& summary,
+                                const std::map<uint16_t, McapChannelStats>& per_channel) const;
+  // Reads the records of the data section that no chunk index covers (Schema, Channel, Metadata;
+  // others only framed), so that the index route sees the definitions a scan would. *why_not
+  // when one of them holds messages the index cannot locate (a Message record, an unindexed
+  // Chunk) or the records do not frame between the indexed chunks. *metadata_records gets the
+  // offset and length of each Metadata record.
+  bool ReadUnindexed(uint64_t data_end, const std::vector<std::pair<uint64_t, uint64_t>>& covered,
+                     std::map<uint64_t, uint64_t>* metadata_records, std::string* why_not, std::string* error);
+  // A chunk's message indexes: its channels and message count, and per-channel figures. *why_not
+  // when one is for a channel no record outside chunks defines, or a record other than a
+  // MessageIndex lies among them.
   bool ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexLocation& location,
-                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* error);
-  bool ReadMetadata(uint64_t offset, uint64_t length, std::string* error);
+                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* why_not, std::string* error);
+
+  // mcap_reader_scan.cc
   // Reads the data section record by record. A finished file must be well formed; an unfinished
   // one keeps what precedes its first bad record (recovery_note says which).
   bool Scan(bool finished, std::string* error);
@@ -136,7 +164,6 @@ struct McapReader::Impl {
   bool ScanRecord(uint8_t op, uint64_t pos, std::string_view record, ScanState& state, bool* end_of_data,
                   std::string* error);
   bool ScanChunk(uint64_t pos, std::string_view content, ScanState& state, std::string* error);
-  void StatsFromChannels();
 };
 
 // Adds one message's log time to per-channel figures.

@@ -1,6 +1,7 @@
-// McapReader's two ways into a file: the summary of a finished file (chunk indexes, message
-// indexes, statistics), or a scan of the data section record by record, which is also how the
-// complete chunks of an unfinished file are recovered.
+// McapReader's index route: the summary of a finished file (chunk indexes, message indexes,
+// statistics, metadata indexes), checked against the data section it indexes. A summary that is
+// valid but does not locate every message (the MCAP specification makes most of it optional) is
+// not trusted, and the file is scanned instead (mcap_reader_scan.cc).
 #include <algorithm>
 #include <set>
 #include <string>
@@ -25,8 +26,7 @@ uint32_t GetU32(const char* p) {
 // A map<uint16, uint64> field (`map_bytes` long, just read) entry by entry into add(key, value);
 // false with what is wrong when its length is not whole entries within the record.
 template <class Add>
-bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char* field, std::string* what,
-                   Add add) {
+bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char* field, std::string* what, Add add) {
   if (map_bytes % 10 != 0 || map_bytes > c.remaining()) {
     *what = std::string(record) + " record: " + field + " of " + std::to_string(map_bytes) +
             " bytes is not a whole number of entries within the record";
@@ -44,10 +44,77 @@ bool ReadU16U64Map(Cursor& c, uint32_t map_bytes, const char* record, const char
 
 }  // namespace
 
-// ---------------------------------------------------------------------------------------------
-// The summary.
+// What the summary section holds, before it is checked against the data section.
+struct McapReader::Impl::SummaryRecords {
+  uint64_t summary_start = 0;
+  std::vector<McapIndexLocation> locations;                     // one per chunk, in summary order
+  std::vector<std::pair<uint64_t, uint64_t>> metadata_indexes;  // offset, length
+  bool has_statistics = false;
+  uint64_t message_count = 0;                   // Statistics.message_count
+  std::map<uint16_t, uint64_t> channel_counts;  // Statistics.channel_message_counts
+};
 
-bool McapReader::Impl::ReadSummary(uint64_t footer_offset, bool* scan_instead, std::string* error) {
+// ---------------------------------------------------------------------------------------------
+// The summary, and whether it can be trusted.
+
+bool McapReader::Impl::ReadSummary(uint64_t footer_offset, std::string* why_not, std::string* error) {
+  // The summary's records: definitions, chunk indexes, statistics, metadata indexes.
+  SummaryRecords summary;
+  if (!ReadSummaryRecords(footer_offset, &summary, why_not, error)) return false;
+  if (!why_not->empty()) return true;
+  // The data section outside the indexed chunks: the definitions a scan would see, and no message
+  // the index would miss.
+  std::vector<std::pair<uint64_t, uint64_t>> covered;
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    covered.emplace_back(chunks[i].offset, chunks[i].offset + chunks[i].length + summary.locations[i].length);
+  }
+  std::sort(covered.begin(), covered.end());
+  std::map<uint64_t, uint64_t> metadata_records;
+  if (!ReadUnindexed(summary.summary_start, covered, &metadata_records, why_not, error)) return false;
+  if (!why_not->empty()) return true;
+  // Every chunk's message indexes: which channels it holds, how many messages and when. Without
+  // them a chunk's messages are known only by reading it, which is what a scan does.
+  std::map<uint16_t, McapChannelStats> per_channel;
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    if (summary.locations[i].offsets.empty()) {
+      *why_not = "the chunk at byte " + std::to_string(chunks[i].offset) + " has no message index";
+      return true;
+    }
+    if (!ReadMessageIndexes(chunks[i], summary.locations[i], per_channel, why_not, error)) return false;
+    if (!why_not->empty()) return true;
+  }
+  // Every channel's schema is defined.
+  for (const auto& [id, channel] : channels) {
+    if (channel.schema_id != 0 && schemas.count(channel.schema_id) == 0) {
+      *why_not = "Channel " + std::to_string(id) + " (" + channel.topic + ") refers to schema " +
+                 std::to_string(channel.schema_id) + ", which no record outside chunks defines";
+      return true;
+    }
+  }
+  // Statistics, where given, agree with the message indexes.
+  if (summary.has_statistics) {
+    *why_not = CompareStatistics(summary, per_channel);
+    if (!why_not->empty()) return true;
+  }
+  // The figures, from the message indexes.
+  for (const auto& [id, channel] : channels) stats.channels[id] = per_channel[id];
+  stats.num_chunks = static_cast<uint32_t>(chunks.size());
+  StatsFromChannels();
+  // Each metadata index names a Metadata record (read in file order by ReadUnindexed).
+  for (const auto& [offset, length] : summary.metadata_indexes) {
+    const auto it = metadata_records.find(offset);
+    if (it == metadata_records.end() || it->second != length) {
+      return Fail(
+          "byte " + std::to_string(offset),
+          "a MetadataIndex points here, but no Metadata record of " + std::to_string(length) + " bytes starts here",
+          error);
+    }
+  }
+  return true;
+}
+
+bool McapReader::Impl::ReadSummaryRecords(uint64_t footer_offset, SummaryRecords* out, std::string* why_not,
+                                          std::string* error) {
   // Footer: where the summary and the summary offsets start, and their CRC.
   std::string_view footer;
   if (!Read(footer_offset + kRecordPrefix, kFooterContent, &scratch, &footer, error)) return false;
@@ -56,7 +123,7 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, bool* scan_instead, s
   const uint32_t summary_crc = GetU32(footer.data() + 16);
   const std::string at_footer = "byte " + std::to_string(footer_offset);
   if (summary_start == 0) {
-    *scan_instead = true;  // no summary: the data section is all there is
+    *why_not = "the file has no summary";
     return true;
   }
   if (summary_start < data_start || summary_start > footer_offset) {
@@ -77,6 +144,7 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, bool* scan_instead, s
                     std::to_string(options.max_record_bytes),
                 error);
   }
+  out->summary_start = summary_start;
   // The summary CRC covers the summary, the summary offsets and the footer up to the CRC itself.
   std::string buffer;
   std::string_view summary;
@@ -89,12 +157,9 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, bool* scan_instead, s
                     " (the summary is damaged)",
                 error);
   }
-  // Summary records, then the summary offsets (only checked to be well framed).
+  // Summary records, then the summary offsets (only checked to be well framed). A channel's schema
+  // may be defined later in the summary or only in the data section: checked once all are in.
   const uint64_t summary_end = summary_offset_start != 0 ? summary_offset_start : footer_offset;
-  std::vector<McapIndexLocation> locations;
-  std::vector<std::pair<uint64_t, uint64_t>> metadata_indexes;
-  std::map<uint16_t, uint64_t> channel_counts;
-  bool has_statistics = false;
   const McapPlace file;
   const auto record = [&](uint8_t op, std::string_view content, uint64_t pos) {
     Cursor c(content, pos + kRecordPrefix);
@@ -102,61 +167,125 @@ bool McapReader::Impl::ReadSummary(uint64_t footer_offset, bool* scan_instead, s
       case kSchema:
         return AddSchema(content, file, pos, error);
       case kChannel:
-        return AddChannel(content, file, pos, error);
+        return AddChannel(content, file, pos, error, /*check_schema=*/false);
       case kChunkIndex:
-        return ReadChunkIndex(content, pos, summary_start, &locations, error);
+        return ReadChunkIndex(content, pos, summary_start, &out->locations, error);
       case kStatistics:
-        has_statistics = true;
-        return ReadStatistics(content, pos, &channel_counts, error);
+        out->has_statistics = true;
+        return ReadStatistics(content, pos, out, error);
       case kMetadataIndex: {
         uint64_t offset = 0, length = 0;
         std::string_view n;
         if (!c.U64(&offset, "offset") || !c.U64(&length, "length") || !c.String(&n, "name")) {
           return Fail("MetadataIndex record", c.Error(), error);
         }
-        metadata_indexes.emplace_back(offset, length);
+        out->metadata_indexes.emplace_back(offset, length);
         return true;
       }
       default:
         return true;  // AttachmentIndex, future records
     }
   };
-  if (!ForEachRecord(summary.substr(0, summary_end - summary_start), summary_start, file, name, error, record) ||
-      !ForEachRecord(summary.substr(summary_end - summary_start, footer_offset - summary_end), summary_end, file, name,
-                     error, [](uint8_t, std::string_view, uint64_t) { return true; })) {
-    return false;
+  return ForEachRecord(summary.substr(0, summary_end - summary_start), summary_start, file, name, error, record) &&
+         ForEachRecord(summary.substr(summary_end - summary_start, footer_offset - summary_end), summary_end, file,
+                       name, error, [](uint8_t, std::string_view, uint64_t) { return true; });
+}
+
+std::string McapReader::Impl::CompareStatistics(const SummaryRecords& summary,
+                                                const std::map<uint16_t, McapChannelStats>& per_channel) const {
+  uint64_t in_indexes = 0;
+  for (const auto& [id, s] : per_channel) in_indexes += s.num_messages;
+  if (summary.message_count != in_indexes) {
+    return "the Statistics record counts " + std::to_string(summary.message_count) + " messages, the message indexes " +
+           std::to_string(in_indexes);
   }
-  // Messages outside chunks cannot be indexed: a file with messages but no chunk index is scanned.
-  if (chunks.empty() && (!has_statistics || stats.num_messages > 0)) {
-    *scan_instead = true;
-    return true;
-  }
-  // Per-channel figures: counts from Statistics, times (and counts) from the message indexes.
-  std::map<uint16_t, McapChannelStats> per_channel;
-  bool all_indexed = true;
-  for (size_t i = 0; i < chunks.size(); ++i) {
-    if (!ReadMessageIndexes(chunks[i], locations[i], per_channel, error)) return false;
-    all_indexed = all_indexed && chunks[i].channels_known;
-  }
-  for (const auto& [id, channel] : channels) {
-    McapChannelStats& s = stats.channels[id];
-    if (all_indexed || !has_statistics) s = per_channel[id];
-    if (!all_indexed && has_statistics) s.num_messages = channel_counts[id];
-  }
-  for (const auto& [id, count] : channel_counts) {
+  for (const auto& [id, count] : summary.channel_counts) {
     if (channels.count(id) == 0) {
-      return Fail("Statistics record",
-                  "counts messages on channel " + std::to_string(id) + ", which the summary does not define", error);
+      return "the Statistics record counts messages on channel " + std::to_string(id) +
+             ", which no record outside chunks defines";
+    }
+    const auto it = per_channel.find(id);
+    const uint64_t found = it == per_channel.end() ? 0 : it->second.num_messages;
+    if (found != count) {
+      return "the Statistics record counts " + std::to_string(count) + " messages on channel " + std::to_string(id) +
+             ", the message indexes " + std::to_string(found);
     }
   }
-  if (!has_statistics) {
-    stats.num_chunks = static_cast<uint32_t>(chunks.size());
-    StatsFromChannels();
+  return "";
+}
+
+bool McapReader::Impl::ReadUnindexed(uint64_t data_end, const std::vector<std::pair<uint64_t, uint64_t>>& covered,
+                                     std::map<uint64_t, uint64_t>* metadata_records, std::string* why_not,
+                                     std::string* error) {
+  std::string buffer;
+  uint64_t pos = data_start;
+  size_t next = 0;  // the first indexed chunk not yet passed
+  while (pos < data_end) {
+    // An indexed chunk and its message indexes: read when iterated.
+    if (next < covered.size() && covered[next].first == pos) {
+      pos = covered[next++].second;
+      continue;
+    }
+    // Anything else must frame up to the next indexed chunk (or the summary).
+    const uint64_t limit = next < covered.size() ? covered[next].first : data_end;
+    const std::string where = "byte " + std::to_string(pos);
+    if (limit < pos) {
+      *why_not = "the chunk index at " + std::to_string(limit) + " overlaps the record before it";
+      return true;
+    }
+    if (limit - pos < kRecordPrefix) {
+      *why_not = "the records outside chunks at " + where + " do not end at byte " + std::to_string(limit);
+      return true;
+    }
+    std::string_view prefix;
+    if (!Read(pos, kRecordPrefix, &buffer, &prefix, error)) return false;
+    const uint8_t op = static_cast<uint8_t>(prefix[0]);
+    const uint64_t length = GetU64(prefix.data() + 1);
+    if (length > limit - pos - kRecordPrefix) {
+      *why_not = std::string("the ") + OpName(op) + " record at " + where + " runs past byte " + std::to_string(limit) +
+                 (next < covered.size() ? ", where an indexed chunk starts" : ", where the summary starts");
+      return true;
+    }
+    switch (op) {
+      case kMessage:
+        *why_not = "a Message record at " + where + " lies outside the indexed chunks";
+        return true;
+      case kChunk:
+        *why_not = "the Chunk record at " + where + " has no chunk index";
+        return true;
+      case kHeader:
+      case kFooter:
+        *why_not = std::string("a ") + OpName(op) + " record at " + where + " in the data section";
+        return true;
+      case kDataEnd:
+        if (next < covered.size()) *why_not = "a chunk index points after the DataEnd record at " + where;
+        return true;
+      case kSchema:
+      case kChannel:
+      case kMetadata: {
+        // Definitions and metadata, read as a scan reads them.
+        if (length > options.max_record_bytes) {
+          return Fail(where,
+                      std::string(OpName(op)) + " record of " + std::to_string(length) +
+                          " bytes exceeds the limit of " + std::to_string(options.max_record_bytes),
+                      error);
+        }
+        std::string_view record;
+        if (!Read(pos, kRecordPrefix + length, &buffer, &record, error)) return false;
+        const std::string_view content = record.substr(kRecordPrefix);
+        const bool ok = op == kSchema    ? AddSchema(content, McapPlace{}, pos, error)
+                        : op == kChannel ? AddChannel(content, McapPlace{}, pos, error, /*check_schema=*/false)
+                                         : ParseMetadata(content, pos, error);
+        if (!ok) return false;
+        if (op == kMetadata) (*metadata_records)[pos] = kRecordPrefix + length;
+        break;
+      }
+      default:
+        break;  // Attachment, MessageIndex, future records
+    }
+    pos += kRecordPrefix + length;
   }
-  // Metadata records, through their index.
-  for (const auto& [offset, length] : metadata_indexes) {
-    if (!ReadMetadata(offset, length, error)) return false;
-  }
+  if (next < covered.size()) *why_not = "a chunk index points past the data section";
   return true;
 }
 
@@ -205,35 +334,35 @@ bool McapReader::Impl::ReadChunkIndex(std::string_view content, uint64_t pos, ui
                   error);
     }
   }
-  chunk.channels_known = !location.offsets.empty();
   chunks.push_back(std::move(chunk));
   locations->push_back(std::move(location));
   return true;
 }
 
-bool McapReader::Impl::ReadStatistics(std::string_view content, uint64_t pos,
-                                      std::map<uint16_t, uint64_t>* channel_counts, std::string* error) {
+bool McapReader::Impl::ReadStatistics(std::string_view content, uint64_t pos, SummaryRecords* out, std::string* error) {
+  // Only the counts are used (to check the message indexes); the rest is checked to be there.
   Cursor c(content, pos + kRecordPrefix);
   uint16_t schema_count = 0;
-  uint32_t channel_count = 0, attachment_count = 0, metadata_count = 0, map_bytes = 0;
-  if (!c.U64(&stats.num_messages, "message_count") || !c.U16(&schema_count, "schema_count") ||
+  uint32_t channel_count = 0, attachment_count = 0, metadata_count = 0, chunk_count = 0, map_bytes = 0;
+  uint64_t start_ns = 0, end_ns = 0;
+  if (!c.U64(&out->message_count, "message_count") || !c.U16(&schema_count, "schema_count") ||
       !c.U32(&channel_count, "channel_count") || !c.U32(&attachment_count, "attachment_count") ||
-      !c.U32(&metadata_count, "metadata_count") || !c.U32(&stats.num_chunks, "chunk_count") ||
-      !c.U64(&stats.start_ns, "message_start_time") || !c.U64(&stats.end_ns, "message_end_time") ||
+      !c.U32(&metadata_count, "metadata_count") || !c.U32(&chunk_count, "chunk_count") ||
+      !c.U64(&start_ns, "message_start_time") || !c.U64(&end_ns, "message_end_time") ||
       !c.U32(&map_bytes, "channel_message_counts")) {
     return Fail("Statistics record", c.Error(), error);
   }
   std::string what;
   if (!ReadU16U64Map(c, map_bytes, "Statistics", "channel_message_counts", &what,
-                     [&](uint16_t channel, uint64_t count) { (*channel_counts)[channel] = count; })) {
+                     [&](uint16_t channel, uint64_t count) { out->channel_counts[channel] = count; })) {
     return Fail("byte " + std::to_string(pos), what, error);
   }
   return true;
 }
 
 bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexLocation& location,
-                                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* error) {
-  if (!chunk.channels_known) return true;
+                                          std::map<uint16_t, McapChannelStats>& per_channel, std::string* why_not,
+                                          std::string* error) {
   // All of a chunk's message indexes in one read.
   const uint64_t start = chunk.offset + chunk.length;
   if (location.length > options.max_record_bytes) {
@@ -244,7 +373,12 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
   if (!Read(start, location.length, &scratch, &block, error)) return false;
   std::map<uint64_t, uint16_t> found;  // record offset -> channel
   const auto record = [&](uint8_t op, std::string_view content, uint64_t pos) {
-    if (op != kMessageIndex) return true;
+    if (op != kMessageIndex) {
+      // Anything else here would be skipped by ReadUnindexed and never read: not indexed.
+      *why_not = std::string("a ") + OpName(op) + " record at byte " + std::to_string(pos) +
+                 " lies among the message indexes of the chunk at byte " + std::to_string(chunk.offset);
+      return false;
+    }
     const std::string where = "byte " + std::to_string(pos);
     Cursor c(content, pos + kRecordPrefix);
     uint16_t channel = 0;
@@ -259,8 +393,9 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
                   error);
     }
     if (channels.count(channel) == 0) {
-      return Fail(where, "MessageIndex for channel " + std::to_string(channel) + ", which the summary does not define",
-                  error);
+      *why_not = "the MessageIndex at " + where + " is for channel " + std::to_string(channel) +
+                 ", which no record outside chunks defines";
+      return false;
     }
     // Each entry lies in the chunk: its time in the chunk's range, its offset in its records.
     for (uint32_t i = 0; i < bytes / 16; ++i) {
@@ -280,7 +415,7 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
     found[pos] = channel;
     return true;
   };
-  if (!ForEachRecord(block, start, McapPlace{}, name, error, record)) return false;
+  if (!ForEachRecord(block, start, McapPlace{}, name, error, record)) return !why_not->empty();
   // The chunk index's offsets name those records.
   for (const auto& [channel, offset] : location.offsets) {
     const auto it = found.find(offset);
@@ -294,243 +429,6 @@ bool McapReader::Impl::ReadMessageIndexes(McapChunkInfo& chunk, const McapIndexL
   std::set<uint16_t> present;
   for (const auto& [offset, channel] : found) present.insert(channel);
   chunk.channels.assign(present.begin(), present.end());
-  return true;
-}
-
-bool McapReader::Impl::ReadMetadata(uint64_t offset, uint64_t length, std::string* error) {
-  const std::string where = "byte " + std::to_string(offset);
-  if (offset < data_start || offset > size || length > size - offset || length < kRecordPrefix ||
-      length > options.max_record_bytes) {
-    return Fail(where, "a MetadataIndex points outside the file or at an oversize record", error);
-  }
-  std::string_view record;
-  if (!Read(offset, length, &scratch, &record, error)) return false;
-  if (static_cast<uint8_t>(record[0]) != kMetadata || GetU64(record.data() + 1) != length - kRecordPrefix) {
-    return Fail(
-        where,
-        "a MetadataIndex points here, but no Metadata record of " + std::to_string(length) + " bytes starts here",
-        error);
-  }
-  return ParseMetadata(record.substr(kRecordPrefix), offset, error);
-}
-
-void McapReader::Impl::StatsFromChannels() {
-  stats.num_messages = 0;
-  stats.start_ns = stats.end_ns = 0;
-  bool any = false;
-  for (const auto& [id, s] : stats.channels) {
-    if (s.num_messages == 0) continue;
-    stats.num_messages += s.num_messages;
-    if (!any || s.start_ns < stats.start_ns) stats.start_ns = s.start_ns;
-    if (!any || s.end_ns > stats.end_ns) stats.end_ns = s.end_ns;
-    any = true;
-  }
-}
-
-// ---------------------------------------------------------------------------------------------
-// The scan.
-
-struct McapReader::Impl::ScanState {
-  std::map<uint16_t, McapChannelStats> per_channel;
-  Loaded slot;
-  uint32_t crc = 0;  // of every byte before the current record
-  // A run of records outside chunks that holds messages: a "loose" pseudo-chunk.
-  McapChunkInfo run;
-  bool run_open = false;
-
-  void CloseRun(std::vector<McapChunkInfo>& out) {
-    if (run_open) out.push_back(run);
-    run_open = false;
-  }
-};
-
-bool McapReader::Impl::Scan(bool finished, std::string* error) {
-  ScanState state;
-  std::string_view head;
-  if (!Read(0, data_start, &scratch, &head, error)) return false;
-  state.crc = Crc32(0, head);
-  // A finished file must be well formed; an unfinished one ends at its first bad record.
-  const auto stop = [&](const std::string& message, bool data_complete = false) {
-    if (finished) {
-      if (error != nullptr) *error = message;
-      return false;
-    }
-    uint64_t kept = 0;
-    for (const McapChunkInfo& c : chunks) kept += c.num_messages;
-    if (state.run_open) kept += state.run.num_messages;
-    const std::string num_chunks = std::to_string(chunks.size() + (state.run_open ? 1 : 0));
-    recovery_note =
-        message + (data_complete ? "; kept all " + num_chunks + " chunks (" + std::to_string(kept) + " messages)"
-                                 : "; kept the " + num_chunks + " complete chunks (" + std::to_string(kept) +
-                                       " messages) before it");
-    return true;
-  };
-  uint64_t pos = data_start;
-  while (true) {
-    // Framing: a record must fit the file and the limit.
-    const std::string where = name + ": byte " + std::to_string(pos) + ": ";
-    if (pos == size) {
-      if (!stop(where + "the file ends without a DataEnd record (unfinished)")) return false;
-      break;
-    }
-    if (size - pos < kRecordPrefix) {
-      if (!stop(where + "a record prefix is cut short (" + std::to_string(size - pos) + " bytes)")) return false;
-      break;
-    }
-    std::string_view prefix;
-    if (!Read(pos, kRecordPrefix, &scratch, &prefix, error)) return false;
-    const uint8_t op = static_cast<uint8_t>(prefix[0]);
-    const uint64_t length = GetU64(prefix.data() + 1);
-    if (!finished && op == 0) {
-      stop(where + "opcode 0 is no MCAP record (a zero-filled tail after a crash?)");
-      break;
-    }
-    if (length > size - pos - kRecordPrefix) {
-      if (!stop(where + OpName(op) + " record (opcode " + std::to_string(op) + ") of " + std::to_string(length) +
-                " bytes extends past the end of the file (" + std::to_string(size) + " bytes)")) {
-        return false;
-      }
-      break;
-    }
-    if (length > options.max_record_bytes) {
-      if (!stop(where + OpName(op) + " record of " + std::to_string(length) + " bytes exceeds the limit of " +
-                std::to_string(options.max_record_bytes))) {
-        return false;
-      }
-      break;
-    }
-    // The record.
-    std::string_view record;
-    if (!Read(pos, kRecordPrefix + length, &state.slot.raw, &record, error)) return false;
-    bool end_of_data = false;
-    std::string record_error;
-    if (!ScanRecord(op, pos, record, state, &end_of_data, &record_error)) {
-      if (!stop(record_error)) return false;
-      break;
-    }
-    if (end_of_data) {
-      // The data section is whole, but an unfinished file still says so.
-      if (!finished) {
-        stop(where + OpName(op) +
-                 " ends the data section, but the file has no Footer (unfinished, or cut in its "
-                 "summary)",
-             true);
-      }
-      break;
-    }
-    state.crc = Crc32(state.crc, record);
-    pos += kRecordPrefix + length;
-  }
-  state.CloseRun(chunks);
-  // Statistics from what was read.
-  for (const auto& [id, channel] : channels) stats.channels[id] = state.per_channel[id];
-  StatsFromChannels();
-  return true;
-}
-
-bool McapReader::Impl::ScanRecord(uint8_t op, uint64_t pos, std::string_view record, ScanState& state,
-                                  bool* end_of_data, std::string* error) {
-  const std::string_view content = record.substr(kRecordPrefix);
-  const std::string where = "byte " + std::to_string(pos);
-  switch (op) {
-    case kHeader:
-      return Fail(where, "a second Header record", error);
-    case kFooter:
-      *end_of_data = true;
-      return true;
-    case kDataEnd: {
-      // The data section CRC covers every byte of the file before this record.
-      *end_of_data = true;
-      Cursor c(content, pos + kRecordPrefix);
-      uint32_t stored = 0;
-      if (!c.U32(&stored, "data_section_crc")) return Fail("DataEnd record", c.Error(), error);
-      if (stored != 0 && stored != state.crc) {
-        return Fail(where,
-                    "DataEnd: data section CRC " + Hex32(stored) + ", computed " + Hex32(state.crc) +
-                        " (the data section is damaged)",
-                    error);
-      }
-      return true;
-    }
-    case kChunk:
-      state.CloseRun(chunks);
-      return ScanChunk(pos, content, state, error);
-    case kMessageIndex:
-      state.CloseRun(chunks);
-      return true;
-    case kSchema:
-      return AddSchema(content, McapPlace{}, pos, error);
-    case kChannel:
-      return AddChannel(content, McapPlace{}, pos, error);
-    case kMetadata:
-      return ParseMetadata(content, pos, error);
-    case kMessage: {
-      // A message outside chunks: opens or extends the loose run.
-      McapMessage m;
-      if (!ParseMessage(content, McapPlace{}, pos, &m, error)) return false;
-      McapChunkInfo& run = state.run;
-      if (!state.run_open) {
-        run = McapChunkInfo{};
-        run.offset = pos;
-        run.loose = true;
-        run.channels_known = true;
-        run.message_start_ns = run.message_end_ns = m.log_time_ns;
-        state.run_open = true;
-      }
-      run.length = pos + record.size() - run.offset;
-      run.compressed_bytes = run.uncompressed_bytes = run.length;
-      run.message_start_ns = std::min(run.message_start_ns, m.log_time_ns);
-      run.message_end_ns = std::max(run.message_end_ns, m.log_time_ns);
-      ++run.num_messages;
-      const auto at = std::lower_bound(run.channels.begin(), run.channels.end(), m.channel_id);
-      if (at == run.channels.end() || *at != m.channel_id) run.channels.insert(at, m.channel_id);
-      CountMessage(m.log_time_ns, state.per_channel[m.channel_id]);
-      return true;
-    }
-    default:
-      return true;  // Attachment, index records of other writers, future records
-  }
-}
-
-bool McapReader::Impl::ScanChunk(uint64_t pos, std::string_view content, ScanState& state, std::string* error) {
-  McapChunkInfo chunk;
-  std::string_view records;
-  if (!DecodeChunk(pos, content, state.slot, &chunk, &records, error)) return false;
-  chunk.offset = pos;
-  chunk.length = kRecordPrefix + content.size();
-  chunk.channels_known = true;
-  // Its records: schemas and channels register, messages count (and must lie in its range).
-  std::set<uint16_t> present;
-  std::map<uint16_t, McapChannelStats> counted;
-  const McapPlace place{true, pos};
-  const auto record = [&](uint8_t op, std::string_view inner, uint64_t inner_pos) {
-    if (op == kSchema) return AddSchema(inner, place, inner_pos, error);
-    if (op == kChannel) return AddChannel(inner, place, inner_pos, error);
-    if (op != kMessage) return true;
-    McapMessage m;
-    if (!ParseMessage(inner, place, inner_pos, &m, error)) return false;
-    if (m.log_time_ns < chunk.message_start_ns || m.log_time_ns > chunk.message_end_ns) {
-      return Fail(place.At(inner_pos),
-                  "Message log time " + std::to_string(m.log_time_ns) + " lies outside the chunk's range " +
-                      std::to_string(chunk.message_start_ns) + ".." + std::to_string(chunk.message_end_ns),
-                  error);
-    }
-    CountMessage(m.log_time_ns, counted[m.channel_id]);
-    ++chunk.num_messages;
-    present.insert(m.channel_id);
-    return true;
-  };
-  if (!ForEachRecord(records, 0, place, name, error, record)) return false;
-  // Only a whole chunk counts: merge its figures once it has been read without error.
-  for (const auto& [id, s] : counted) {
-    McapChannelStats& total = state.per_channel[id];
-    if (total.num_messages == 0 || s.start_ns < total.start_ns) total.start_ns = s.start_ns;
-    if (total.num_messages == 0 || s.end_ns > total.end_ns) total.end_ns = s.end_ns;
-    total.num_messages += s.num_messages;
-  }
-  chunk.channels.assign(present.begin(), present.end());
-  chunks.push_back(std::move(chunk));
-  ++stats.num_chunks;
   return true;
 }
 

@@ -163,8 +163,7 @@ bool RecordingReader::FindKeyframe(uint64_t t_ns, uint64_t* keyframe_ns, std::st
   // Windows [chunk start, hi] back from t, one per distinct chunk start holding /mesh frames.
   std::vector<uint64_t> starts;
   for (const McapChunkInfo& chunk : mcap_.chunks()) {
-    const bool has_mesh =
-        !chunk.channels_known || std::binary_search(chunk.channels.begin(), chunk.channels.end(), mesh_channel_);
+    const bool has_mesh = std::binary_search(chunk.channels.begin(), chunk.channels.end(), mesh_channel_);
     if (has_mesh && chunk.message_start_ns <= t_ns) starts.push_back(chunk.message_start_ns);
   }
   std::sort(starts.begin(), starts.end());

@@ -54,6 +54,8 @@ int Info(const std::string& path, uint64_t max_bytes, bool scan) {
   std::printf("profile    %s\n", reader.profile().empty() ? "(none)" : reader.profile().c_str());
   if (reader.indexed()) {
     std::printf("index      summary (finished file)\n");
+  } else if (!reader.index_note().empty()) {
+    std::printf("index      summary not used (%s): scanned\n", reader.index_note().c_str());
   } else if (reader.recovery_note().empty()) {
     std::printf("index      none: scanned\n");
   } else {

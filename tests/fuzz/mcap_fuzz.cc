@@ -1,7 +1,9 @@
 // libFuzzer target: McapReader and RecordingReader must open or reject any input cleanly (with a
 // message), never crash or over-allocate, and return messages in log-time order within the range
-// and channels asked for. Each input is read through its summary and by a scan, then seeked to
-// its middle; the seeds (tests/fuzz/corpus/mcap_fuzz) are real recordings, whole and cut short.
+// and channels asked for; a file read whole both through its summary and by a scan yields as many
+// messages either way. Each input is read through its summary and by a scan, then seeked to its
+// middle; the seeds (tests/fuzz/corpus/mcap_fuzz) are real recordings, whole and cut short, and
+// files of the MCAP conformance suite.
 #include <google/protobuf/stubs/logging.h>
 
 #include <cstddef>
@@ -50,6 +52,8 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string input(reinterpret_cast<const char*>(data), size);
   std::string error;
+  uint64_t read_whole[2] = {0, 0};  // messages of a complete, error-free read: scan, summary
+  bool whole[2] = {false, false};
   for (const bool use_summary : {true, false}) {
     idms::McapReader reader;
     if (!reader.OpenBuffer(input, "fuzz", FuzzOptions(use_summary), &error)) {
@@ -59,6 +63,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     // Everything; a scan counted exactly what it returns.
     const uint64_t count = ReadRange(reader, 0, UINT64_MAX, 0, &error);
     if (!use_summary && error.empty() && count != reader.statistics().num_messages) __builtin_trap();
+    read_whole[use_summary] = count;
+    whole[use_summary] = error.empty() && reader.recovery_note().empty();
     // The second half of the time range, on one channel.
     const idms::McapStatistics& stats = reader.statistics();
     if (stats.num_messages > 0 && !reader.channels().empty()) {
@@ -66,6 +72,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       ReadRange(reader, mid, stats.end_ns, reader.channels().begin()->first, &error);
     }
   }
+  // A finished file read whole through its summary yields what a scan yields: the index is used
+  // only where it locates every message.
+  if (whole[0] && whole[1] && read_whole[0] != read_whole[1]) __builtin_trap();
   // The recording on top: a seek to the middle replays the mesh from a keyframe.
   idms::RecordingReader recording;
   idms::RecordingReaderOptions options;

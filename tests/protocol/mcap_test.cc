@@ -178,14 +178,14 @@ TEST_P(McapRoundTrip, ManyMessagesAcrossManyChunks) {
     ASSERT_EQ(read.size(), expected.size());
     EXPECT_TRUE(read == expected);
   }
-  // Chunks: compressed when asked, never larger than their records.
+  // Chunks: compressed when asked, never larger than their records, their channels known.
   McapReader reader;
   std::string error;
   ASSERT_TRUE(reader.Open(path, McapReaderOptions{}, &error)) << error;
   for (const McapChunkInfo& c : reader.chunks()) {
     EXPECT_EQ(c.compression, GetParam() ? "zstd" : "");
     EXPECT_LE(c.compressed_bytes, c.uncompressed_bytes);
-    EXPECT_TRUE(c.channels_known);
+    EXPECT_FALSE(c.channels.empty());
   }
 }
 
@@ -414,6 +414,29 @@ TEST(McapReader, DamagedSummaryAndDataSectionAreReported) {
   WriteFile(damaged, Flipped(bytes, chunk.offset + chunk.length + 9 + 2 + 4 + 3));
   EXPECT_FALSE(reader.Open(damaged, Scanning(), &error));
   EXPECT_NE(error.find(": DataEnd: data section CRC"), std::string::npos) << error;
+}
+
+// A summary that contradicts itself (a Statistics count the message indexes do not add up to)
+// is not trusted: the file is scanned, every message is read, and index_note() says why.
+TEST(McapReader, SummaryThatDisagreesWithItsIndexesIsNotTrusted) {
+  const std::string path = TempPath("stats_source.mcap");
+  const std::vector<Msg> messages = MakeMessages(500);
+  WriteMessages(path, SmallChunks(true), messages);
+  std::string bytes = ReadFile(path);
+  // The Statistics record's message_count, one too many; the summary CRC zeroed (not checked).
+  const size_t footer = bytes.size() - 8 - 20 - 9;
+  size_t at = U64At(bytes, footer + 9);
+  while (static_cast<uint8_t>(bytes[at]) != 0x0B) at += 9 + U64At(bytes, at + 1);
+  bytes[at + 9] = static_cast<char>(bytes[at + 9] + 1);
+  for (int i = 0; i < 4; ++i) bytes[footer + 9 + 16 + i] = 0;
+  McapReader reader;
+  std::string error;
+  ASSERT_TRUE(reader.OpenBuffer(bytes, "stats.mcap", McapReaderOptions{}, &error)) << error;
+  EXPECT_FALSE(reader.indexed());
+  EXPECT_EQ(reader.index_note(), "the Statistics record counts 501 messages, the message indexes 500");
+  EXPECT_EQ(reader.statistics().num_messages, 500u);
+  EXPECT_TRUE(ReadAll(reader, &error) == Expected(messages));
+  EXPECT_EQ(error, "");
 }
 
 TEST(McapReader, RejectsGarbageAndOversizeFiles) {

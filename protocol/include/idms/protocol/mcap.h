@@ -131,7 +131,6 @@ struct McapChunkInfo {
   uint64_t uncompressed_bytes = 0;
   uint64_t num_messages = 0;       // from the message indexes (scanned: counted)
   std::vector<uint16_t> channels;  // that have messages in it, ascending
-  bool channels_known = false;     // false: no message index, any channel may be in it
   bool loose = false;              // a run of Message records outside chunks (scanned files only)
 };
 
@@ -153,6 +152,11 @@ struct McapStatistics {
 // offsets, the summary CRC; a scan also checks chunk CRCs and the data CRC); Next() checks each
 // chunk's CRC and decompressed size as it loads it. Errors name the file and the byte offset:
 //   "rec.mcap: byte 1234: Chunk record: uncompressed CRC 0x1a2b3c4d, computed 0x55aa0f0f".
+// A finished file is read through its summary when the summary locates every message: a chunk
+// index and message indexes for every chunk, no Message record outside chunks, every channel and
+// schema defined outside chunks, Statistics (if any) agreeing with the message indexes. The
+// specification makes all of these optional; a finished file that lacks one is scanned (and
+// index_note() says why), so that no reader ever sees fewer messages than the file holds.
 // A file without footer (the writer crashed or is still writing) is scanned from the start and
 // keeps every complete chunk before the first truncated or damaged record; recovery_note() says
 // where reading stopped and why. Owned by one thread; reads with pread, so several readers may
@@ -180,6 +184,9 @@ class McapReader {
   bool indexed() const;  // read through the summary; false = scanned
   // Non-empty for an unfinished file: where the scan stopped and why, and what was kept.
   const std::string& recovery_note() const;
+  // Non-empty for a finished file scanned although use_summary was set: why its summary was not
+  // used ("the chunk at byte 28 has no message index").
+  const std::string& index_note() const;
   // The first channel on `topic`, or nullptr.
   const McapChannel* FindChannel(std::string_view topic) const;
   const McapSchema* FindSchema(uint16_t schema_id) const;
