@@ -53,10 +53,15 @@ curl -sf -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/hex_4x5_home.fem
 echo "-- a malformed upload is refused at its line, and nothing is stored"
 curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F plg=@"$out/hex_4x5_home.plg" \
   "$url/api/models/my_fragment"; echo
-echo "-- the device agent fetches its model from the library by name (it cannot publish yet: issue 10)"
+echo "-- the device agent fetches its model from the library by name and publishes a session, recorded"
 "$bin/idms-agent" --server "ws://${url#http://}" --token "$agent" --model my_fragment --device scripted:palpate \
   --duration 0.5 --no-realtime --cache-dir "$out/agent-cache" --flush-timeout 1 > "$out/agent-fetch.log" 2>&1 || true
 ls "$out/agent-cache/blobs"
+echo "-- GET /api/sessions, and the recording"
+curl -sf -H "Authorization: Bearer $admin" "$url/api/sessions"; echo
+id=$(curl -sf -H "Authorization: Bearer $admin" "$url/api/sessions" | sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1)
+curl -sf -H "Authorization: Bearer $admin" -o "$out/session.mcap" "$url/api/sessions/$id/recording.mcap"
+"$bin/idms-mcap" info "$out/session.mcap"
 kill "$server_pid"; wait "$server_pid" || true
 echo "server log: $out/server.log (one line per request; no token in it)"
 echo "plots: $out/*.png; the agent's figures: $out/agent.json"

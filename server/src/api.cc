@@ -76,6 +76,7 @@ ApiResponse MetricsText(ApiContext& ctx, ApiRequest& req) {
   ApiResponse res{http::status::ok, req.message.version()};
   res.set(http::field::content_type, "text/plain; version=0.0.4; charset=utf-8");
   res.body() = ctx.metrics->Render(ctx.library->models().NumModels(), ctx.library->models().LibraryBytes(), uptime);
+  if (ctx.more_metrics) res.body() += ctx.more_metrics();
   return res;
 }
 
@@ -145,6 +146,7 @@ std::vector<Route> MakeRoutes() {
       {V::get, "/ws/library", P::kRead, false, true, nullptr},
       {V::get, "/ws/agent", P::kPublish, false, true, nullptr},
       {V::get, "/ws/session/{id}", P::kRead, false, true, nullptr},
+      {V::get, "/ws/replay/{id}", P::kRead, false, true, nullptr},
   };
 }
 

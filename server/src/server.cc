@@ -136,6 +136,7 @@ bool Server::Impl::Start(std::string* error) {
     return tokens;
   };
   core.ctx.publish_library_event = [this](std::string text) { core.Publish(text); };
+  core.ctx.more_metrics = [this] { return hub->MetricsText(); };
   hub = std::make_unique<SessionHub>(core, storage.sessions.get(), (fs::path(o.data_dir) / "recordings").string());
   core.hub = hub.get();
   hub->RecoverInterrupted();

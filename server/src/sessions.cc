@@ -623,6 +623,44 @@ int SessionHub::live_count() {
   return static_cast<int>(live_.size());
 }
 
+std::string SessionHub::MetricsText() {
+  std::vector<std::shared_ptr<LiveSession>> all;
+  {
+    std::lock_guard lock(mu_);
+    for (auto& [id, s] : live_) all.push_back(s);
+  }
+  // One group of lines per metric family, as the text format requires.
+  int viewers = 0;
+  std::string samples, watching, p99, overruns;
+  for (const auto& s : all) {
+    viewers += s->viewers();
+    const SessionRow r = s->Snapshot();
+    const json summary = json::parse(r.summary_json.empty() ? "{}" : r.summary_json, nullptr, false);
+    const std::string label = "{session=\"" + r.id + "\"} ";
+    samples += "idms_session_samples" + label + std::to_string(r.samples) + "\n";
+    watching += "idms_session_viewers" + label + std::to_string(s->viewers()) + "\n";
+    if (summary.is_object() && summary.contains("tick_p99_us")) {
+      p99 += "idms_session_tick_p99_us" + label + summary["tick_p99_us"].dump() + "\n";
+      overruns += "idms_session_overruns" + label + summary["overruns"].dump() + "\n";
+    }
+  }
+  return "# HELP idms_live_sessions Live sessions (an agent publishing, or gone and able to resume).\n"
+         "# TYPE idms_live_sessions gauge\nidms_live_sessions " +
+         std::to_string(all.size()) +
+         "\n# HELP idms_viewers Viewers of live sessions.\n# TYPE idms_viewers gauge\nidms_viewers " +
+         std::to_string(viewers) +
+         "\n# HELP idms_session_samples Device samples received, per live session.\n"
+         "# TYPE idms_session_samples gauge\n" +
+         samples + "# HELP idms_session_viewers Viewers, per live session.\n# TYPE idms_session_viewers gauge\n" +
+         watching +
+         "# HELP idms_session_tick_p99_us The agent's tick compute time p99, per live session.\n"
+         "# TYPE idms_session_tick_p99_us gauge\n" +
+         p99 +
+         "# HELP idms_session_overruns The agent's loop overruns, per live session.\n"
+         "# TYPE idms_session_overruns gauge\n" +
+         overruns;
+}
+
 std::vector<SessionRow> SessionHub::List() {
   std::map<std::string, SessionRow> live_rows;
   {
@@ -750,6 +788,8 @@ std::shared_ptr<WsEndpoint> MakeEndpoint(ServerCore& core, const ApiRequest& req
     }
     return std::make_shared<ViewerEndpoint>(s, req.role);
   }
+  if (req.params.size() == 1 && req.path.rfind("/ws/replay/", 0) == 0)
+    return MakeReplayEndpoint(core, req.params[0], refusal);
   *refusal = "no WebSocket endpoint " + req.path;
   return nullptr;
 }

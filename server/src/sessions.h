@@ -23,6 +23,9 @@ namespace idms::server {
 class ViewerEndpoint;
 class Recorder;
 
+// /ws/replay/{id} (replay.cc): null with *refusal for an unknown or live session.
+std::shared_ptr<WsEndpoint> MakeReplayEndpoint(ServerCore& core, const std::string& id, std::string* refusal);
+
 // The session's figures, updated as samples arrive (on the session's strand).
 struct SessionSummary {
   double peak_force = 0;            // |force| maximum, force units
@@ -113,6 +116,8 @@ class SessionHub {
   void StopAll();
   SessionIndex& index() { return *index_; }
   int live_count();
+  // Prometheus lines: live sessions, viewers, and per live session its samples, tick p99 and overruns.
+  std::string MetricsText();
 
  private:
   ServerCore& core_;

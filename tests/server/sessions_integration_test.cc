@@ -285,6 +285,92 @@ TEST(Sessions, GarbageFromAnAgentClosesItWithAReason) {
   EXPECT_EQ(Get(server.port(), "/api/health", "").status, 200);
 }
 
+TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
+  const std::string dir = TempDir("sessions-replay");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(server, dir, 3), dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(port, observer);
+    if (s.empty() || s[0]["state"] != "ended") return false;
+    id = s[0]["id"];
+    return true;
+  }));
+  // Welcome, then the state: paused at 0 of about 3 s.
+  asio::io_context io;
+  websocket::stream<beast::tcp_stream> ws(io);
+  beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  beast::get_lowest_layer(ws).expires_after(seconds(60));
+  ws.set_option(websocket::stream_base::decorator(
+      [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + observer); }));
+  ws.handshake("127.0.0.1", "/ws/replay/" + id);
+  auto read = [&] {
+    beast::flat_buffer buffer;
+    ws.read(buffer);
+    v1::Envelope e;
+    std::string error;
+    const auto data = buffer.data();
+    EXPECT_TRUE(ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error));
+    return e;
+  };
+  auto send = [&](v1::PlaybackControl::Action action, double value) {
+    v1::Envelope e;
+    e.mutable_playback_control()->set_action(action);
+    if (action == v1::PlaybackControl::ACTION_SEEK) e.mutable_playback_control()->set_seek_time_s(value);
+    if (action == v1::PlaybackControl::ACTION_SET_SPEED) e.mutable_playback_control()->set_speed(value);
+    std::string bytes;
+    SerializeEnvelope(e, &bytes);
+    ws.binary(true);
+    ws.write(asio::buffer(bytes));
+  };
+  v1::Envelope e = read();
+  ASSERT_TRUE(e.has_welcome());
+  EXPECT_EQ(e.welcome().scene().model(), "hex_4x5_home");
+  e = read();
+  ASSERT_TRUE(e.has_playback_state());
+  EXPECT_FALSE(e.playback_state().playing());
+  EXPECT_NEAR(e.playback_state().duration_s(), 3.0, 0.5);
+  // At 10x the whole recording plays in about a tenth of its length, every tick in order.
+  send(v1::PlaybackControl::ACTION_SET_SPEED, 10);
+  send(v1::PlaybackControl::ACTION_PLAY, 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<uint64_t> ticks;
+  MeshMirror mirror;
+  std::string error;
+  int gaps = 0;
+  while (true) {
+    e = read();
+    if (e.has_device_samples()) {
+      for (const auto& s : e.device_samples().samples()) ticks.push_back(s.tick());
+    }
+    if ((e.has_mesh_keyframe() || e.has_mesh_delta()) && mirror.Apply(e, &error) != MirrorStatus::kOk) ++gaps;
+    if (e.has_playback_state() && !e.playback_state().playing() && !ticks.empty()) break;
+  }
+  const double played_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_EQ(ticks.size(), 3000u);
+  for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  EXPECT_EQ(gaps, 0);
+  EXPECT_GT(played_s, 0.2);
+  EXPECT_LT(played_s, 1.5);
+  // A seek to 1.5 s sends the surface there first: a keyframe, then the deltas up to 1.5 s.
+  send(v1::PlaybackControl::ACTION_SEEK, 1.5);
+  e = read();
+  EXPECT_TRUE(e.has_mesh_keyframe()) << EnvelopeBodyName(e);
+  while (!e.has_playback_state()) e = read();
+  EXPECT_NEAR(e.playback_state().time_s(), 1.5, 0.01);
+  // Speed outside 0.1..10: an error event, and the replay carries on.
+  send(v1::PlaybackControl::ACTION_SET_SPEED, 20);
+  do e = read();
+  while (!e.has_session_event());
+  EXPECT_EQ(e.session_event().kind(), v1::SessionEvent::KIND_ERROR);
+  // A live or unknown session cannot be replayed.
+  EXPECT_EQ(WsConnect(port, "/ws/replay/nope", {{"Authorization", "Bearer " + observer}}).status, 404);
+}
+
 // The server dies under a live session (SIGKILL, then SIGTERM); the agent reconnects to the
 // restarted server, resumes the same session, and the recording holds every tick once, in order.
 void ResumeAcrossRestart(int signal) {

@@ -36,6 +36,7 @@ struct ApiContext {
   Metrics* metrics = nullptr;
   std::function<std::shared_ptr<const TokenTable>()> tokens;  // the table in force
   std::function<void(std::string)> publish_library_event;     // a JSON text to /ws/library watchers
+  std::function<std::string()> more_metrics;                  // Prometheus lines appended to /metrics (sessions)
   std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
   std::string version = "0.1.0";
 };
