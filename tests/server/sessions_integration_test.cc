@@ -146,6 +146,16 @@ std::vector<uint64_t> RecordedTicks(const std::string& path) {
   return ticks;
 }
 
+// The MCAP project's own reader (@mcap/core, from npm) and protobufjs agree: every record and CRC,
+// every message decoded from the schemas stored in the file, and every tick once, in order.
+void IndependentReaderAccepts(const std::string& path, size_t ticks) {
+  ChildProcess node(IDMS_NODE_BIN,
+                    {std::string(IDMS_SOURCE_DIR) + "/tests/mcap-js/check_recording.mjs", path, "--expect-ticks",
+                     std::to_string(ticks)},
+                    path + ".check.log");
+  EXPECT_EQ(node.Wait(seconds(60)), 0) << node.Log();
+}
+
 std::vector<std::string> AgentArgs(const ServerProcess& server, const std::string& dir, double duration) {
   return {"--server",
           "ws://127.0.0.1:" + server.port_string(),
@@ -230,6 +240,7 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
   ASSERT_EQ(ticks.size(), 4000u);
   for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  IndependentReaderAccepts(dir + "/rec.mcap", 4000);
   // Ranges: the file resumes.
   const HttpReply part = Http(port, HttpCall{"GET",
                                              "/api/sessions/" + id + "/recording.mcap",
@@ -405,6 +416,7 @@ void ResumeAcrossRestart(int signal) {
   const std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
   ASSERT_EQ(ticks.size(), 5000u) << first_log << server->Log();
   for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  IndependentReaderAccepts(dir + "/rec.mcap", 5000);
 }
 
 TEST(Sessions, AgentResumesAfterTheServerIsKilledAndEveryTickIsRecordedOnce) { ResumeAcrossRestart(SIGKILL); }
