@@ -140,6 +140,7 @@ struct Uplink::Impl {
 
   void Drain() {
     loop.samples().consume_all([this](const TickSample& s) { Accept(s); });
+    loop.CollectResets();  // sets replaced by resets are freed here, not on the loop
     int32_t index = -1;
     while (loop.PopMeshSlot(&index)) {
       const MeshSlot& slot = loop.slot(index);
