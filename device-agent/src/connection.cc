@@ -34,7 +34,7 @@ void Connection::OnResolve(const beast::error_code& ec, const tcp::resolver::res
   // The connect timeout covers TCP and the upgrade.
   beast::get_lowest_layer(ws_).expires_after(Seconds(options_.connect_timeout_s));
   beast::get_lowest_layer(ws_).async_connect(results,
-                                              beast::bind_front_handler(&Connection::OnConnect, shared_from_this()));
+                                             beast::bind_front_handler(&Connection::OnConnect, shared_from_this()));
 }
 
 void Connection::OnConnect(const beast::error_code& ec, const tcp::endpoint&) {
@@ -53,8 +53,8 @@ void Connection::OnHandshake(const beast::error_code& ec) {
   if (ec) return Fail(ec, "WebSocket upgrade");
   // From here the WebSocket's own timeouts apply: pings when idle, a dead peer detected.
   beast::get_lowest_layer(ws_).expires_never();
-  ws_.set_option(websocket::stream_base::timeout{Seconds(options_.connect_timeout_s),
-                                                 Seconds(options_.idle_timeout_s), true});
+  ws_.set_option(
+      websocket::stream_base::timeout{Seconds(options_.connect_timeout_s), Seconds(options_.idle_timeout_s), true});
   // The server's messages are small; a huge one is a broken or hostile peer, not a frame to buffer.
   ws_.read_message_max(options_.read_message_max);
   ws_.binary(true);

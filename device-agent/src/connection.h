@@ -18,9 +18,9 @@ namespace idms::agent {
 struct ConnectionOptions {
   std::string host, port;  // the server
   std::string target = "/ws/agent";
-  std::string token;                // "Authorization: Bearer TOKEN" on the upgrade request
-  double connect_timeout_s = 5.0;   // resolve + connect + upgrade; then the close handshake
-  double idle_timeout_s = 10.0;     // a silent server is pinged, then dropped after this
+  std::string token;                  // "Authorization: Bearer TOKEN" on the upgrade request
+  double connect_timeout_s = 5.0;     // resolve + connect + upgrade; then the close handshake
+  double idle_timeout_s = 10.0;       // a silent server is pinged, then dropped after this
   size_t read_message_max = 1 << 20;  // bytes; the server sends Welcome, Commands and events
 };
 
@@ -28,9 +28,9 @@ struct ConnectionOptions {
 class ConnectionHandler {
  public:
   virtual ~ConnectionHandler() = default;
-  virtual void OnOpen() = 0;                             // the upgrade succeeded
-  virtual void OnMessage(std::string_view payload) = 0;  // one whole binary message
-  virtual void OnWritten() = 0;                          // the frame passed to Write went out
+  virtual void OnOpen() = 0;                                      // the upgrade succeeded
+  virtual void OnMessage(std::string_view payload) = 0;           // one whole binary message
+  virtual void OnWritten() = 0;                                   // the frame passed to Write went out
   virtual void OnClosed(const boost::beast::error_code& ec) = 0;  // our close handshake ended
   // A step failed: `what` names it ("resolve", "connect", "WebSocket upgrade", "read", "write");
   // upgrade is the server's answer to the upgrade request (status 0 when there was none).

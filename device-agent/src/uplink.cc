@@ -304,8 +304,8 @@ struct Uplink::Impl final : ConnectionHandler {
                      std::string(upgrade.reason()) + " on " + opt.target + "): check --token");
       }
       if (status == 400 || status == 404) {
-        return Fatal("the server refused the WebSocket upgrade on " + opt.target + " (HTTP " +
-                     std::to_string(status) + "): is --server an idms-server?");
+        return Fatal("the server refused the WebSocket upgrade on " + opt.target + " (HTTP " + std::to_string(status) +
+                     "): is --server an idms-server?");
       }
       if (status != 0) return Retry(ec, step + " (HTTP " + std::to_string(status) + ")");
     }
@@ -320,9 +320,8 @@ struct Uplink::Impl final : ConnectionHandler {
     if (phase == Phase::kConnecting || phase == Phase::kHello) ++stats.connect_failures;
     DropConnection();
     phase = Phase::kIdle;
-    std::fprintf(stderr, "idms-agent: server %s:%s: %s%s: %s; retrying in %.2f s\n", opt.host.c_str(),
-                 opt.port.c_str(), was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(),
-                 backoff_s);
+    std::fprintf(stderr, "idms-agent: server %s:%s: %s%s: %s; retrying in %.2f s\n", opt.host.c_str(), opt.port.c_str(),
+                 was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(), backoff_s);
     std::uniform_real_distribution<double> jitter(0.8, 1.2);
     retry_timer.expires_after(Seconds(backoff_s * jitter(rng)));
     backoff_s = std::min(2 * backoff_s, opt.backoff_max_s);

@@ -215,10 +215,10 @@ TEST(Loop, ResetOnALargeModelSwapsInAPreparedSetWithoutCopying) {
   std::sort(reset_us.begin(), reset_us.end());
   std::sort(tick_us.begin(), tick_us.end());
   std::sort(copy_us.begin(), copy_us.end());
-  std::printf("[ figures  ] %zu atoms: reset tick min %u us, median %u us; ordinary tick median %u us; "
-              "the old in-tick reset (state copy + refile) %lld us\n",
-              num_atoms, reset_us.front(), reset_us[2], tick_us[tick_us.size() / 2],
-              static_cast<long long>(copy_us[2]));
+  std::printf(
+      "[ figures  ] %zu atoms: reset tick min %u us, median %u us; ordinary tick median %u us; "
+      "the old in-tick reset (state copy + refile) %lld us\n",
+      num_atoms, reset_us.front(), reset_us[2], tick_us[tick_us.size() / 2], static_cast<long long>(copy_us[2]));
   // Timing is only a backstop (the swap above is the proof): the best of five reset ticks stays
   // within one 1 ms period, which the old in-tick copy of this model's state does not.
   EXPECT_LT(reset_us.front(), 1000u);
