@@ -153,7 +153,7 @@ int64_t ReadStealMs(const std::string& line) {
 
 Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool, const Registration& registration,
            Device& device, const LoopOptions& options)
-    : model_(std::move(model)),
+    : sim_(std::make_unique<SimSet>()),
       step_options_(step_options),
       registration_(registration),
       device_(device),
@@ -161,18 +161,22 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
       samples_(options.sample_ring),
       mesh_full_(options.mesh_pool + 1),
       mesh_free_(options.mesh_pool + 1),
-      commands_(64) {
-  // Simulation buffers, and their rest copies for Reset.
-  state_ = MakeState(model_);
-  workspace_ = MakeWorkspace(model_, step_options_);
+      commands_(64),
+      reset_ready_(kResetsInFlight),
+      reset_spent_(kResetsInFlight) {
+  // Simulation buffers, and their rest copy for PushCommand's resets.
+  SimSet& sim = *sim_;
+  sim.model = std::move(model);
+  sim.state = MakeState(sim.model);
+  sim.workspace = MakeWorkspace(sim.model, step_options_);
   // No madvise from the loop's first full-mode tick: huge pages pay only past the caches, far
   // beyond what a 1 kHz full-mode scene can step.
-  workspace_.full.huge_pages = false;
-  // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5).
-  ResyncWorkspace(model_, state_, workspace_);
-  rest_model_ = model_;
-  rest_state_ = state_;
-  rest_workspace_ = workspace_;
+  sim.workspace.full.huge_pages = false;
+  // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5). The rest
+  // copy is filed too, so a reset swaps in a workspace that needs no refiling either.
+  ResyncWorkspace(sim.model, sim.state, sim.workspace);
+  rest_ = std::make_unique<const SimSet>(sim);
+  rest_topology_ = sim.model.topology_version;
   input_.tools[0] = tool;
   input_.num_tools = 0;
   // Timing.
@@ -181,14 +185,36 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   // The surface pool: every buffer sized for the whole surface and topology.
   slots_.resize(options_.mesh_pool);
   for (size_t i = 0; i < slots_.size(); ++i) {
-    slots_[i].pos.assign(3 * static_cast<size_t>(model_.num_external), 0.0);
-    slots_[i].tri_verts.assign(3 * static_cast<size_t>(model_.num_tris), 0);
+    slots_[i].pos.assign(3 * static_cast<size_t>(sim.model.num_external), 0.0);
+    slots_[i].tri_verts.assign(3 * static_cast<size_t>(sim.model.num_tris), 0);
     mesh_free_.push(static_cast<int32_t>(i));
   }
 }
 
 Loop::~Loop() {
   if (dma_latency_fd_ >= 0) close(dma_latency_fd_);
+  // Rest sets never applied, and replaced ones never collected.
+  reset_ready_.consume_all([](SimSet* set) { delete set; });
+  reset_spent_.consume_all([](SimSet* set) { delete set; });
+}
+
+bool Loop::PushCommand(const LoopCommand& command) {
+  if (command.kind != LoopCommand::kReset) return commands_.push(command);
+  // Room for both first: this thread is the only producer, so the room cannot shrink meanwhile,
+  // and no prepared set is left behind without its command.
+  if (commands_.write_available() == 0 || resets_in_flight_ >= kResetsInFlight) return false;
+  // The copy of the rest set: the O(model) work a reset used to do inside one tick.
+  auto set = std::make_unique<SimSet>(*rest_);
+  reset_ready_.push(set.release());
+  ++resets_in_flight_;
+  return commands_.push(command);
+}
+
+int Loop::CollectResets() {
+  return static_cast<int>(reset_spent_.consume_all([this](SimSet* set) {
+    delete set;
+    --resets_in_flight_;
+  }));
 }
 
 void Loop::SetUpThread() {
@@ -243,7 +269,7 @@ void Loop::Run() {
   // Ticks on absolute deadlines.
   int64_t next_ns = MonotonicNs();
   while (!stop_.load(std::memory_order_relaxed) && !device_.finished() &&
-         (options_.max_ticks == 0 || state_.tick < options_.max_ticks)) {
+         (options_.max_ticks == 0 || sim_->state.tick < options_.max_ticks)) {
     Tick(WaitUntil(next_ns, options_.spin_ns), next_ns + period_ns_);
     next_ns += period_ns_;
     // Behind schedule: skip the missed wake-ups rather than run them back to back.
@@ -262,12 +288,16 @@ void Loop::Run() {
 }
 
 void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
+  // Commands first: a reset replaces the set stepped below.
   ApplyCommands();
-  const int64_t tick = state_.tick;
+  Model& model = sim_->model;
+  State& state = sim_->state;
+  Workspace& workspace = sim_->workspace;
+  const int64_t tick = state.tick;
 
   // Device read, mapped into the model frame; a device without a pose leaves the tool out.
   DeviceReading reading;
-  device_.Read(tick, state_.time_s, &reading);
+  device_.Read(tick, state.time_s, &reading);
   ToolCommand& tool = input_.tools[0];
   if (reading.valid) {
     registration_.DeviceToModel(reading.pos, tool.pos);
@@ -280,8 +310,8 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   input_.num_tools = has_pose_ ? 1 : 0;
 
   // The DSM step; cuts found by a scalpel are applied between steps.
-  const StepReport report = Step(model_, state_, workspace_, input_);
-  if (report.pending_cuts > 0) ApplyPendingEdits(model_, state_, workspace_);
+  const StepReport report = Step(model, state, workspace, input_);
+  if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
 
   // Device write: zero without a fresh pose; the guard is the last line of defence.
   const ToolReport& out = report.tools[0];
@@ -297,15 +327,15 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   if (fault != 0) counters_.force_faults.fetch_add(1, std::memory_order_relaxed);
 
   // Surface snapshot at the stream rate.
-  if (state_.time_s >= next_mesh_time_s_ - 1e-9) {
+  if (state.time_s >= next_mesh_time_s_ - 1e-9) {
     if (!PublishMesh(false)) counters_.mesh_skipped.fetch_add(1, std::memory_order_relaxed);
-    while (next_mesh_time_s_ <= state_.time_s + 1e-9) next_mesh_time_s_ += mesh_interval_s_;
+    while (next_mesh_time_s_ <= state.time_s + 1e-9) next_mesh_time_s_ += mesh_interval_s_;
   }
 
   // Timing, histograms and the sample.
   TickSample s;
   s.tick = static_cast<uint64_t>(tick);
-  s.time_s = state_.time_s;
+  s.time_s = state.time_s;
   for (int i = 0; i < 3; ++i) s.tool_pos[i] = tool.pos[i], s.force[i] = f_model[i];
   s.compute_us = ToMicros(written_ns - wake_ns);
   s.period_us = prev_wake_ns_ < 0 ? 0 : ToMicros(wake_ns - prev_wake_ns_);
@@ -323,7 +353,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   prev_wake_ns_ = wake_ns;
   if (s.overrun) counters_.overruns.fetch_add(1, std::memory_order_relaxed);
   if (!samples_.push(s)) counters_.samples_lost.fetch_add(1, std::memory_order_relaxed);
-  counters_.ticks.store(static_cast<uint64_t>(state_.tick), std::memory_order_relaxed);
+  counters_.ticks.store(static_cast<uint64_t>(state.tick), std::memory_order_relaxed);
 }
 
 void Loop::ApplyCommands() {
@@ -352,44 +382,46 @@ bool Loop::PublishMesh(bool final_frame) {
   int32_t index = -1;
   if (!mesh_free_.pop(index)) return false;
   MeshSlot& slot = slots_[static_cast<size_t>(index)];
+  const Model& model = sim_->model;
+  const State& state = sim_->state;
   // Positions of the external atoms, in plg vertex order.
-  GatherSurface(model_, state_.atom_pos, slot.pos);
+  GatherSurface(model, state.atom_pos, slot.pos);
   // Triangles only when the topology changed since the last published frame.
   slot.num_tris = -1;
-  if (model_.topology_version != published_topology_) {
-    slot.num_tris = model_.num_tris;
-    for (size_t i = 0; i < 3 * static_cast<size_t>(model_.num_tris); ++i) {
-      slot.tri_verts[i] = model_.atom_external_id[static_cast<size_t>(model_.tri_atoms[i])];
+  if (model.topology_version != published_topology_) {
+    slot.num_tris = model.num_tris;
+    for (size_t i = 0; i < 3 * static_cast<size_t>(model.num_tris); ++i) {
+      slot.tri_verts[i] = model.atom_external_id[static_cast<size_t>(model.tri_atoms[i])];
     }
-    published_topology_ = model_.topology_version;
+    published_topology_ = model.topology_version;
   }
-  slot.tick = static_cast<uint64_t>(state_.tick);
-  slot.time_s = state_.time_s;
-  slot.topology_version = model_.topology_version;
+  slot.tick = static_cast<uint64_t>(state.tick);
+  slot.time_s = state.time_s;
+  slot.topology_version = model.topology_version;
   slot.final_frame = final_frame;
   mesh_full_.push(index);
   return true;
 }
 
 void Loop::Reset() {
-  // Back to rest, keeping the tick count and time (samples stay consecutive).
-  const int64_t tick = state_.tick;
-  const double time_s = state_.time_s;
-  if (model_.topology_version != rest_model_.topology_version) {
-    // Cuts happened: restore the model and its workspace too, under a new topology version.
-    const uint64_t version = model_.topology_version + 1;
-    model_ = rest_model_;
-    workspace_ = rest_workspace_;
-    model_.topology_version = version;
-    workspace_.topology_version = version;
-    rest_model_.topology_version = version;
-    rest_workspace_.topology_version = version;
-  }
-  state_ = rest_state_;
-  state_.tick = tick;
-  state_.time_s = time_s;
-  ResyncWorkspace(model_, state_, workspace_);
+  // The rest set PushCommand queued ahead of this command; none means a broken handoff, and the
+  // loop does not abort: the command is ignored.
+  SimSet* rest = nullptr;
+  if (!reset_ready_.pop(rest)) return;
+  // Keep the tick count and time (samples stay consecutive).
+  rest->state.tick = sim_->state.tick;
+  rest->state.time_s = sim_->state.time_s;
+  rest->workspace.synced_tick = rest->state.tick;
+  // Cuts since the last rest: the restored model is a new topology for the viewers.
+  if (sim_->model.topology_version != rest_topology_) rest_topology_ = sim_->model.topology_version + 1;
+  rest->model.topology_version = rest_topology_;
+  rest->workspace.topology_version = rest_topology_;
+  // Swap pointers; the replaced set goes back to the I/O thread to be freed there. It cannot find
+  // the ring full: PushCommand keeps at most its capacity of sets away from the loop.
+  reset_spent_.push(sim_.release());
+  sim_.reset(rest);
   tweezers_override_ = -1;
+  counters_.resets.fetch_add(1, std::memory_order_relaxed);
 }
 
 }  // namespace idms::agent

@@ -1,15 +1,11 @@
-// The I/O thread: one io_context, one WebSocket connection at a time (recreated on every
-// attempt), a poll timer that drains the loop's rings, one write in flight, and a pull model
-// for what to send next (session events, then the newest surface, then sample batches).
+// The I/O thread: one io_context, one Connection at a time (a new one per attempt), a poll timer
+// that drains the loop's rings into the Backlog, one write in flight, and a pull model for what
+// to send next (FrameOrder: session events, then the newest surface, then sample batches).
 #include "idms/agent/uplink.h"
 
 #include <algorithm>
-#include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
-#include <boost/beast/core.hpp>
-#include <boost/beast/http.hpp>
-#include <boost/beast/websocket.hpp>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -17,6 +13,9 @@
 #include <random>
 #include <thread>
 
+#include "backlog.h"
+#include "connection.h"
+#include "frame_order.h"
 #include "idms/protocol/envelope.h"
 #include "idms/protocol/mesh_codec.h"
 
@@ -25,39 +24,37 @@ namespace {
 
 namespace asio = boost::asio;
 namespace beast = boost::beast;
-namespace http = beast::http;
-namespace websocket = beast::websocket;
-using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 std::chrono::nanoseconds Seconds(double s) { return std::chrono::nanoseconds(static_cast<int64_t>(s * 1e9)); }
 
-// One connection attempt: the stream and its buffers. Handlers hold a shared_ptr, so a dropped
-// connection lives until its last pending operation has completed.
-struct Connection {
-  explicit Connection(asio::io_context& io) : ws(io) {}
-  websocket::stream<beast::tcp_stream> ws;
-  beast::flat_buffer read_buffer;
-  websocket::response_type response;
-  std::string out;  // the frame being written
-};
-
 enum class Phase { kIdle, kConnecting, kHello, kOnline, kClosing, kDone };
+
+ConnectionOptions MakeConnectionOptions(const UplinkOptions& o) {
+  ConnectionOptions c;
+  c.host = o.host;
+  c.port = o.port;
+  c.target = o.target;
+  c.token = o.token;
+  c.connect_timeout_s = o.connect_timeout_s;
+  return c;
+}
 
 }  // namespace
 
-struct Uplink::Impl {
+struct Uplink::Impl final : ConnectionHandler {
   Impl(Loop& loop_in, const UplinkOptions& options_in)
       : loop(loop_in),
         opt(options_in),
+        connection_options(MakeConnectionOptions(options_in)),
         signals(io, SIGINT, SIGTERM),
         poll_timer(io),
         retry_timer(io),
         hello_timer(io),
-        resolver(io),
         rng(std::random_device{}()),
+        backlog(options_in.backlog_samples),
+        order(options_in.scene.sample_batch()),
         encoder(MakeEncoderOptions(options_in.scene)) {
-    batch = opt.scene.sample_batch() > 0 ? static_cast<size_t>(opt.scene.sample_batch()) : 20;
     backoff_s = opt.backoff_initial_s;
     // The surface triangles as the loop starts with them.
     const Model& model = loop.model();
@@ -80,10 +77,12 @@ struct Uplink::Impl {
     Poll();
     if (!opt.offline) Connect();
     io.run();
+    SyncStats();
     if (!loop.finished()) {
       loop.RequestStop();
       while (!loop.finished()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
+    loop.CollectResets();
     return stats.fatal_error.empty();
   }
 
@@ -122,9 +121,17 @@ struct Uplink::Impl {
   void Done() {
     if (phase == Phase::kDone) return;
     phase = Phase::kDone;
-    stats.samples_unsent = backlog.size() - cursor;
+    SyncStats();
     if (pending_mesh >= 0) loop.ReleaseMeshSlot(pending_mesh), pending_mesh = -1;
     io.stop();
+  }
+
+  // The backlog's counts into the stats.
+  void SyncStats() {
+    stats.samples_sent = backlog.num_sent();
+    stats.samples_resent = backlog.num_resent();
+    stats.samples_dropped = backlog.num_dropped();
+    stats.samples_unsent = backlog.num_unsent();
   }
 
   void Fatal(const std::string& message) {
@@ -140,6 +147,7 @@ struct Uplink::Impl {
 
   void Drain() {
     loop.samples().consume_all([this](const TickSample& s) { Accept(s); });
+    loop.CollectResets();  // sets replaced by resets are freed here, not on the loop
     int32_t index = -1;
     while (loop.PopMeshSlot(&index)) {
       const MeshSlot& slot = loop.slot(index);
@@ -178,74 +186,20 @@ struct Uplink::Impl {
       warned_time_s = s.time_s;
       has_warned = true;
     }
-    backlog.push_back(s);
     // Bounded: the oldest goes; one the server never got is a drop, counted and reported.
-    if (static_cast<int64_t>(backlog.size()) > opt.backlog_samples) {
-      if (cursor == 0) {
-        ++stats.samples_dropped;
-        ++dropped_unreported;
-      } else {
-        evicted_sent_max = backlog.front().tick;
-        has_evicted_sent = true;
-        --cursor;
-      }
-      backlog.pop_front();
-    }
+    backlog.Accept(s);
   }
 
   // ------------------------------------------------------------------------------------------
-  // Connecting: resolve, TCP, WebSocket upgrade with the token, Hello -> Welcome.
+  // Connecting: the Connection resolves, connects and upgrades with the token; then Hello -> Welcome.
 
   void Connect() {
     phase = Phase::kConnecting;
-    auto c = std::make_shared<Connection>(io);
-    conn = c;
-    resolver.async_resolve(opt.host, opt.port,
-                           [this, c](const beast::error_code& ec, tcp::resolver::results_type results) {
-                             if (c != conn) return;
-                             if (ec) return ConnectFailed(ec, "resolve " + opt.host);
-                             beast::get_lowest_layer(c->ws).expires_after(Seconds(opt.connect_timeout_s));
-                             beast::get_lowest_layer(c->ws).async_connect(
-                                 results, [this, c](const beast::error_code& ec2, const tcp::endpoint&) {
-                                   if (c != conn) return;
-                                   if (ec2) return ConnectFailed(ec2, "connect");
-                                   Upgrade(c);
-                                 });
-                           });
+    conn = std::make_shared<Connection>(io, connection_options, *this);
+    conn->Start();
   }
 
-  void Upgrade(const std::shared_ptr<Connection>& c) {
-    // The token travels on the upgrade request, so a bad one is refused before any frame.
-    const std::string auth = "Bearer " + opt.token;
-    c->ws.set_option(websocket::stream_base::decorator([auth](websocket::request_type& req) {
-      req.set(http::field::authorization, auth);
-      req.set(http::field::user_agent, "idms-agent");
-    }));
-    c->ws.async_handshake(c->response, opt.host + ":" + opt.port, opt.target, [this, c](const beast::error_code& ec) {
-      if (c != conn) return;
-      if (ec) {
-        const unsigned status = c->response.result_int();
-        if (status == 401 || status == 403) {
-          return Fatal("the server refused the token (HTTP " + std::to_string(status) + " " +
-                       std::string(c->response.reason()) + " on " + opt.target + "): check --token");
-        }
-        if (status == 400 || status == 404) {
-          return Fatal("the server refused the WebSocket upgrade on " + opt.target + " (HTTP " +
-                       std::to_string(status) + "): is --server an idms-server?");
-        }
-        return ConnectFailed(ec, status != 0 ? "WebSocket upgrade (HTTP " + std::to_string(status) + ")"
-                                             : std::string("WebSocket upgrade"));
-      }
-      // From here the WebSocket's own timeouts apply: pings when idle, a dead peer detected.
-      beast::get_lowest_layer(c->ws).expires_never();
-      websocket::stream_base::timeout timeouts{Seconds(opt.connect_timeout_s), std::chrono::seconds(10), true};
-      c->ws.set_option(timeouts);
-      c->ws.binary(true);
-      SendHello(c);
-    });
-  }
-
-  void SendHello(const std::shared_ptr<Connection>& c) {
+  void OnOpen() override {
     phase = Phase::kHello;
     v1::Envelope envelope;
     v1::Hello* hello = envelope.mutable_hello();
@@ -255,30 +209,33 @@ struct Uplink::Impl {
     hello->set_session_id(session_id);
     hello->set_resume_token(resume_token);
     *hello->mutable_scene() = opt.scene;
-    SerializeEnvelope(envelope, &c->out);
+    SerializeEnvelope(envelope, &frame);
     // The Welcome must come within the connect timeout.
     hello_timer.expires_after(Seconds(opt.connect_timeout_s));
-    hello_timer.async_wait([this, c](const beast::error_code& ec) {
-      if (!ec && c == conn && phase == Phase::kHello) ConnectFailed(asio::error::timed_out, "waiting for Welcome");
+    hello_timer.async_wait([this, c = conn.get()](const beast::error_code& ec) {
+      if (!ec && c == conn.get() && phase == Phase::kHello) Retry(asio::error::timed_out, "waiting for Welcome");
     });
-    c->ws.async_write(asio::buffer(c->out), [this, c](const beast::error_code& ec, size_t) {
-      if (c != conn) return;
-      if (ec) return ConnectFailed(ec, "send Hello");
-      c->ws.async_read(c->read_buffer, [this, c](const beast::error_code& ec2, size_t) {
-        if (c != conn) return;
-        if (ec2) return ConnectFailed(ec2, "read Welcome");
-        OnWelcomeFrame(c);
-      });
-    });
+    StartWrite();
   }
 
-  void OnWelcomeFrame(const std::shared_ptr<Connection>& c) {
+  void OnMessage(std::string_view payload) override {
+    if (phase == Phase::kHello) return OnWelcomeFrame(payload);
+    v1::Envelope envelope;
+    std::string error;
+    if (ParseEnvelope(payload, &envelope, &error)) {
+      OnServerFrame(envelope);
+    } else {
+      std::fprintf(stderr, "idms-agent: ignored a malformed frame from the server: %s\n", error.c_str());
+    }
+  }
+
+  void OnWelcomeFrame(std::string_view payload) {
     hello_timer.cancel();
     v1::Envelope envelope;
     std::string error;
-    const bool parsed = ParseEnvelope(beast::buffers_to_string(c->read_buffer.data()), &envelope, &error);
-    c->read_buffer.consume(c->read_buffer.size());
-    if (!parsed) return Fatal("the server's answer to Hello is not an Envelope: " + error);
+    if (!ParseEnvelope(payload, &envelope, &error)) {
+      return Fatal("the server's answer to Hello is not an Envelope: " + error);
+    }
     if (envelope.has_session_event() && envelope.session_event().kind() == v1::SessionEvent::KIND_ERROR) {
       // A refused resume (the server lost the session): start a new one; a refused new session is final.
       if (!session_id.empty()) {
@@ -286,7 +243,7 @@ struct Uplink::Impl {
                      session_id.c_str(), envelope.session_event().message().c_str());
         session_id.clear();
         resume_token.clear();
-        return ConnectFailed(asio::error::connection_refused, "resume");
+        return Retry(asio::error::connection_refused, "resume");
       }
       return Fatal("the server refused the session: " + envelope.session_event().message());
     }
@@ -296,7 +253,6 @@ struct Uplink::Impl {
     OnWelcome(envelope.welcome());
     phase = Phase::kOnline;
     backoff_s = opt.backoff_initial_s;
-    DoRead(c);
     MaybeWrite();
   }
 
@@ -306,16 +262,7 @@ struct Uplink::Impl {
       // Resend from the first tick the server does not have.
       ++stats.reconnects;
       const uint64_t next = welcome.next_tick();
-      if (!backlog.empty() && next < backlog.front().tick && has_evicted_sent) {
-        // Sent before the drop, lost in flight, and no longer kept.
-        const uint64_t lost =
-            std::min(backlog.front().tick, evicted_sent_max + 1) - std::min(next, evicted_sent_max + 1);
-        stats.samples_dropped += lost;
-        dropped_unreported += lost;
-      }
-      const auto it = std::lower_bound(backlog.begin(), backlog.end(), next,
-                                       [](const TickSample& s, uint64_t tick) { return s.tick < tick; });
-      cursor = static_cast<size_t>(it - backlog.begin());
+      backlog.ResumeAt(next);
       std::fprintf(stderr, "idms-agent: resumed session %s at tick %llu\n", session_id.c_str(),
                    static_cast<unsigned long long>(next));
     } else {
@@ -334,32 +281,47 @@ struct Uplink::Impl {
   }
 
   void ReportDrops() {
-    if (dropped_unreported == 0) return;
+    const uint64_t dropped = backlog.TakeUnreportedDrops();
+    if (dropped == 0) return;
     v1::Envelope envelope;
     v1::SessionEvent* event = envelope.mutable_session_event();
     event->set_kind(v1::SessionEvent::KIND_SAMPLES_DROPPED);
-    event->set_tick(backlog.empty() ? last_tick : backlog.front().tick);
-    event->set_count(dropped_unreported);
+    event->set_tick(backlog.empty() ? last_tick : backlog.front_tick());
+    event->set_count(dropped);
     event->set_message("agent backlog overflowed while the server was unreachable; oldest samples dropped");
     control.push_back(std::move(envelope));
-    dropped_unreported = 0;
   }
 
-  void ConnectFailed(const beast::error_code& ec, const std::string& what) {
-    ++stats.connect_failures;
-    LostConnection(ec, what);
+  // The connection failed: a refusal of the token or of the upgrade is final, anything else is
+  // retried.
+  void OnFailed(const beast::error_code& ec, const char* what,
+                const beast::websocket::response_type& upgrade) override {
+    const std::string step = what;
+    const unsigned status = upgrade.result_int();
+    if (step == "WebSocket upgrade") {
+      if (status == 401 || status == 403) {
+        return Fatal("the server refused the token (HTTP " + std::to_string(status) + " " +
+                     std::string(upgrade.reason()) + " on " + opt.target + "): check --token");
+      }
+      if (status == 400 || status == 404) {
+        return Fatal("the server refused the WebSocket upgrade on " + opt.target + " (HTTP " + std::to_string(status) +
+                     "): is --server an idms-server?");
+      }
+      if (status != 0) return Retry(ec, step + " (HTTP " + std::to_string(status) + ")");
+    }
+    if (phase == Phase::kHello) return Retry(ec, step == "write" ? "send Hello" : "read Welcome");
+    Retry(ec, step);
   }
 
-  // Drops the connection and schedules the next attempt after the backoff.
-  void LostConnection(const beast::error_code& ec, const std::string& what) {
+  // Drops the connection and schedules the next attempt after the backoff; a connection that
+  // never got its Welcome counts as a connect failure.
+  void Retry(const beast::error_code& ec, const std::string& what) {
     const bool was_online = phase == Phase::kOnline || phase == Phase::kClosing;
+    if (phase == Phase::kConnecting || phase == Phase::kHello) ++stats.connect_failures;
     DropConnection();
     phase = Phase::kIdle;
-    if (ec != asio::error::operation_aborted) {
-      std::fprintf(stderr, "idms-agent: server %s:%s: %s%s: %s; retrying in %.2f s\n", opt.host.c_str(),
-                   opt.port.c_str(), was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(),
-                   backoff_s);
-    }
+    std::fprintf(stderr, "idms-agent: server %s:%s: %s%s: %s; retrying in %.2f s\n", opt.host.c_str(), opt.port.c_str(),
+                 was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(), backoff_s);
     std::uniform_real_distribution<double> jitter(0.8, 1.2);
     retry_timer.expires_after(Seconds(backoff_s * jitter(rng)));
     backoff_s = std::min(2 * backoff_s, opt.backoff_max_s);
@@ -370,8 +332,7 @@ struct Uplink::Impl {
 
   void DropConnection() {
     if (conn) {
-      beast::error_code ignored;
-      beast::get_lowest_layer(conn->ws).socket().close(ignored);
+      conn->Abandon();
       conn.reset();
     }
     write_in_flight = false;
@@ -379,27 +340,7 @@ struct Uplink::Impl {
   }
 
   // ------------------------------------------------------------------------------------------
-  // Online: reading commands, writing frames.
-
-  void DoRead(const std::shared_ptr<Connection>& c) {
-    c->ws.async_read(c->read_buffer, [this, c](const beast::error_code& ec, size_t) {
-      if (c != conn) return;
-      if (ec) {
-        // The server's close frame after ours: the session ended cleanly.
-        if (phase == Phase::kClosing && ec == websocket::error::closed) return;
-        return LostConnection(ec, "read");
-      }
-      v1::Envelope envelope;
-      std::string error;
-      const bool parsed = ParseEnvelope(beast::buffers_to_string(c->read_buffer.data()), &envelope, &error);
-      c->read_buffer.consume(c->read_buffer.size());
-      if (parsed)
-        OnServerFrame(envelope);
-      else
-        std::fprintf(stderr, "idms-agent: ignored a malformed frame from the server: %s\n", error.c_str());
-      DoRead(c);
-    });
-  }
+  // Online: commands in, frames out.
 
   void OnServerFrame(const v1::Envelope& envelope) {
     if (envelope.has_session_event() && envelope.session_event().kind() == v1::SessionEvent::KIND_ERROR) {
@@ -419,7 +360,7 @@ struct Uplink::Impl {
         lc.kind = LoopCommand::kTweezersOpen;
         break;
       case v1::Command::KIND_RESET:
-        lc.kind = LoopCommand::kReset;
+        lc.kind = LoopCommand::kReset;  // PushCommand copies the rest model here, on this thread
         break;
       case v1::Command::KIND_KEYFRAME_REQUEST:
         encoder.RequestKeyframe();
@@ -428,65 +369,77 @@ struct Uplink::Impl {
         return;
     }
     if (!loop.PushCommand(lc))
-      std::fprintf(stderr, "idms-agent: command %llu dropped: the loop's command ring is full\n",
+      std::fprintf(stderr, "idms-agent: command %llu dropped: the loop has not taken the previous ones yet\n",
                    static_cast<unsigned long long>(command.id()));
   }
 
-  // Builds the next frame, if any, into conn->out. Order: events, surface, samples.
-  bool NextFrame() {
-    v1::Envelope& envelope = scratch;
-    ReportDrops();
-    if (!control.empty()) {
-      SerializeEnvelope(control.front(), &conn->out);
-      control.pop_front();
-      return true;
-    }
-    // The newest surface; after a reconnection with nothing newer coming (the loop has ended),
-    // the last one again, so the server's mirror ends on the final surface.
-    if (pending_mesh >= 0 || resend_surface) {
-      if (pending_mesh >= 0) {
-        const MeshSlot& slot = loop.slot(pending_mesh);
-        last_surface.assign(slot.pos.begin(), slot.pos.end());
-        last_surface_time_s = slot.time_s;
-        loop.ReleaseMeshSlot(pending_mesh);
-        pending_mesh = -1;
+  // Sends the next frame FrameOrder picks, if any; ENDED when everything has been delivered.
+  void MaybeWrite() {
+    if (phase != Phase::kOnline || write_in_flight || !conn) return;
+    for (;;) {
+      ReportDrops();
+      Waiting waiting;
+      waiting.events = control.size();
+      waiting.surface = pending_mesh >= 0 || resend_surface;
+      waiting.samples = backlog.num_unsent();
+      waiting.loop_finished = loop_finished;
+      const NextFrame next = order.Next(waiting);
+      switch (next.kind) {
+        case FrameKind::kNone:
+          return;
+        case FrameKind::kEvent:
+          SerializeEnvelope(control.front(), &frame);
+          control.pop_front();
+          return StartWrite();
+        case FrameKind::kSurface:
+          if (!EncodeSurface()) continue;  // said on stderr; the samples go instead
+          return StartWrite();
+        case FrameKind::kSamples:
+          EncodeSamples(next.num_samples);
+          return StartWrite();
+        case FrameKind::kEnded:
+          return SendEnded();
       }
-      resend_surface = false;
-      std::string error;
-      EncodeStats es;
-      envelope.Clear();
-      if (encoder.Encode(last_surface_time_s, last_surface, &envelope, &error, &es)) {
-        ++stats.mesh_frames;
-        stats.keyframes += es.keyframe ? 1 : 0;
-        stats.mesh_bytes += static_cast<uint64_t>(es.payload_bytes);
-        SerializeEnvelope(envelope, &conn->out);
-        return true;
-      }
-      std::fprintf(stderr, "idms-agent: surface frame not sent: %s\n", error.c_str());
     }
-    const size_t unsent = backlog.size() - cursor;
-    if (unsent >= batch || (unsent > 0 && loop_finished)) {
-      envelope.Clear();
-      v1::DeviceSamples* batch_msg = envelope.mutable_device_samples();
-      const size_t n = std::min(unsent, batch);
-      for (size_t i = 0; i < n; ++i) AddSample(backlog[cursor + i], batch_msg->add_samples());
-      cursor += n;
-      FillStats(batch_msg->mutable_stats());
-      batch_msg->set_samples_dropped(stats.samples_dropped);
-      SerializeEnvelope(envelope, &conn->out);
-      return true;
-    }
-    return false;
   }
 
-  void AddSample(const TickSample& s, v1::DeviceSample* out) {
-    if (!has_sent || s.tick > highest_sent) {
-      ++stats.samples_sent;
-      highest_sent = s.tick;
-      has_sent = true;
-    } else {
-      ++stats.samples_resent;
+  // The newest surface into `frame`; after a reconnection with nothing newer coming (the loop has
+  // ended), the last one again, so the server's mirror ends on the final surface.
+  bool EncodeSurface() {
+    if (pending_mesh >= 0) {
+      const MeshSlot& slot = loop.slot(pending_mesh);
+      last_surface.assign(slot.pos.begin(), slot.pos.end());
+      last_surface_time_s = slot.time_s;
+      loop.ReleaseMeshSlot(pending_mesh);
+      pending_mesh = -1;
     }
+    resend_surface = false;
+    std::string error;
+    EncodeStats es;
+    scratch.Clear();
+    if (!encoder.Encode(last_surface_time_s, last_surface, &scratch, &error, &es)) {
+      std::fprintf(stderr, "idms-agent: surface frame not sent: %s\n", error.c_str());
+      return false;
+    }
+    ++stats.mesh_frames;
+    stats.keyframes += es.keyframe ? 1 : 0;
+    stats.mesh_bytes += static_cast<uint64_t>(es.payload_bytes);
+    SerializeEnvelope(scratch, &frame);
+    return true;
+  }
+
+  // The oldest n unsent samples into `frame` as one DeviceSamples.
+  void EncodeSamples(size_t n) {
+    scratch.Clear();
+    v1::DeviceSamples* batch_msg = scratch.mutable_device_samples();
+    for (size_t i = 0; i < n; ++i) AddSample(backlog.unsent(i), batch_msg->add_samples());
+    backlog.MarkSent(n);
+    FillStats(batch_msg->mutable_stats());
+    batch_msg->set_samples_dropped(backlog.num_dropped());
+    SerializeEnvelope(scratch, &frame);
+  }
+
+  static void AddSample(const TickSample& s, v1::DeviceSample* out) {
     out->set_tick(s.tick);
     out->set_time_s(s.time_s);
     out->mutable_tool_pos()->set_x(s.tool_pos[0]);
@@ -524,26 +477,15 @@ struct Uplink::Impl {
     out->set_realtime(loop.realtime());
   }
 
-  void MaybeWrite() {
-    if (phase != Phase::kOnline || write_in_flight || !conn) return;
-    if (!NextFrame()) {
-      // Nothing left and the loop is done: say goodbye and close.
-      if (loop_finished && pending_mesh < 0 && cursor == backlog.size()) SendEnded();
-      return;
-    }
-    StartWrite();
-  }
-
   void StartWrite() {
     write_in_flight = true;
-    auto c = conn;
-    c->ws.async_write(asio::buffer(c->out), [this, c](const beast::error_code& ec, size_t) {
-      if (c != conn) return;
-      write_in_flight = false;
-      if (ec) return LostConnection(ec, "write");
-      if (phase == Phase::kClosing) return Close(c);
-      MaybeWrite();
-    });
+    conn->Write(frame);
+  }
+
+  void OnWritten() override {
+    write_in_flight = false;
+    if (phase == Phase::kClosing) return conn->Close();
+    MaybeWrite();  // nothing while the Hello waits for its Welcome (phase kHello)
   }
 
   void SendEnded() {
@@ -552,29 +494,26 @@ struct Uplink::Impl {
     event->set_kind(v1::SessionEvent::KIND_ENDED);
     event->set_tick(last_tick);
     event->set_message("the agent stopped");
-    SerializeEnvelope(envelope, &conn->out);
+    SerializeEnvelope(envelope, &frame);
     phase = Phase::kClosing;
     StartWrite();
   }
 
-  void Close(const std::shared_ptr<Connection>& c) {
-    c->ws.async_close(websocket::close_code::normal, [this, c](const beast::error_code& ec) {
-      if (c != conn) return;
-      stats.ended_cleanly = !ec;
-      if (ec) std::fprintf(stderr, "idms-agent: closing the session: %s\n", ec.message().c_str());
-      Done();
-    });
+  void OnClosed(const beast::error_code& ec) override {
+    stats.ended_cleanly = !ec;
+    if (ec) std::fprintf(stderr, "idms-agent: closing the session: %s\n", ec.message().c_str());
+    Done();
   }
 
   // ------------------------------------------------------------------------------------------
   Loop& loop;
   UplinkOptions opt;
+  ConnectionOptions connection_options;
   UplinkStats stats;
 
   asio::io_context io;  // before the objects that use it, so it is destroyed after them
   asio::signal_set signals;
   asio::steady_timer poll_timer, retry_timer, hello_timer;
-  tcp::resolver resolver;
   std::shared_ptr<Connection> conn;
   Phase phase = Phase::kIdle;
   bool write_in_flight = false;
@@ -585,13 +524,12 @@ struct Uplink::Impl {
   std::string session_id, resume_token;
   std::deque<v1::Envelope> control;  // session events waiting to be sent
   v1::Envelope scratch;
+  std::string frame;  // the next frame, serialized
 
-  // Samples: the backlog holds sent and unsent ones; [cursor, end) are unsent.
-  std::deque<TickSample> backlog;
-  size_t cursor = 0;
-  size_t batch = 20;
-  uint64_t highest_sent = 0, evicted_sent_max = 0, last_tick = 0, dropped_unreported = 0;
-  bool has_sent = false, has_evicted_sent = false;
+  // Samples.
+  Backlog backlog;
+  FrameOrder order;
+  uint64_t last_tick = 0;
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;

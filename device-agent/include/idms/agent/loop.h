@@ -6,6 +6,7 @@
 #include <atomic>
 #include <boost/lockfree/spsc_queue.hpp>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -47,11 +48,19 @@ struct MeshSlot {
 };
 
 // A command from the server, I/O thread -> loop. Tweezers close/open hold until the device's own
-// button changes (or kTweezersDevice hands control back); kReset returns the model to rest.
+// button changes (or kTweezersDevice hands control back); kReset returns the model to rest (its
+// rest copy is prepared by Loop::PushCommand, off the loop).
 struct LoopCommand {
   enum Kind : uint8_t { kTweezersClose, kTweezersOpen, kTweezersDevice, kReset };
   Kind kind = kReset;
   int32_t tool = 0;
+};
+
+// A model with its state and workspace: what the loop steps, and what a reset swaps in whole.
+struct SimSet {
+  Model model;
+  State state;
+  Workspace workspace;
 };
 
 struct LoopOptions {
@@ -85,6 +94,7 @@ struct LoopCounters {
   // Wake-ups one full period or more after their scheduled time (the tick's deadline passed
   // before it started): the loop's count of what cyclictest reports as latency >= the period.
   std::atomic<uint64_t> late_wakeups{0};
+  std::atomic<uint64_t> resets{0};  // prepared rest states swapped in
 };
 
 class Loop {
@@ -119,20 +129,28 @@ class Loop {
   bool PopMeshSlot(int32_t* index) { return mesh_full_.pop(*index); }
   void ReleaseMeshSlot(int32_t index) { mesh_free_.push(index); }
   const MeshSlot& slot(int32_t index) const { return slots_[static_cast<size_t>(index)]; }
-  bool PushCommand(const LoopCommand& command) { return commands_.push(command); }
+  // I/O thread (the single producer). A kReset first copies the rest model, state and workspace
+  // on the calling thread (allocates, O(model)) and queues the copy ahead of the command; the tick
+  // that applies it swaps the copy in (O(1), no allocation, no copy) and hands the set it
+  // replaced back for CollectResets. At most kResetsInFlight copies exist outside the loop at a
+  // time. False, with nothing queued, when the command ring or the reset handoff is full.
+  bool PushCommand(const LoopCommand& command);
+  // I/O thread: frees the sets replaced by resets (O(model) each, off the loop); how many.
+  int CollectResets();
+  static constexpr int kResetsInFlight = 2;
 
-  // Set before Run; read-only while it runs.
-  const Model& model() const { return model_; }
   const LoopOptions& options() const { return options_; }
   const LoopCounters& counters() const { return counters_; }
   bool realtime() const { return realtime_.load(std::memory_order_relaxed); }
 
-  // Loop-thread data: read only after finished() (or from the loop thread).
+  // Loop-thread data: read only after finished() (or from the loop thread), or before Run. The
+  // model and state references are invalidated by a reset.
+  const Model& model() const { return sim_->model; }
+  const State& state() const { return sim_->state; }
   const LatencyHistogram& period_histogram() const { return period_hist_; }
   const LatencyHistogram& compute_histogram() const { return compute_hist_; }
   // Wake-up minus scheduled wake-up, µs: cyclictest's latency, measured the same way.
   const LatencyHistogram& wake_histogram() const { return wake_hist_; }
-  const State& state() const { return state_; }
   RealtimeReport realtime_report() const { return rt_report_; }
 
  private:
@@ -141,14 +159,12 @@ class Loop {
   bool PublishMesh(bool final_frame);  // false when no buffer was free
   void Reset();
 
-  // Simulation (loop thread).
-  Model model_;
+  // Simulation (loop thread). sim_ is replaced whole by a reset; rest_ is immutable after the
+  // constructor, so the I/O thread copies it while the loop runs.
+  std::unique_ptr<SimSet> sim_;
+  std::unique_ptr<const SimSet> rest_;
+  uint64_t rest_topology_ = 0;  // the topology version of the model at rest (a cut changes the model's)
   StepOptions step_options_;
-  State state_;
-  Workspace workspace_;
-  Model rest_model_;  // for Reset: plain copies into buffers of the same capacity, no allocation
-  State rest_state_;
-  Workspace rest_workspace_;
   ToolInput input_;
   Registration registration_;
   Device& device_;
@@ -176,6 +192,11 @@ class Loop {
   boost::lockfree::spsc_queue<int32_t> mesh_full_;
   boost::lockfree::spsc_queue<int32_t> mesh_free_;
   boost::lockfree::spsc_queue<LoopCommand> commands_;
+  // Reset handoff: prepared rest sets in (pushed before their kReset), replaced sets out. Owned
+  // raw pointers: spsc_queue needs trivially copyable items; the destructor frees what is left.
+  boost::lockfree::spsc_queue<SimSet*> reset_ready_;
+  boost::lockfree::spsc_queue<SimSet*> reset_spent_;
+  int resets_in_flight_ = 0;  // I/O thread: sets pushed to reset_ready_ and not yet collected
 
   LoopCounters counters_;
   std::atomic<bool> stop_{false};

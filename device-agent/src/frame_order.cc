@@ -1,0 +1,22 @@
+// The uplink's frame order (frame_order.h).
+#include "frame_order.h"
+
+#include <algorithm>
+
+namespace idms::agent {
+
+FrameOrder::FrameOrder(int64_t batch) : batch_(batch > 0 ? static_cast<size_t>(batch) : 20) {}
+
+NextFrame FrameOrder::Next(const Waiting& waiting) const {
+  // Events, then the surface: both are small next to what they describe.
+  if (waiting.events > 0) return {FrameKind::kEvent, 0};
+  if (waiting.surface) return {FrameKind::kSurface, 0};
+  // Samples in full batches; a partial one only when no more will come.
+  if (waiting.samples >= batch_ || (waiting.samples > 0 && waiting.loop_finished)) {
+    return {FrameKind::kSamples, std::min(waiting.samples, batch_)};
+  }
+  if (waiting.loop_finished) return {FrameKind::kEnded, 0};
+  return {FrameKind::kNone, 0};
+}
+
+}  // namespace idms::agent
