@@ -23,7 +23,8 @@ using json = nlohmann::json;
 
 namespace {
 
-constexpr size_t kViewerQueueLimit = 256;  // frames queued for a viewer before deltas are skipped
+constexpr size_t kViewerQueueLimit = 256;                     // frames queued for a viewer before deltas are skipped
+constexpr auto kViewerStallLimit = std::chrono::seconds(10);  // behind that long: closed with a reason
 constexpr uint16_t kPolicyError = 1008;
 constexpr uint16_t kGoingAway = 1001;
 
@@ -177,7 +178,8 @@ std::string SessionSummary::Json() const {
 // A viewer of a live session (/ws/session/{id}).
 class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<ViewerEndpoint> {
  public:
-  ViewerEndpoint(std::shared_ptr<LiveSession> session, Role role) : session_(std::move(session)), role_(role) {}
+  ViewerEndpoint(SessionHub& hub, std::shared_ptr<LiveSession> session, Role role)
+      : hub_(hub), session_(std::move(session)), role_(role) {}
 
   void OnOpen(std::shared_ptr<WsPeer> peer) override {
     peer_ = std::move(peer);
@@ -218,26 +220,41 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
   // sample batches are dropped and counted; nothing waits.
   void Offer(const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples) {
     if (!peer_) return;
-    if (is_delta && skipping_.load()) return void(++deltas_skipped_);
+    if (is_delta && skipping_.load()) return void(++hub_.deltas_skipped);
     if (peer_->queued() >= kViewerQueueLimit) {
+      // Behind: a viewer stalled past the limit is closed; until then it loses deltas (and is
+      // resynchronised with a keyframe once it drains) and sample batches (counted).
+      const auto now = std::chrono::steady_clock::now();
+      if (!behind_since_) behind_since_ = now;
+      if (now - *behind_since_ > kViewerStallLimit) {
+        ++hub_.stalled_closed;
+        peer_->Close(kPolicyError, "viewer stalled: more than 256 frames behind for 10 s");
+        peer_.reset();
+        return;
+      }
       if (is_delta) {
-        ++deltas_skipped_;
+        ++hub_.deltas_skipped;
         skipping_ = true;
         return;
       }
-      if (is_samples) return void(++samples_dropped_);
+      if (is_samples) return void(++hub_.samples_dropped);
+    } else {
+      behind_since_.reset();
     }
-    peer_->Send(bytes, true);
+    Send(bytes);
   }
   void OfferKeyframe(const std::shared_ptr<const std::string>& bytes) {
     if (!peer_) return;
     skipping_ = false;
     resync_requested_ = false;
-    ++resyncs_;
-    peer_->Send(bytes, true);
+    ++hub_.resyncs;
+    Send(bytes);
   }
   void Send(const std::shared_ptr<const std::string>& bytes) {
-    if (peer_) peer_->Send(bytes, true);
+    if (!peer_) return;
+    ++hub_.viewer_frames;
+    hub_.viewer_bytes += bytes->size();
+    peer_->Send(bytes, true);
   }
   void Close(uint16_t code, const std::string& reason) {
     if (peer_) peer_->Close(code, reason);
@@ -245,9 +262,9 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
   Role role() const { return role_; }
   std::string peer() const { return peer_ ? peer_->peer() : std::string("?"); }
 
-  std::atomic<uint64_t> deltas_skipped_{0}, samples_dropped_{0}, resyncs_{0};
-
  private:
+  SessionHub& hub_;
+  std::optional<std::chrono::steady_clock::time_point> behind_since_;  // on the session's strand
   std::shared_ptr<LiveSession> session_;
   Role role_;
   std::shared_ptr<WsPeer> peer_;
@@ -623,6 +640,13 @@ int SessionHub::live_count() {
   return static_cast<int>(live_.size());
 }
 
+namespace {
+std::string Counter(const char* name, const char* help, const std::atomic<uint64_t>& value) {
+  return std::string("# HELP ") + name + " " + help + "\n# TYPE " + name + " counter\n" + name + " " +
+         std::to_string(value.load()) + "\n";
+}
+}  // namespace
+
 std::string SessionHub::MetricsText() {
   std::vector<std::shared_ptr<LiveSession>> all;
   {
@@ -648,8 +672,14 @@ std::string SessionHub::MetricsText() {
          "# TYPE idms_live_sessions gauge\nidms_live_sessions " +
          std::to_string(all.size()) +
          "\n# HELP idms_viewers Viewers of live sessions.\n# TYPE idms_viewers gauge\nidms_viewers " +
-         std::to_string(viewers) +
-         "\n# HELP idms_session_samples Device samples received, per live session.\n"
+         std::to_string(viewers) + "\n" +
+         Counter("idms_viewer_frames_total", "Frames queued to live viewers.", viewer_frames) +
+         Counter("idms_viewer_bytes_total", "Bytes queued to live viewers.", viewer_bytes) +
+         Counter("idms_viewer_deltas_skipped_total", "Mesh deltas slow viewers skipped.", deltas_skipped) +
+         Counter("idms_viewer_samples_dropped_total", "Sample batches slow viewers did not get.", samples_dropped) +
+         Counter("idms_viewer_resyncs_total", "Keyframes sent to put a slow viewer right.", resyncs) +
+         Counter("idms_viewer_stalled_closed_total", "Viewers closed for staying stalled.", stalled_closed) +
+         "# HELP idms_session_samples Device samples received, per live session.\n"
          "# TYPE idms_session_samples gauge\n" +
          samples + "# HELP idms_session_viewers Viewers, per live session.\n# TYPE idms_session_viewers gauge\n" +
          watching +
@@ -786,7 +816,7 @@ std::shared_ptr<WsEndpoint> MakeEndpoint(ServerCore& core, const ApiRequest& req
       *refusal = "no live session " + req.params[0];
       return nullptr;
     }
-    return std::make_shared<ViewerEndpoint>(s, req.role);
+    return std::make_shared<ViewerEndpoint>(*core.hub, s, req.role);
   }
   if (req.params.size() == 1 && req.path.rfind("/ws/replay/", 0) == 0)
     return MakeReplayEndpoint(core, req.params[0], refusal);
