@@ -57,6 +57,8 @@ const char* EnvelopeBodyName(const v1::Envelope& envelope) {
       return "playback_state";
     case v1::Envelope::kCommand:
       return "command";
+    case v1::Envelope::kAnnotation:
+      return "annotation";
     case v1::Envelope::BODY_NOT_SET:
       return "none";
   }

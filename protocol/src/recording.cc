@@ -49,7 +49,8 @@ bool RecordingWriter::Open(const std::string& path, const RecordingWriterOptions
   device_channel_ = mcap_.AddChannel(device_schema, kDeviceTopic, kProtobuf, {}, error);
   mesh_channel_ = mcap_.AddChannel(envelope_schema, kMeshTopic, kProtobuf, {}, error);
   events_channel_ = mcap_.AddChannel(envelope_schema, kEventsTopic, kProtobuf, {}, error);
-  if (device_channel_ == 0 || mesh_channel_ == 0 || events_channel_ == 0) return false;
+  annotations_channel_ = mcap_.AddChannel(envelope_schema, kAnnotationsTopic, kProtobuf, {}, error);
+  if (device_channel_ == 0 || mesh_channel_ == 0 || events_channel_ == 0 || annotations_channel_ == 0) return false;
   if (!options.session.empty() && !mcap_.AddMetadata(kSessionMetadataName, options.session, error)) return false;
   return mcap_.Flush(0, error);
 }
@@ -74,10 +75,15 @@ bool RecordingWriter::Write(const v1::Envelope& envelope, uint64_t log_time_ns, 
       channel = events_channel_;
       envelope.AppendToString(&bytes_);
       break;
+    case v1::Envelope::kAnnotation:
+      channel = annotations_channel_;
+      envelope.AppendToString(&bytes_);
+      break;
     default:
       if (error != nullptr) {
         *error = std::string("recording: a frame with body ") + EnvelopeBodyName(envelope) +
-                 " is not recorded (only device_samples, mesh_keyframe, mesh_delta, session_event, topology_event)";
+                 " is not recorded (only device_samples, mesh_keyframe, mesh_delta, session_event, topology_event, "
+                 "annotation)";
       }
       return false;
   }
@@ -121,7 +127,8 @@ bool RecordingReader::Setup(const RecordingReaderOptions& options, std::string* 
   };
   if (!find(kDeviceTopic, v1::DeviceSamples::descriptor()->full_name(), &device_channel_) ||
       !find(kMeshTopic, v1::Envelope::descriptor()->full_name(), &mesh_channel_) ||
-      !find(kEventsTopic, v1::Envelope::descriptor()->full_name(), &events_channel_)) {
+      !find(kEventsTopic, v1::Envelope::descriptor()->full_name(), &events_channel_) ||
+      !find(kAnnotationsTopic, v1::Envelope::descriptor()->full_name(), &annotations_channel_)) {
     return false;
   }
   session_.clear();
@@ -132,6 +139,7 @@ bool RecordingReader::Setup(const RecordingReaderOptions& options, std::string* 
   if (options_.device && device_channel_ != 0) selected_.push_back(device_channel_);
   if (options_.mesh && mesh_channel_ != 0) selected_.push_back(mesh_channel_);
   if (options_.events && events_channel_ != 0) selected_.push_back(events_channel_);
+  if (options_.annotations && annotations_channel_ != 0) selected_.push_back(annotations_channel_);
   return Seek(0, error);
 }
 
@@ -232,14 +240,16 @@ bool RecordingReader::Parse(const McapMessage& m, RecordedMessage* out, std::str
     return true;
   }
   const bool mesh = m.channel_id == mesh_channel_;
-  out->topic = mesh ? RecordingTopic::kMesh : RecordingTopic::kEvents;
-  const std::string_view topic = mesh ? kMeshTopic : kEventsTopic;
+  const bool note = m.channel_id == annotations_channel_;
+  out->topic = mesh ? RecordingTopic::kMesh : note ? RecordingTopic::kAnnotations : RecordingTopic::kEvents;
+  const std::string_view topic = mesh ? kMeshTopic : note ? kAnnotationsTopic : kEventsTopic;
   std::string parse_error;
   if (!ParseEnvelope(m.data, &out->envelope, &parse_error, std::numeric_limits<int64_t>::max())) {
     return fail(topic, parse_error);
   }
-  const bool allowed = mesh ? out->envelope.has_mesh_keyframe() || out->envelope.has_mesh_delta()
-                            : out->envelope.has_session_event() || out->envelope.has_topology_event();
+  const bool allowed = mesh   ? out->envelope.has_mesh_keyframe() || out->envelope.has_mesh_delta()
+                       : note ? out->envelope.has_annotation()
+                              : out->envelope.has_session_event() || out->envelope.has_topology_event();
   if (!allowed) return fail(topic, std::string("a frame with body ") + EnvelopeBodyName(out->envelope));
   return true;
 }

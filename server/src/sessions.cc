@@ -194,6 +194,15 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
       return peer_->Close(kPolicyError, "malformed frame");
     }
     if (e.has_hello()) return;  // optional: the URL names the session
+    if (e.has_annotation()) {
+      const std::string& text = e.annotation().text();
+      if (text.empty() || text.size() > 1000) {
+        peer_->Send(Serialized(ErrorEvent("an annotation's text must have 1 to 1000 bytes")), true);
+        return;
+      }
+      return asio::post(session_->strand(),
+                        [s = session_, a = e.annotation(), p = peer_->peer()] { s->ViewerAnnotation(a, p); });
+    }
     if (e.has_command()) {
       if (role_ != Role::kAdmin) {
         peer_->Send(Serialized(ErrorEvent("command refused: only an admin may send commands to the agent")), true);
@@ -490,6 +499,18 @@ void LiveSession::KeyframeFor(std::shared_ptr<ViewerEndpoint> viewer) {
   std::string error;
   if (!mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return;
   viewer->OfferKeyframe(Serialized(e));
+}
+
+void LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
+  // Stamped here: who, which, and when (now, in session time, unless the viewer named a time).
+  auto e = std::make_shared<v1::Envelope>();
+  v1::Annotation* a = e->mutable_annotation();
+  *a = note;
+  a->set_author(peer);
+  a->set_id(++annotations_);
+  if (!(note.time_s() > 0)) a->set_time_s(summary_.last_time_s);
+  Broadcast(Serialized(*e), false, false);
+  Record(std::move(e));
 }
 
 void LiveSession::ViewerCommand(const v1::Command& command, const std::string& peer) {

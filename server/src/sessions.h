@@ -59,6 +59,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void ViewerAttached(std::shared_ptr<ViewerEndpoint> viewer);
   void ViewerDetached(ViewerEndpoint* viewer);
   void ViewerCommand(const v1::Command& command, const std::string& peer);
+  void ViewerAnnotation(const v1::Annotation& note, const std::string& peer);
   void KeyframeFor(std::shared_ptr<ViewerEndpoint> viewer);
   void Stop(const std::string& why);  // server shutdown: tell everyone, finish the recording
 
@@ -87,6 +88,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   std::vector<std::shared_ptr<ViewerEndpoint>> viewers_;
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
+  uint64_t annotations_ = 0;
   uint64_t first_tick_time_valid_ = 0;
   double first_time_s_ = -1;
   mutable std::mutex row_mu_;  // row_ is read by the REST handlers

@@ -75,10 +75,17 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                        RecordingReader reader;
                        RecordingReaderOptions options;
                        options.device = options.mesh = false;
+                       json annotations = json::array();
                        std::string error;
                        if (reader.Open(hub->RecordingPath(*r), options, &error)) {
                          RecordedMessage m;
                          while (reader.Next(&m, &error)) {
+                           if (m.envelope.has_annotation()) {
+                             const v1::Annotation& a = m.envelope.annotation();
+                             annotations.push_back(
+                                 {{"id", a.id()}, {"time_s", a.time_s()}, {"text", a.text()}, {"author", a.author()}});
+                             continue;
+                           }
                            if (!m.envelope.has_session_event()) continue;
                            const v1::SessionEvent& e = m.envelope.session_event();
                            events.push_back({{"kind", v1::SessionEvent::Kind_Name(e.kind())},
@@ -89,6 +96,7 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                          }
                        }
                        out["events"] = events;
+                       out["annotations"] = annotations;
                        return JsonResponse(req, http::status::ok, JsonText(out));
                      },
                      true});

@@ -214,6 +214,25 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
     }
     return false;
   }));
+  // An annotation from the instructor reaches every viewer, stamped with its author and time.
+  v1::Envelope note;
+  note.mutable_annotation()->set_text("too much force here");
+  b.Send(note);
+  v1::Annotation noted;
+  auto annotation_in = [](TestViewer& v, v1::Annotation* out) {
+    for (const v1::Envelope& e : v.Frames()) {
+      if (e.has_annotation()) return *out = e.annotation(), true;
+    }
+    return false;
+  };
+  ASSERT_TRUE(Eventually([&] {
+    v1::Annotation ignored;
+    return annotation_in(late, &ignored) && annotation_in(b, &ignored) && annotation_in(a, &noted);
+  }));
+  EXPECT_EQ(noted.text(), "too much force here");
+  EXPECT_EQ(noted.id(), 1u);
+  EXPECT_NE(noted.author().find("admin"), std::string::npos);
+  EXPECT_GT(noted.time_s(), 1.0);
   // The agent ends: every viewer is closed, and its mirror equals the agent's final surface.
   ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
   for (TestViewer* v : {&a, &b, &late}) {
@@ -252,6 +271,9 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   bool saw_joined = false;
   for (const json& e : detail["events"]) saw_joined |= e["kind"] == "KIND_VIEWER_JOINED";
   EXPECT_TRUE(saw_joined);
+  ASSERT_EQ(detail["annotations"].size(), 1u);
+  EXPECT_EQ(detail["annotations"][0]["text"], "too much force here");
+  EXPECT_NEAR(detail["annotations"][0]["time_s"].get<double>(), noted.time_s(), 1e-9);
   // A viewer of a session that is not live: 404.
   EXPECT_EQ(WsConnect(port, "/ws/session/" + id, {{"Authorization", "Bearer " + observer}}).status, 404);
   // Only an admin deletes a recording.

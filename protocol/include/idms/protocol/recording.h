@@ -5,6 +5,7 @@
 //   /device  idms.v1.DeviceSamples   a batch of 1 kHz ticks, as the agent sent it
 //   /mesh    idms.v1.Envelope        mesh_keyframe or mesh_delta: the frame as it went out
 //   /events  idms.v1.Envelope        session_event or topology_event
+//   /annotations idms.v1.Envelope    annotation (a viewer's note; absent from older recordings)
 //
 // Envelopes on /mesh and /events keep one channel per topic while carrying two message types
 // (an MCAP channel has one schema), and are the WebSocket frames themselves, so playback forwards
@@ -29,6 +30,7 @@ namespace idms {
 inline constexpr std::string_view kDeviceTopic = "/device";
 inline constexpr std::string_view kMeshTopic = "/mesh";
 inline constexpr std::string_view kEventsTopic = "/events";
+inline constexpr std::string_view kAnnotationsTopic = "/annotations";
 // Name of the Metadata record that holds RecordingWriterOptions::session.
 inline constexpr std::string_view kSessionMetadataName = "idms.session";
 
@@ -49,7 +51,8 @@ class RecordingWriter {
  public:
   bool Open(const std::string& path, const RecordingWriterOptions& options, std::string* error);
   // Records one frame on its channel by body: device_samples -> /device, mesh_keyframe and
-  // mesh_delta -> /mesh, session_event and topology_event -> /events. Other bodies are refused.
+  // mesh_delta -> /mesh, session_event and topology_event -> /events, annotation -> /annotations.
+  // Other bodies are refused.
   bool Write(const v1::Envelope& envelope, uint64_t log_time_ns, uint64_t publish_time_ns, std::string* error);
   // McapWriter::Flush: call periodically so that a quiet session's chunk still closes.
   bool Flush(uint64_t now_ns, std::string* error) { return mcap_.Flush(now_ns, error); }
@@ -61,10 +64,11 @@ class RecordingWriter {
   uint16_t device_channel_ = 0;
   uint16_t mesh_channel_ = 0;
   uint16_t events_channel_ = 0;
+  uint16_t annotations_channel_ = 0;
   std::string bytes_;  // reused serialization buffer
 };
 
-enum class RecordingTopic { kDevice, kMesh, kEvents };
+enum class RecordingTopic { kDevice, kMesh, kEvents, kAnnotations };
 
 // One recorded message, parsed.
 struct RecordedMessage {
@@ -83,6 +87,7 @@ struct RecordingReaderOptions {
   bool device = true;
   bool mesh = true;
   bool events = true;
+  bool annotations = true;
 };
 
 // Reads a recording (finished, or unfinished after a crash: see McapReader) in log-time order.
@@ -127,6 +132,7 @@ class RecordingReader {
   uint16_t device_channel_ = 0;  // 0 = absent
   uint16_t mesh_channel_ = 0;
   uint16_t events_channel_ = 0;
+  uint16_t annotations_channel_ = 0;
   std::vector<uint16_t> selected_;
   // Seek state: before seek_ns only /mesh frames from the keyframe on are returned.
   uint64_t seek_ns_ = 0;
