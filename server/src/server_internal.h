@@ -46,8 +46,8 @@ struct ServerCore {
   std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
   std::atomic<bool> draining{false};
   std::atomic<int> uploads_in_flight{0};
-  SessionHub* hub = nullptr;                     // live sessions (sessions.cc)
-  boost::asio::thread_pool recorder{1};          // recordings' disk writes, off the network threads
+  SessionHub* hub = nullptr;             // live sessions (sessions.cc)
+  boost::asio::thread_pool recorder{1};  // recordings' disk writes, off the network threads
 
   ServerCore(ServerOptions o, int io_threads, int worker_threads)
       : options(std::move(o)), ioc(io_threads), workers(static_cast<size_t>(worker_threads)) {}

@@ -34,15 +34,6 @@ uint64_t UnixNs() {
           .count());
 }
 
-std::string UtcNow() {
-  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 std::string RandomHex(size_t bytes) {
   std::vector<unsigned char> raw(bytes);
   RAND_bytes(raw.data(), static_cast<int>(raw.size()));
@@ -435,32 +426,28 @@ void LiveSession::AgentDetached(bool ended_cleanly) {
     return Persist();
   }
   // The agent ended the session: finish the recording, tell the viewers, forget it.
-  live_ = false;
-  timer_.cancel();
-  {
-    std::lock_guard lock(row_mu_);
-    row_.state = "ended";
-    row_.recording = id_ + ".mcap";
-  }
-  auto self = shared_from_this();
-  recorder_->Finish([self] { self->Persist(); });
+  FinishRecording("ended");
   for (const auto& v : viewers_) v->Close(1000, "the session ended");
   viewers_.clear();
   num_viewers_ = 0;
   core_.hub->Forget(id_);
 }
 
-void LiveSession::Stop(const std::string& why) {
-  if (!live_) return;
+void LiveSession::FinishRecording(const std::string& state) {
   live_ = false;
   timer_.cancel();
   {
     std::lock_guard lock(row_mu_);
-    row_.state = "interrupted";
+    row_.state = state;
     row_.recording = id_ + ".mcap";
   }
-  auto self = shared_from_this();
-  recorder_->Finish([self] { self->Persist(); });
+  // The row is stored once the file is closed and renamed.
+  recorder_->Finish([self = shared_from_this()] { self->Persist(); });
+}
+
+void LiveSession::Stop(const std::string& why) {
+  if (!live_) return;
+  FinishRecording("interrupted");
   v1::Envelope bye;
   bye.mutable_session_event()->set_kind(v1::SessionEvent::KIND_RECORDING_STOPPED);
   bye.mutable_session_event()->set_message(why);
@@ -604,13 +591,7 @@ std::shared_ptr<LiveSession> SessionHub::OpenForAgent(const v1::Hello& hello, co
       row.recording = row.id + ".live.mcap";
       v1::Scene scene;
       google::protobuf::TextFormat::ParseFromString(row.scene_text, &scene);
-      auto recorder = std::make_shared<Recorder>(core_.recorder, recordings_dir_, row.id);
-      RecordingWriterOptions options;
-      options.session = {{"session_id", row.id}, {"model", row.model}, {"scene", row.scene_text}};
-      recorder->Start(options, /*continue_finished=*/true);
-      s = std::make_shared<LiveSession>(core_, row, scene, recorder);
-      s->Start();
-      live_[row.id] = s;
+      s = StartSession(row, scene, /*continue_finished=*/true);
     }
     welcome->set_session_id(row.id);
     welcome->set_resume_token(hello.resume_token());
@@ -630,18 +611,25 @@ std::shared_ptr<LiveSession> SessionHub::OpenForAgent(const v1::Hello& hello, co
   google::protobuf::TextFormat::PrintToString(hello.scene(), &row.scene_text);
   const std::string resume_token = RandomHex(32);
   row.resume_sha256 = Sha256Hex(resume_token);
-  auto recorder = std::make_shared<Recorder>(core_.recorder, recordings_dir_, row.id);
-  RecordingWriterOptions options;
-  options.session = {{"session_id", row.id}, {"model", row.model}, {"scene", row.scene_text}};
-  recorder->Start(options, false);
-  auto s = std::make_shared<LiveSession>(core_, row, hello.scene(), recorder);
-  s->Start();
-  live_[row.id] = s;
+  auto s = StartSession(row, hello.scene(), /*continue_finished=*/false);
   index_->Put(row, error);
   welcome->set_session_id(row.id);
   welcome->set_resume_token(resume_token);
   welcome->set_next_tick(0);
   Log(LogLevel::kInfo, "session started", {{"session", row.id}, {"model", row.model}, {"peer", peer}});
+  return s;
+}
+
+std::shared_ptr<LiveSession> SessionHub::StartSession(const SessionRow& row, const v1::Scene& scene,
+                                                      bool continue_finished) {
+  // Its recording (with the session's id, model and scene as metadata), then the session itself.
+  auto recorder = std::make_shared<Recorder>(core_.recorder, recordings_dir_, row.id);
+  RecordingWriterOptions options;
+  options.session = {{"session_id", row.id}, {"model", row.model}, {"scene", row.scene_text}};
+  recorder->Start(options, continue_finished);
+  auto s = std::make_shared<LiveSession>(core_, row, scene, recorder);
+  s->Start();
+  live_[row.id] = s;
   return s;
 }
 

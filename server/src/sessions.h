@@ -74,7 +74,8 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void Broadcast(std::shared_ptr<const std::string> bytes, bool is_delta, bool is_samples);
   void Record(std::shared_ptr<const v1::Envelope> envelope);
   void RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer);
-  void Tick();  // once a second: flush the recording, store the row
+  void Tick();                                     // once a second: flush the recording, store the row
+  void FinishRecording(const std::string& state);  // no longer live: "ended" or "interrupted"
   void Persist();
 
   ServerCore& core_;
@@ -126,6 +127,9 @@ class SessionHub {
   std::string MetricsText();
 
  private:
+  // A live session and its recorder, under mu_; continue_finished: a resume after a restart.
+  std::shared_ptr<LiveSession> StartSession(const SessionRow& row, const v1::Scene& scene, bool continue_finished);
+
   ServerCore& core_;
   SessionIndex* index_;
   std::string recordings_dir_;

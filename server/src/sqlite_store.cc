@@ -100,6 +100,8 @@ ModelVersion RowToVersion(const Statement& s) {
   return v;
 }
 
+}  // namespace
+
 std::string UtcNow() {
   const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
   std::tm tm{};
@@ -108,6 +110,8 @@ std::string UtcNow() {
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   return buf;
 }
+
+namespace {
 
 class SqliteModelStore final : public ModelStore {
  public:

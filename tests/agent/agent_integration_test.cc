@@ -25,17 +25,6 @@ const std::string kModel = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home"
 
 nlohmann::json ReadJson(const std::string& path) { return nlohmann::json::parse(ReadText(path)); }
 
-// The final surface the agent dumped: one "x y z" line per vertex after a comment line.
-std::vector<double> ReadDump(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  std::string line;
-  std::getline(in, line);
-  std::vector<double> out;
-  double v = 0;
-  while (in >> v) out.push_back(v);
-  return out;
-}
-
 // All device samples' ticks over all connections, in arrival order.
 std::vector<uint64_t> Ticks(const std::vector<ConnectionRecord>& connections) {
   std::vector<uint64_t> ticks;
@@ -104,7 +93,7 @@ TEST(AgentIntegration, EverySampleOnceInOrderAcrossDisconnectAndMirrorMatches) {
     }
   }
   EXPECT_GT(frames, 150);  // ~60 Hz for 3 s
-  const std::vector<double> truth = ReadDump(dir + "/final.txt");
+  const std::vector<double> truth = ReadNumbersAfterFirstLine(dir + "/final.txt");
   ASSERT_EQ(truth.size(), 3 * static_cast<size_t>(mirror.num_vertices()));
   double max_error = 0, max_dent = 0;
   for (size_t i = 0; i < truth.size(); ++i) {

@@ -118,3 +118,17 @@ std::string ReadText(const std::string& path) {
 }
 
 }  // namespace idms::test
+
+namespace idms::test {
+
+std::vector<double> ReadNumbersAfterFirstLine(const std::string& path) {
+  std::istringstream in(ReadText(path));
+  std::string line;
+  std::getline(in, line);
+  std::vector<double> out;
+  double v = 0;
+  while (in >> v) out.push_back(v);
+  return out;
+}
+
+}  // namespace idms::test

@@ -40,5 +40,7 @@ class ChildProcess {
 // A fresh directory under the test's temporary directory.
 std::string TempDir(const std::string& name);
 std::string ReadText(const std::string& path);
+// The numbers of a file after its first line (the agent's --dump-final: a comment, then "x y z" per vertex).
+std::vector<double> ReadNumbersAfterFirstLine(const std::string& path);
 
 }  // namespace idms::test

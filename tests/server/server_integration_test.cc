@@ -58,18 +58,6 @@ void WatchLibrary(websocket::stream<beast::tcp_stream>& ws, uint16_t port, const
   ws.read(hello);
 }
 
-// Polls `condition` until it holds or `timeout` passes (for effects of a signal, which have no
-// other completion to await).
-template <class F>
-bool Eventually(F condition, milliseconds timeout = milliseconds(10000)) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(milliseconds(20));
-  }
-  return condition();
-}
-
 TEST(ServerIntegration, FirstStartImportsShippedModelsAndWritesPrivateTokens) {
   const std::string dir = TempDir("first-start") + "/data";
   ServerProcess server(dir);

@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "child_process.h"
@@ -62,6 +63,18 @@ struct WsResult {
 WsResult WsConnect(uint16_t port, const std::string& target,
                    const std::vector<std::pair<std::string, std::string>>& headers,
                    boost::asio::ssl::context* tls = nullptr);
+
+// Polls `condition` every 20 ms until it holds or `timeout` passes: for effects that have no
+// completion to await (a signal's, another process's).
+template <class F>
+bool Eventually(F condition, std::chrono::milliseconds timeout = std::chrono::milliseconds(20000)) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return condition();
+}
 
 // The file's text as a JSON string value.
 std::string JsonUpload(const std::string& fem, const std::string& plg, const std::string& description);

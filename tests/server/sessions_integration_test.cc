@@ -31,16 +31,6 @@ using json = nlohmann::json;
 using std::chrono::milliseconds;
 using std::chrono::seconds;
 
-template <class F>
-bool Eventually(F condition, milliseconds timeout = milliseconds(20000)) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(milliseconds(20));
-  }
-  return condition();
-}
-
 // A viewer on its own thread: every frame kept, mesh frames applied to a mirror.
 class TestViewer {
  public:
@@ -113,17 +103,6 @@ class TestViewer {
   std::atomic<bool> closed_{false};
   std::atomic<int> gaps_{0};
 };
-
-// The agent's final surface (--dump-final): one "x y z" per vertex after a comment line.
-std::vector<double> ReadDump(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  std::string line;
-  std::getline(in, line);
-  std::vector<double> out;
-  double v = 0;
-  while (in >> v) out.push_back(v);
-  return out;
-}
 
 json Sessions(uint16_t port, const std::string& token) {
   const HttpReply r = Get(port, "/api/sessions", token);
@@ -238,7 +217,7 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   for (TestViewer* v : {&a, &b, &late}) {
     ASSERT_TRUE(v->WaitClosed(seconds(20)));
     EXPECT_EQ(v->gaps(), 0);
-    const std::vector<double> truth = ReadDump(dir + "/final.txt");
+    const std::vector<double> truth = ReadNumbersAfterFirstLine(dir + "/final.txt");
     const std::vector<float> seen = v->Positions();
     ASSERT_EQ(seen.size(), truth.size());
     double worst = 0;

@@ -103,6 +103,9 @@ std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string
 std::unique_ptr<ModelStore> OpenSqliteModelStore(const std::string& db_path, std::string* error);
 std::unique_ptr<SessionIndex> OpenSqliteSessionIndex(const std::string& db_path, std::string* error);
 
+// The current UTC time as ISO 8601 ("2026-11-23T19:04:05Z"), as the stores write it.
+std::string UtcNow();
+
 // SHA-256 of bytes as 64 lowercase hex digits (OpenSSL).
 std::string Sha256Hex(std::string_view bytes);
 
