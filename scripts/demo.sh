@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs dependencies, builds, and runs the demo of what exists today: the thesis's hex
 # fragment (figure 3-1) is generated, validated and compared with the shipped model library,
-# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/, and the
-# device agent runs its 1 kHz loop on a scripted palpation for two seconds.
+# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/; the
+# device agent runs its 1 kHz loop on a scripted palpation for two seconds; then idms-server
+# serves the library over HTTP, takes an upload, refuses a broken one, and records a session the
+# agent publishes after fetching its model by name.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -55,7 +57,7 @@ curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F pl
   "$url/api/models/my_fragment"; echo
 echo "-- the device agent fetches its model from the library by name and publishes a session, recorded"
 "$bin/idms-agent" --server "ws://${url#http://}" --token "$agent" --model my_fragment --device scripted:palpate \
-  --duration 0.5 --no-realtime --cache-dir "$out/agent-cache" --flush-timeout 1 > "$out/agent-fetch.log" 2>&1 || true
+  --duration 3 --no-realtime --cache-dir "$out/agent-cache" --flush-timeout 1 > "$out/agent-fetch.log" 2>&1 || true
 ls "$out/agent-cache/blobs"
 echo "-- GET /api/sessions, and the recording"
 curl -sf -H "Authorization: Bearer $admin" "$url/api/sessions"; echo
