@@ -34,7 +34,7 @@ bool SplitListen(const std::string& text, std::string* host, uint16_t* port) {
 int main(int argc, char** argv) {
   ServerOptions o;
   std::string listen = "127.0.0.1:8740";
-  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30;
+  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30, resume_window_s = 600;
 
   CLI::App app{
       "idms-server: the idms session server. HTTP and WebSocket on one port (TLS optional): the model library "
@@ -74,6 +74,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 3600))
       ->capture_default_str();
 
+  app.add_option("--resume-window", resume_window_s,
+                 "Seconds a live session waits for its agent to come back before it is closed as interrupted")
+      ->check(CLI::Range(1, 86400))
+      ->capture_default_str();
+
   // idms-server token create ROLE --tokens FILE
   CLI::App* token = app.add_subcommand("token", "Manage tokens");
   CLI::App* create =
@@ -106,6 +111,7 @@ int main(int argc, char** argv) {
   o.max_ws_message_bytes = int64_t{max_ws_mb} << 20;
   o.header_timeout = std::chrono::seconds(header_timeout_s);
   o.body_timeout = std::chrono::seconds(body_timeout_s);
+  o.resume_window = std::chrono::seconds(resume_window_s);
   idms::server::SetLogFormat(o.log_format);
 
   idms::server::Server server(o);

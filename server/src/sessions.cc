@@ -305,6 +305,17 @@ void LiveSession::Tick() {
   timer_.expires_after(std::chrono::seconds(1));
   timer_.async_wait([self = shared_from_this()](boost::system::error_code ec) {
     if (ec || !self->live_) return;
+    // An agent gone past the resume window: the session is closed, nothing recorded is lost.
+    if (!self->agent_ &&
+        std::chrono::steady_clock::now() - self->agent_gone_since_ > self->core_.options.resume_window) {
+      Log(LogLevel::kInfo, "session closed: its agent did not come back", {{"session", self->id_}});
+      self->FinishRecording("interrupted");
+      for (const auto& v : self->viewers_) v->Close(1000, "the agent did not come back");
+      self->viewers_.clear();
+      self->num_viewers_ = 0;
+      self->core_.hub->Forget(self->id_);
+      return;
+    }
     self->recorder_->Flush();
     self->Persist();
     self->Tick();
@@ -421,6 +432,7 @@ void LiveSession::AgentFrame(std::shared_ptr<const v1::Envelope> envelope, std::
 void LiveSession::AgentDetached(bool ended_cleanly) {
   if (!live_) return;
   agent_.reset();
+  agent_gone_since_ = std::chrono::steady_clock::now();
   if (!ended_cleanly) {
     RecordEvent(v1::SessionEvent::KIND_AGENT_DISCONNECTED, "the agent's connection dropped; it may resume", "");
     return Persist();

@@ -86,6 +86,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   std::shared_ptr<Recorder> recorder_;
   MeshMirror mirror_;
   std::shared_ptr<WsPeer> agent_;
+  std::chrono::steady_clock::time_point agent_gone_since_ = std::chrono::steady_clock::now();
   std::vector<std::shared_ptr<ViewerEndpoint>> viewers_;
   SessionSummary summary_;
   uint64_t next_tick_ = 0;

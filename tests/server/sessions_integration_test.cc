@@ -383,6 +383,38 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
   EXPECT_EQ(WsConnect(port, "/ws/replay/nope", {{"Authorization", "Bearer " + observer}}).status, 404);
 }
 
+TEST(Sessions, AnAgentThatDiesAndDoesNotComeBackLeavesAWholeRecording) {
+  const std::string dir = TempDir("sessions-agent-dies");
+  ServerProcess server(dir + "/data", {"--resume-window", "1"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(server, dir, 10), dir + "/agent.log");
+  std::string id;
+  int64_t samples = 0;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(port, observer);
+    if (s.empty() || s[0]["samples"].get<int>() < 1000) return false;
+    id = s[0]["id"];
+    return true;
+  }));
+  agent.Signal(SIGKILL);
+  ASSERT_TRUE(agent.Wait(seconds(30)));
+  // Past the resume window: closed as interrupted, its recording finished and whole.
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(port, observer);
+    samples = s[0]["samples"];
+    return s[0]["state"] == "interrupted";
+  })) << server.Log();
+  const HttpReply rec = Get(port, "/api/sessions/" + id + "/recording.mcap", observer);
+  ASSERT_EQ(rec.status, 200);
+  std::ofstream(dir + "/rec.mcap", std::ios::binary) << rec.body;
+  const std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
+  EXPECT_EQ(static_cast<int64_t>(ticks.size()), samples);
+  for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  IndependentReaderAccepts(dir + "/rec.mcap", ticks.size());
+}
+
 // The server dies under a live session (SIGKILL, then SIGTERM); the agent reconnects to the
 // restarted server, resumes the same session, and the recording holds every tick once, in order.
 void ResumeAcrossRestart(int signal) {

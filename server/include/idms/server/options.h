@@ -29,6 +29,9 @@ struct ServerOptions {
   std::chrono::seconds body_timeout{30};    // plus 1 s per MiB of the announced body
   std::chrono::seconds login_lifetime{12 * 3600};
   std::chrono::seconds shutdown_grace{10};  // SIGTERM: requests in flight get this long
+  // A live session whose agent has been gone this long is closed as "interrupted" (recording
+  // finished); its agent can still resume it later, as after a restart.
+  std::chrono::seconds resume_window{600};
 };
 
 }  // namespace idms::server
