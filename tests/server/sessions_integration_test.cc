@@ -263,6 +263,24 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   EXPECT_EQ(Get(port, "/api/sessions/" + id + "/recording.mcap", observer).status, 404);
 }
 
+TEST(Sessions, TheRealAgentIsRefusedAWrongTokenAndAnObserversOne) {
+  const std::string dir = TempDir("sessions-refused");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string url = "ws://127.0.0.1:" + server.port_string();
+  for (const auto& [token, status] : std::vector<std::pair<std::string, std::string>>{
+           {"wrong-token-xxxxxxxxxxx", "HTTP 401"}, {server.Token("observer"), "HTTP 403"}}) {
+    ChildProcess agent(IDMS_AGENT_BIN,
+                       {"--server", url, "--token", token, "--model-file",
+                        std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home", "--device", "scripted:palpate",
+                        "--no-realtime", "--duration", "2"},
+                       dir + "/agent.log");
+    EXPECT_EQ(agent.Wait(seconds(30)), 2) << agent.Log();
+    EXPECT_NE(agent.Log().find("refused the token (" + status), std::string::npos) << agent.Log();
+  }
+  EXPECT_TRUE(Sessions(server.port(), server.Token("observer")).empty());
+}
+
 TEST(Sessions, GarbageFromAnAgentClosesItWithAReason) {
   const std::string dir = TempDir("sessions-garbage");
   ServerProcess server(dir + "/data");
