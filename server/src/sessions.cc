@@ -153,6 +153,25 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
   bool open_ = false;
 };
 
+void SessionSummary::Add(const v1::DeviceSamples& ds) {
+  for (const v1::DeviceSample& s : ds.samples()) {
+    const double f = Norm(s.force());
+    peak_force = std::max(peak_force, f);
+    const double dt = have_last ? s.time_s() - last_time_s : 0;
+    if (s.contact()) force_sum_in_contact += f, ++contact_samples, contact_time_s += dt;
+    const double p[3] = {s.tool_pos().x(), s.tool_pos().y(), s.tool_pos().z()};
+    if (have_last) path_length += std::hypot(p[0] - last_pos[0], p[1] - last_pos[1], p[2] - last_pos[2]);
+    std::copy(p, p + 3, last_pos);
+    have_last = true;
+    if (first_time_s < 0) first_time_s = s.time_s();
+    last_time_s = s.time_s();
+    warnings += s.warnings();
+  }
+  overruns = ds.stats().overruns();
+  tick_p99_us = ds.stats().compute_p99_us();
+  samples_dropped = ds.samples_dropped();
+}
+
 std::string SessionSummary::Json() const {
   return json{{"peak_force", peak_force},
               {"mean_contact_force", contact_samples > 0 ? force_sum_in_contact / contact_samples : 0.0},
@@ -373,33 +392,13 @@ void LiveSession::AgentFrame(std::shared_ptr<const v1::Envelope> envelope, std::
                       std::to_string(i == 0 ? next_tick_ : ds.samples(i - 1).tick() + 1) + ")");
       }
     }
-    // The summary.
-    for (const v1::DeviceSample& s : ds.samples()) {
-      const double f = Norm(s.force());
-      summary_.peak_force = std::max(summary_.peak_force, f);
-      const double dt = summary_.have_last ? s.time_s() - summary_.last_time_s : 0;
-      if (s.contact()) summary_.force_sum_in_contact += f, ++summary_.contact_samples, summary_.contact_time_s += dt;
-      if (summary_.have_last) {
-        const double d[3] = {s.tool_pos().x() - summary_.last_pos[0], s.tool_pos().y() - summary_.last_pos[1],
-                             s.tool_pos().z() - summary_.last_pos[2]};
-        summary_.path_length += std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      }
-      summary_.last_pos[0] = s.tool_pos().x(), summary_.last_pos[1] = s.tool_pos().y();
-      summary_.last_pos[2] = s.tool_pos().z();
-      summary_.have_last = true;
-      summary_.last_time_s = s.time_s();
-      summary_.warnings += s.warnings();
-      if (first_time_s_ < 0) first_time_s_ = s.time_s();
-    }
-    summary_.overruns = ds.stats().overruns();
-    summary_.tick_p99_us = ds.stats().compute_p99_us();
-    summary_.samples_dropped = ds.samples_dropped();
+    summary_.Add(ds);
     if (ds.samples_size() > 0) next_tick_ = ds.samples(ds.samples_size() - 1).tick() + 1;
     {
       std::lock_guard lock(row_mu_);
       row_.samples += ds.samples_size();
       row_.next_tick = next_tick_;
-      row_.duration_s = first_time_s_ < 0 ? 0 : summary_.last_time_s - first_time_s_;
+      row_.duration_s = summary_.first_time_s < 0 ? 0 : summary_.last_time_s - summary_.first_time_s;
       row_.summary_json = summary_.Json();
     }
     Broadcast(bytes, false, true);

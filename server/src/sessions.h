@@ -39,7 +39,8 @@ struct SessionSummary {
   uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
-  double last_time_s = 0;
+  double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample
+  void Add(const v1::DeviceSamples& batch);
   std::string Json() const;
 };
 
@@ -91,8 +92,6 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
   uint64_t annotations_ = 0;
-  uint64_t first_tick_time_valid_ = 0;
-  double first_time_s_ = -1;
   mutable std::mutex row_mu_;  // row_ is read by the REST handlers
   SessionRow row_;
   std::atomic<int> num_viewers_{0};
