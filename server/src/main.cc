@@ -34,7 +34,8 @@ bool SplitListen(const std::string& text, std::string* host, uint16_t* port) {
 int main(int argc, char** argv) {
   ServerOptions o;
   std::string listen = "127.0.0.1:8740";
-  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30, resume_window_s = 600;
+  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30, resume_window_s = 600,
+      viewer_stall_timeout_s = 10, ws_send_buffer_kb = 256;
 
   CLI::App app{
       "idms-server: the idms session server. HTTP and WebSocket on one port (TLS optional): the model library "
@@ -79,6 +80,17 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 86400))
       ->capture_default_str();
 
+  app.add_option("--viewer-stall-timeout", viewer_stall_timeout_s,
+                 "Seconds a live viewer may stay a full queue behind before it is closed (until then it skips "
+                 "mesh deltas and is resynchronised with a keyframe)")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
+
+  app.add_option("--ws-send-buffer-kb", ws_send_buffer_kb,
+                 "Kernel send buffer of each WebSocket in KiB (bounds a slow viewer's latency; 0: autotuned)")
+      ->check(CLI::Range(0, 65536))
+      ->capture_default_str();
+
   // idms-server token create ROLE --tokens FILE
   CLI::App* token = app.add_subcommand("token", "Manage tokens");
   CLI::App* create =
@@ -112,6 +124,8 @@ int main(int argc, char** argv) {
   o.header_timeout = std::chrono::seconds(header_timeout_s);
   o.body_timeout = std::chrono::seconds(body_timeout_s);
   o.resume_window = std::chrono::seconds(resume_window_s);
+  o.viewer_stall_timeout = std::chrono::seconds(viewer_stall_timeout_s);
+  o.ws_send_buffer_bytes = ws_send_buffer_kb << 10;
   idms::server::SetLogFormat(o.log_format);
 
   idms::server::Server server(o);

@@ -32,6 +32,12 @@ struct ServerOptions {
   // A live session whose agent has been gone this long is closed as "interrupted" (recording
   // finished); its agent can still resume it later, as after a restart.
   std::chrono::seconds resume_window{600};
+  // A live viewer that stays this long more than a queue's worth of frames behind is closed.
+  std::chrono::seconds viewer_stall_timeout{10};
+  // SO_SNDBUF of every WebSocket: a fixed kernel send buffer instead of Linux's autotuning (up to
+  // 4 MiB), so that a slow peer's backlog builds in the server's queue, where deltas are skipped
+  // and keyframes resynchronise, not as seconds of stale frames in the kernel. 0: the system's.
+  int ws_send_buffer_bytes = 256 << 10;
 };
 
 }  // namespace idms::server
