@@ -13,3 +13,6 @@ set(IDMS_FUZZ_SECONDS 20)
 # The server's request path (Beast's parser, admission, handlers, multipart and JSON bodies).
 list(APPEND IDMS_FUZZ_TARGETS http_fuzz)
 set(IDMS_FUZZ_LIBS_http_fuzz idms_server_api)
+# A WebSocket's first frames on /ws/agent and /ws/session/{id} (the sessions' endpoints).
+list(APPEND IDMS_FUZZ_TARGETS ws_fuzz)
+set(IDMS_FUZZ_LIBS_ws_fuzz idms_server)
