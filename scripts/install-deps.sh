@@ -23,6 +23,7 @@ $build_only || packages+=(
   clang libclang-rt-14-dev
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
+  docker.io docker-compose debootstrap
 )
 npm_dirs=()
 $build_only || npm_dirs+=(tests/mcap-js)
