@@ -104,7 +104,8 @@ ApiResponse ListModels(ApiContext& ctx, ApiRequest& req) {
                       {"triangles", v.triangles},
                       {"bytes", v.bytes},
                       {"description", v.description},
-                      {"created", v.created}});
+                      {"created", v.created},
+                      {"thumbnail", "/api/models/" + v.name + "/thumbnail.png?version=" + std::to_string(v.version)}});
   }
   return JsonResponse(req, http::status::ok, JsonText(json{{"models", models}}));
 }

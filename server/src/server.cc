@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "idms/server/log.h"
+#include "render_api.h"
 #include "server_internal.h"
 #include "sessions.h"
 
@@ -142,6 +143,7 @@ bool Server::Impl::Start(std::string* error) {
   hub->RecoverInterrupted();
   core.routes = MakeRoutes();
   AppendSessionRoutes(core, &core.routes);
+  AppendRenderRoutes(core, &core.routes);
   core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
   // Bind.
   boost::system::error_code ec;

@@ -1,0 +1,304 @@
+// The renderer against expectations that fail if nothing or the wrong mesh were drawn: coverage
+// by the lit surface, lit and shadowed colours, front and back, the dent under the tool after a
+// real palpation, the tool marker where the device was, the force arrow, and determinism.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "idms/render/png.h"
+#include "idms/render/render.h"
+#include "idms/render/source.h"
+#include "recording_fixture.h"
+
+namespace idms::render {
+namespace {
+
+const std::string kModels = std::string(IDMS_SOURCE_DIR) + "/models/";
+
+bool IsBackground(const uint8_t* p) {
+  for (int c = 0; c < 3; ++c) {
+    if (std::abs(p[c] - std::lround(kBackground[c] * 255)) > 2) return false;
+  }
+  return true;
+}
+
+double Luma(const uint8_t* p) { return 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]; }
+
+struct Coverage {
+  int64_t covered = 0;
+  int min_x = 1 << 30, max_x = -1, min_y = 1 << 30, max_y = -1;
+};
+
+Coverage Cover(const Image& image) {
+  Coverage c;
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      if (IsBackground(image.Pixel(x, y))) continue;
+      ++c.covered;
+      c.min_x = std::min(c.min_x, x), c.max_x = std::max(c.max_x, x);
+      c.min_y = std::min(c.min_y, y), c.max_y = std::max(c.max_y, y);
+    }
+  }
+  return c;
+}
+
+// Mean luma of the surface's pixels in columns [x0, x1).
+double MeanLuma(const Image& image, int x0, int x1) {
+  double sum = 0;
+  int64_t n = 0;
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      if (!IsBackground(image.Pixel(x, y))) sum += Luma(image.Pixel(x, y)), ++n;
+    }
+  }
+  return n > 0 ? sum / static_cast<double>(n) : -1;
+}
+
+TEST(Params, SizeCameraSeconds) {
+  int w = 0, h = 0;
+  std::string error;
+  EXPECT_TRUE(ParseSize("1280x720", &w, &h, &error));
+  EXPECT_EQ(w, 1280);
+  EXPECT_EQ(h, 720);
+  for (const char* bad : {"", "1280", "x720", "1280x", "12x720", "99999x10", "4096x4096", "-5x100", "1280x720x3",
+                          "+100x100", "100 x100"}) {
+    EXPECT_FALSE(ParseSize(bad, &w, &h, &error)) << bad;
+  }
+  EXPECT_NE(error.find("expected"), std::string::npos);
+  Camera c;
+  EXPECT_TRUE(ParseCamera("1,2,3:0,0,-1.5", &c, &error));
+  EXPECT_FALSE(c.automatic);
+  EXPECT_EQ(c.eye[1], 2);
+  EXPECT_EQ(c.target[2], -1.5);
+  EXPECT_TRUE(ParseCamera("auto", &c, &error));
+  EXPECT_TRUE(c.automatic);
+  for (const char* bad : {"", "1,2:3,4,5", "1,2,3", "1,2,3:4,5", "1,2,3:1,2,3", "nan,0,0:1,1,1", "1,2,3:4,5,6,7"}) {
+    EXPECT_FALSE(ParseCamera(bad, &c, &error)) << bad;
+  }
+  double s = 0;
+  EXPECT_TRUE(ParseSeconds("1.25", &s, &error));
+  EXPECT_EQ(s, 1.25);
+  for (const char* bad : {"", "-1", "inf", "nan", "1s", "abc"}) EXPECT_FALSE(ParseSeconds(bad, &s, &error)) << bad;
+}
+
+class RenderTest : public ::testing::Test {
+ protected:
+  Image Draw(const ViewerState& state, const RenderOptions& options) {
+    Image image;
+    std::string error;
+    EXPECT_TRUE(renderer_.ok()) << renderer_.error();
+    EXPECT_TRUE(renderer_.Render(state.View(), options, &image, &error)) << error;
+    return image;
+  }
+  Renderer renderer_;
+};
+
+TEST_F(RenderTest, TheLitSurfaceCoversTheFramedImageInTissueColour) {
+  ViewerState cap;
+  std::string error;
+  ASSERT_TRUE(LoadRestState(kModels + "sphere_cap", &cap, &error)) << error;
+  RenderOptions o;
+  o.width = 640, o.height = 480;
+  const Image image = Draw(cap, o);
+  const Coverage c = Cover(image);
+  // The automatic camera frames the cap: a good part of the image, centred, never cut off.
+  const double fraction = static_cast<double>(c.covered) / (o.width * o.height);
+  EXPECT_GT(fraction, 0.15);
+  EXPECT_LT(fraction, 0.9);
+  EXPECT_GT(c.min_x, 0);
+  EXPECT_LT(c.max_x, o.width - 1);
+  EXPECT_GT(c.min_y, 0);
+  EXPECT_LT(c.max_y, o.height - 1);
+  EXPECT_NEAR((c.min_x + c.max_x) / 2.0, o.width / 2.0, o.width * 0.1);
+  // The brightest surface pixel is tissue: red over green over blue.
+  const uint8_t* best = nullptr;
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      if (!IsBackground(image.Pixel(x, y)) && (best == nullptr || Luma(image.Pixel(x, y)) > Luma(best)))
+        best = image.Pixel(x, y);
+    }
+  }
+  ASSERT_NE(best, nullptr);
+  EXPECT_GT(best[0], 180);
+  EXPECT_GT(best[0], best[1] + 40);
+  EXPECT_GE(best[1] + 5, best[2]);
+  // Nothing to draw is an error, not a blank image.
+  ViewerState empty;
+  Image blank;
+  EXPECT_FALSE(renderer_.Render(empty.View(), o, &blank, &error));
+}
+
+TEST_F(RenderTest, TheSideFacingTheLightIsBrighterAndTheBackSideHasItsOwnColour) {
+  ViewerState cap;
+  std::string error;
+  ASSERT_TRUE(LoadRestState(kModels + "sphere_cap", &cap, &error)) << error;
+  RenderOptions o;
+  o.width = 640, o.height = 480;
+  const Image image = Draw(cap, o);
+  const Coverage c = Cover(image);
+  // The light comes from the viewer's upper left: the cap's left side is lit, its right in shade.
+  const int quarter = (c.max_x - c.min_x) / 4;
+  const double left = MeanLuma(image, c.min_x, c.min_x + quarter);
+  const double right = MeanLuma(image, c.max_x - quarter, c.max_x + 1);
+  EXPECT_GT(left, right + 25) << "left " << left << ", right " << right;
+  // Seen from below, the flat hex fragment shows its back: the back colour, blue over red.
+  ViewerState hex;
+  ASSERT_TRUE(LoadRestState(kModels + "hex_4x5_home", &hex, &error)) << error;
+  RenderOptions below = o;
+  ASSERT_TRUE(ParseCamera("2,1.7,-8:2,1.7,0", &below.camera, &error));
+  const Image back = Draw(hex, below);
+  const uint8_t* centre = back.Pixel(o.width / 2, o.height / 2);
+  EXPECT_GT(centre[2], centre[0]) << int(centre[0]) << "," << int(centre[1]) << "," << int(centre[2]);
+  RenderOptions above = o;
+  ASSERT_TRUE(ParseCamera("2,1.7,8:2,1.7,0", &above.camera, &error));
+  const Image front = Draw(hex, above);
+  const uint8_t* top = front.Pixel(o.width / 2, o.height / 2);
+  EXPECT_GT(top[0], top[2] + 40) << int(top[0]) << "," << int(top[1]) << "," << int(top[2]);
+  // Wireframe: edges, mostly background in between.
+  RenderOptions wire = above;
+  wire.wireframe = true;
+  EXPECT_LT(Cover(Draw(hex, wire)).covered, Cover(front).covered / 3);
+}
+
+class RecordingRenderTest : public RenderTest {
+ protected:
+  void SetUp() override {
+    test::RecordedSession& s = test::Session();
+    ASSERT_EQ(s.error, "");
+    ASSERT_GT(s.peak_force, 0.3) << "the palpation never pressed";
+    std::string error;
+    ASSERT_TRUE(player_.Open(s.recording, &error)) << error;
+  }
+  RecordingPlayer player_;
+};
+
+TEST_F(RecordingRenderTest, TheDentUnderTheToolAfterPalpation) {
+  const test::RecordedSession& s = test::Session();
+  std::string error;
+  // The surface at rest (t = 0) and at the peak force, through one fixed camera from above.
+  ASSERT_TRUE(player_.MoveTo(0, &error)) << error;
+  RenderOptions o;
+  o.width = 800, o.height = 600;
+  const std::vector<float> rest(player_.state().mirror.positions().begin(), player_.state().mirror.positions().end());
+  o.camera = AutoCamera(rest, 800.0 / 600);
+  const Image at_rest = Draw(player_.state(), o);
+  ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
+  const Image pressed = Draw(player_.state(), o);
+  ASSERT_TRUE(player_.state().has_sample);
+  const double tx = player_.state().sample.tool_pos().x(), ty = player_.state().sample.tool_pos().y();
+  // The mesh itself: the vertex nearest the tool went down.
+  const auto pos = player_.state().mirror.positions();
+  double nearest = 1e9, dz = 0;
+  for (size_t i = 0; i < rest.size(); i += 3) {
+    const double d = std::hypot(rest[i] - tx, rest[i + 1] - ty);
+    if (d < nearest) nearest = d, dz = pos[i + 2] - rest[i + 2];
+  }
+  EXPECT_LT(dz, -0.05) << "no dent in the mirror";
+  RecordProperty("dent_depth", std::to_string(dz));
+  // The image, seen from above: pixels around the point under the tool changed (the shading of a
+  // dent this shallow changes by a level or two).
+  double px = 0, py = 0;
+  ASSERT_TRUE(renderer_.Project({tx, ty, 0}, &px, &py));
+  int64_t changed = 0;
+  const int r = 60;
+  for (int y = std::max(0, int(py) - r); y < std::min(o.height, int(py) + r); ++y) {
+    for (int x = std::max(0, int(px) - r); x < std::min(o.width, int(px) + r); ++x)
+      changed += std::memcmp(pressed.Pixel(x, y), at_rest.Pixel(x, y), 3) != 0;
+  }
+  EXPECT_GT(changed, 100) << "pixels that changed around (" << px << ", " << py << ")";
+  // Seen edge on (the eye in the surface's plane), the flat fragment at rest is a line of nothing;
+  // pressed, the dent shows below the horizon, under the tool.
+  RenderOptions edge = o;
+  edge.camera.automatic = false;
+  edge.camera.eye = {tx, ty - 4, 0};
+  edge.camera.target = {tx, ty, 0};
+  const Image edge_rest = [&] {
+    RecordingPlayer rest_player;
+    EXPECT_TRUE(rest_player.Open(s.recording, &error) && rest_player.MoveTo(0, &error)) << error;
+    return Draw(rest_player.state(), edge);
+  }();
+  const Image edge_pressed = Draw(player_.state(), edge);
+  ASSERT_TRUE(renderer_.Project({tx, ty, 0}, &px, &py));
+  const Coverage c_rest = Cover(edge_rest), c_pressed = Cover(edge_pressed);
+  EXPECT_LT(c_rest.covered, o.width * 2) << "at rest, edge on: at most a line";
+  EXPECT_GT(c_pressed.covered, c_rest.covered + 500) << "the dent, edge on";
+  EXPECT_GT(c_pressed.max_y, py + 10) << "the dent goes below the surface's plane";
+  EXPECT_NEAR((c_pressed.min_x + c_pressed.max_x) / 2.0, px, o.width * 0.15) << "under the tool";
+  // Kept for a look when this fails.
+  std::string png;
+  for (const auto& [name, image] : {std::pair{"rest", &at_rest}, std::pair{"pressed", &pressed},
+                                    std::pair{"edge_rest", &edge_rest}, std::pair{"edge_pressed", &edge_pressed}}) {
+    ASSERT_TRUE(EncodePng(*image, &png, &error));
+    ASSERT_TRUE(WriteFile(s.dir + "/dent_" + name + ".png", png, &error)) << error;
+  }
+  // Rendering the rest state again changes nothing: the difference is the dent, not noise.
+  ASSERT_TRUE(player_.MoveTo(0, &error)) << error;
+  EXPECT_EQ(Draw(player_.state(), o).rgba, at_rest.rgba);
+}
+
+TEST_F(RecordingRenderTest, TheToolMarkerIsWhereTheDeviceWasAndTheForceArrowShows) {
+  const test::RecordedSession& s = test::Session();
+  std::string error;
+  ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
+  const ViewerState& state = player_.state();
+  ASSERT_TRUE(state.has_sample);
+  EXPECT_NEAR(state.tool_radius, 1.5, 1e-9);  // the recorded scene's
+  RenderOptions o;
+  o.width = 800, o.height = 600;
+  o.show_tool = true;
+  const Image with_tool = Draw(state, o);
+  const std::array<double, 3> top{state.sample.tool_pos().x(), state.sample.tool_pos().y(),
+                                  state.sample.tool_pos().z() + state.tool_radius * 0.999};
+  double px = 0, py = 0;
+  ASSERT_TRUE(renderer_.Project(top, &px, &py));
+  ASSERT_TRUE(px >= 0 && px < o.width && py >= 0 && py < o.height);
+  const uint8_t* p = with_tool.Pixel(int(px), int(py));
+  EXPECT_GT(p[2], p[0] + 40) << "tool colour at the top of the tool: " << int(p[0]) << "," << int(p[1]) << ","
+                             << int(p[2]);
+  // Without the marker that pixel is tissue or background, not tool blue.
+  o.show_tool = false;
+  const Image without = Draw(state, o);
+  const uint8_t* q = without.Pixel(int(px), int(py));
+  EXPECT_LT(q[2], q[0] + 20);
+  // The force arrow: yellow pixels appear only with --show-force.
+  auto yellow = [](const Image& image) {
+    int64_t n = 0;
+    for (size_t i = 0; i < image.rgba.size(); i += 4) {
+      n += image.rgba[i] > 150 && image.rgba[i + 1] > 120 && image.rgba[i + 2] < 80;
+    }
+    return n;
+  };
+  o.show_tool = o.show_force = true;
+  EXPECT_GT(yellow(Draw(state, o)), 50);
+  EXPECT_EQ(yellow(with_tool), 0);
+}
+
+TEST_F(RecordingRenderTest, TheSameTimeRenderedTwiceIsTheSameImage) {
+  const test::RecordedSession& s = test::Session();
+  std::string error;
+  RenderOptions o;
+  o.show_tool = o.show_force = true;
+  // Forward to t, then back to t through a seek: the same surface, the same pixels, the same PNG.
+  const double t = s.peak_force_t_s;
+  ASSERT_TRUE(player_.MoveTo(t, &error)) << error;
+  const Image a = Draw(player_.state(), o);
+  ASSERT_TRUE(player_.MoveTo(s.duration_s, &error)) << error;
+  ASSERT_TRUE(player_.MoveTo(t, &error)) << error;
+  const Image b = Draw(player_.state(), o);
+  EXPECT_EQ(a.rgba, b.rgba);
+  std::string png_a, png_b;
+  ASSERT_TRUE(EncodePng(a, &png_a, &error));
+  ASSERT_TRUE(EncodePng(b, &png_b, &error));
+  EXPECT_EQ(png_a, png_b);
+  // The PNG decodes back to the pixels.
+  Image decoded;
+  ASSERT_TRUE(DecodePng(png_a, &decoded, &error)) << error;
+  EXPECT_EQ(decoded.rgba, a.rgba);
+  // Times outside the recording are refused with a reason.
+  EXPECT_FALSE(player_.MoveTo(s.duration_s + 5, &error));
+  EXPECT_NE(error.find("outside the recording"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace idms::render

@@ -1,0 +1,67 @@
+// Where frames come from: a model at rest, a recording at a session time, a live session. Each
+// feeds a MeshMirror with the frames the protocol carries (for a model, one keyframe from the
+// session encoder), so an image shows exactly what a viewer of the same frames saw.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "idms/protocol/mesh_mirror.h"
+#include "idms/protocol/recording.h"
+#include "idms/render/render.h"
+
+namespace idms {
+struct Model;
+}
+
+namespace idms::render {
+
+// A mirror, the device's last sample and the tool's radius: what a viewer holds.
+struct ViewerState {
+  MeshMirror mirror;
+  bool has_sample = false;
+  v1::DeviceSample sample;  // the last one received
+  double tool_radius = 0;   // from the scene (0 = unknown)
+  // A view of the above for Renderer::Render (valid while this state is unchanged).
+  SceneView View() const;
+  // Reads the tool radius from a scene (its first tool).
+  void SetScene(const v1::Scene& scene);
+  // Applies a mesh frame or takes a device batch; other bodies are ignored. False on a mesh frame
+  // the mirror refuses (with *error).
+  bool Apply(const v1::Envelope& envelope, std::string* error);
+};
+
+// The model's surface at rest, through the mesh encoder and into the mirror.
+bool LoadRestState(const Model& model, ViewerState* state, std::string* error);
+// The same from PREFIX.fem + PREFIX.plg.
+bool LoadRestState(const std::string& prefix, ViewerState* state, std::string* error);
+// The same from the files' text (the server's library blobs).
+bool LoadRestStateText(std::string_view fem, std::string_view plg, const std::string& name, ViewerState* state,
+                       std::string* error);
+
+// A recording played to any session time, as a viewer of /ws/replay would hold it. Owned by one
+// thread. Moving forward reads on; moving back seeks through the keyframe index.
+class RecordingPlayer {
+ public:
+  bool Open(const std::string& path, std::string* error);
+  double duration_s() const { return (reader_.end_ns() - reader_.start_ns()) * 1e-9; }
+  // Applies every message logged up to session time t_s (seconds from the first message; within
+  // [0, duration_s()]); before the first keyframe, reads on to it. False with *error on malformed
+  // data, a time outside the recording, or a recording without a surface.
+  bool MoveTo(double t_s, std::string* error);
+  const ViewerState& state() const { return *state_; }
+
+ private:
+  bool ReadNext(std::string* error);  // fills pending_; false at the end (error empty) or on error
+
+  RecordingReader reader_;
+  std::string path_;
+  std::unique_ptr<ViewerState> state_ = std::make_unique<ViewerState>();  // new after each seek
+  std::optional<RecordedMessage> pending_;
+  bool at_end_ = false;
+  uint64_t position_ns_ = 0;  // everything logged at or before it is applied
+};
+
+}  // namespace idms::render

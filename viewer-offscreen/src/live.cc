@@ -1,0 +1,89 @@
+// The live viewer: Beast's synchronous WebSocket client, one thread, a read timeout per frame.
+#include "idms/render/live.h"
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
+
+#include "idms/protocol/envelope.h"
+
+namespace idms::render {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace websocket = beast::websocket;
+
+namespace {
+
+// "http://host:port/..." or "ws://host:port" -> host, port.
+bool SplitUrl(const std::string& url, std::string* host, std::string* port, std::string* error) {
+  std::string rest = url;
+  for (const char* scheme : {"http://", "ws://"}) {
+    if (rest.rfind(scheme, 0) == 0) rest = rest.substr(std::string(scheme).size());
+  }
+  if (rest.rfind("https://", 0) == 0 || rest.rfind("wss://", 0) == 0 || rest.find("://") != std::string::npos) {
+    *error = "--server " + url + ": expected http://HOST:PORT or ws://HOST:PORT (TLS is not supported here)";
+    return false;
+  }
+  rest = rest.substr(0, rest.find('/'));
+  const size_t colon = rest.rfind(':');
+  *host = colon == std::string::npos ? rest : rest.substr(0, colon);
+  *port = colon == std::string::npos ? "8740" : rest.substr(colon + 1);
+  if (host->empty() || port->empty()) return *error = "--server " + url + ": no host", false;
+  return true;
+}
+
+}  // namespace
+
+bool WatchLive(const LiveOptions& o, ViewerState* state, const std::function<bool(const ViewerState&)>& on_update,
+               std::string* error) {
+  std::string host, port;
+  if (!SplitUrl(o.url, &host, &port, error)) return false;
+  asio::io_context io;
+  websocket::stream<beast::tcp_stream> ws(io);
+  beast::error_code ec;
+  const auto timeout = std::chrono::milliseconds(static_cast<int64_t>(o.timeout_s * 1000));
+  // Connect and hand-shake as a viewer of the session.
+  asio::ip::tcp::resolver resolver(io);
+  const auto endpoints = resolver.resolve(host, port, ec);
+  if (ec) return *error = "cannot resolve " + host + ": " + ec.message(), false;
+  beast::get_lowest_layer(ws).expires_after(timeout);
+  beast::get_lowest_layer(ws).connect(endpoints, ec);
+  if (ec) return *error = "cannot connect to " + host + ":" + port + ": " + ec.message(), false;
+  const std::string token = o.token;
+  ws.set_option(websocket::stream_base::decorator([token](websocket::request_type& req) {
+    if (!token.empty()) req.set(beast::http::field::authorization, "Bearer " + token);
+  }));
+  websocket::response_type response;
+  ws.handshake(response, host + ":" + port, "/ws/session/" + o.session, ec);
+  if (ec) {
+    *error = "the server refused /ws/session/" + o.session + ": " + ec.message() +
+             (response.result_int() != 200 ? " (HTTP " + std::to_string(response.result_int()) + ") " + response.body()
+                                           : std::string());
+    return false;
+  }
+  beast::get_lowest_layer(ws).expires_never();
+  ws.set_option(websocket::stream_base::timeout{timeout, timeout, false});
+  // Frames until the session ends or the caller has what it wanted.
+  beast::flat_buffer buffer;
+  v1::Envelope e;
+  while (true) {
+    buffer.consume(buffer.size());
+    ws.read(buffer, ec);
+    if (ec == websocket::error::closed) return true;
+    if (ec) return *error = "reading the session: " + ec.message(), false;
+    const auto data = buffer.data();
+    if (!ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, error)) return false;
+    if (e.has_welcome()) state->SetScene(e.welcome().scene());
+    if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ERROR)
+      return *error = "the server: " + e.session_event().message(), false;
+    if (!state->Apply(e, error)) return false;
+    const bool mesh = e.has_mesh_keyframe() || e.has_mesh_delta();
+    if (mesh && state->mirror.has_keyframe() && !on_update(*state)) break;
+  }
+  ws.close(websocket::close_code::normal, ec);
+  return true;
+}
+
+}  // namespace idms::render

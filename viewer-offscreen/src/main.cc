@@ -1,0 +1,153 @@
+// idms-render: a PNG of a model at rest, a recording at a session time (or every S seconds of
+// it), or a live session, drawn with OSMesa. Exit 0 on success, 1 on a usage error, 2 on failure.
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include "idms/render/live.h"
+#include "idms/render/png.h"
+#include "idms/render/render.h"
+#include "idms/render/source.h"
+
+namespace {
+
+using namespace idms::render;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+
+struct Output {
+  Renderer renderer;
+  RenderOptions options;
+  Image image;
+  std::string png;
+  bool fixed_camera = false;  // --every: the automatic camera of the first frame, for all
+
+  bool Write(const ViewerState& state, const std::string& path, double t_s, std::string* error) {
+    const SceneView view = state.View();
+    if (options.camera.automatic && fixed_camera) options.camera = CameraFor(view, options);
+    const auto t0 = Clock::now();
+    if (!renderer.Render(view, options, &image, error)) return false;
+    const auto t1 = Clock::now();
+    if (!EncodePng(image, &png, error)) return false;
+    const auto t2 = Clock::now();
+    if (!WriteFile(path, png, error)) return false;
+    std::printf("%s: %dx%d, t=%.3f s, %d triangles, render %.1f ms, png %.1f ms, %zu bytes\n", path.c_str(),
+                image.width, image.height, t_s, state.mirror.num_triangles(), Ms(t0, t1), Ms(t1, t2), png.size());
+    return true;
+  }
+};
+
+std::string FramePath(const std::string& dir, int index) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06d.png", index);
+  return (fs::path(dir) / name).string();
+}
+
+int Fail(const std::string& error) {
+  std::fprintf(stderr, "idms-render: %s\n", error.c_str());
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"idms-render: PNG screenshots of idms models, recordings and live sessions (OSMesa, no display)"};
+  std::string model, recording, server, session, token, out, size = "1280x720", camera = "auto";
+  std::string at_text, every_text;
+  bool wireframe = false, show_tool = false, show_force = false;
+  auto* model_opt = app.add_option("--model", model, "A model at rest: PREFIX of PREFIX.fem + PREFIX.plg");
+  auto* rec_opt = app.add_option("--recording", recording, "A session recording (.mcap)");
+  auto* server_opt = app.add_option("--server", server, "A live session's server, http://HOST:PORT");
+  app.add_option("--session", session, "The live session's id (with --server)");
+  app.add_option("--token", token, "Bearer token for --server (observer or above)");
+  app.add_option("--at", at_text, "Session time to render, s (recordings; default: the end)");
+  app.add_option("--every", every_text, "Render a frame every S seconds of session time into --out DIR");
+  app.add_option("--out", out, "The PNG to write, or with --every the directory for frame_NNNNNN.png")->required();
+  app.add_option("--size", size, "Image size WIDTHxHEIGHT")->capture_default_str();
+  app.add_option("--camera", camera, "auto, or EYE_X,EYE_Y,EYE_Z:TARGET_X,TARGET_Y,TARGET_Z")->capture_default_str();
+  app.add_flag("--wireframe", wireframe, "Draw the triangles' edges instead of the shaded surface");
+  app.add_flag("--show-tool", show_tool, "Draw the tool sphere at the device position");
+  app.add_flag("--show-force", show_force, "Draw the device force as an arrow from the tool");
+  model_opt->excludes(rec_opt)->excludes(server_opt);
+  rec_opt->excludes(server_opt);
+  CLI11_PARSE(app, argc, argv);
+
+  // Parameters, checked before any work.
+  std::string error;
+  Output o;
+  double at_s = -1, every_s = 0;
+  if (!ParseSize(size, &o.options.width, &o.options.height, &error) ||
+      !ParseCamera(camera, &o.options.camera, &error) || (!at_text.empty() && !ParseSeconds(at_text, &at_s, &error)) ||
+      (!every_text.empty() && !ParseSeconds(every_text, &every_s, &error))) {
+    std::fprintf(stderr, "idms-render: %s\n", error.c_str());
+    return 1;
+  }
+  if (model.empty() + recording.empty() + server.empty() != 2 || (!server.empty() && session.empty())) {
+    std::fprintf(stderr, "idms-render: give one of --model PREFIX, --recording FILE, --server URL --session ID\n");
+    return 1;
+  }
+  if (!every_text.empty() && (every_s <= 0 || !model.empty())) {
+    std::fprintf(stderr, "idms-render: --every needs a positive period and a recording or a live session\n");
+    return 1;
+  }
+  o.options.wireframe = wireframe;
+  o.options.show_tool = show_tool;
+  o.options.show_force = show_force;
+  o.fixed_camera = every_s > 0;
+  if (!o.renderer.ok()) return Fail(o.renderer.error());
+  if (every_s > 0) {
+    std::error_code ec;
+    fs::create_directories(out, ec);
+    if (ec) return Fail("cannot create " + out + ": " + ec.message());
+  }
+
+  // A model at rest.
+  if (!model.empty()) {
+    ViewerState state;
+    if (!LoadRestState(model, &state, &error) || !o.Write(state, out, 0, &error)) return Fail(error);
+    return 0;
+  }
+  // A recording: one time, or every S seconds from the start.
+  if (!recording.empty()) {
+    RecordingPlayer player;
+    if (!player.Open(recording, &error)) return Fail(error);
+    if (every_s == 0) {
+      const double t = at_s < 0 ? player.duration_s() : at_s;
+      if (!player.MoveTo(t, &error) || !o.Write(player.state(), out, t, &error)) return Fail(error);
+      return 0;
+    }
+    int index = 0;
+    for (double t = 0; t <= player.duration_s() + 1e-9; t = ++index * every_s) {
+      if (!player.MoveTo(std::min(t, player.duration_s()), &error)) return Fail(error);
+      if (!o.Write(player.state(), FramePath(out, index), t, &error)) return Fail(error);
+    }
+    return 0;
+  }
+  // A live session: the first frame with the device's position, or every S seconds until it ends.
+  LiveOptions live{server, session, token};
+  ViewerState state;
+  double next_s = -1;
+  int index = 0;
+  bool wrote = false, failed = false;
+  const bool ok = WatchLive(live, &state, [&](const ViewerState& s) {
+    if (!s.has_sample) return true;
+    const double t = s.mirror.time_s();
+    if (every_s == 0) {
+      failed = !o.Write(s, out, t, &error);
+      wrote = true;
+      return false;
+    }
+    if (next_s < 0) next_s = t;
+    if (t + 1e-9 < next_s) return true;
+    next_s += every_s;
+    failed = !o.Write(s, FramePath(out, index++), t, &error);
+    wrote = true;
+    return !failed;
+  }, &error);
+  if (!ok || failed) return Fail(error);
+  if (!wrote) return Fail("the session ended before its surface arrived");
+  return 0;
+}

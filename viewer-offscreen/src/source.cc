@@ -1,0 +1,148 @@
+// Frame sources: a model at rest (encoder -> keyframe -> mirror) and recordings (reader -> mirror).
+#include "idms/render/source.h"
+
+#include <google/protobuf/text_format.h>
+
+#include <cmath>
+
+#include "idms/protocol/mesh_codec.h"
+#include "idms/sim/model.h"
+#include "idms/sim/model_io.h"
+
+namespace idms::render {
+
+SceneView ViewerState::View() const {
+  SceneView v;
+  v.positions = mirror.positions();
+  v.triangles = mirror.triangles();
+  v.has_tool = has_sample;
+  v.tool_radius = tool_radius;
+  if (has_sample) {
+    v.tool_pos = {sample.tool_pos().x(), sample.tool_pos().y(), sample.tool_pos().z()};
+    v.force = {sample.force().x(), sample.force().y(), sample.force().z()};
+  }
+  return v;
+}
+
+void ViewerState::SetScene(const v1::Scene& scene) {
+  tool_radius = scene.tools_size() > 0 && scene.tools(0).has_radius() ? scene.tools(0).radius() : 0;
+}
+
+bool ViewerState::Apply(const v1::Envelope& e, std::string* error) {
+  if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+    const MirrorStatus status = mirror.Apply(e, error);
+    if (status == MirrorStatus::kInvalid) return false;
+    return true;  // a gap keeps the last frame, as a viewer does until its next keyframe
+  }
+  if (e.has_device_samples() && e.device_samples().samples_size() > 0) {
+    sample = e.device_samples().samples(e.device_samples().samples_size() - 1);
+    has_sample = true;
+  }
+  return true;
+}
+
+bool LoadRestState(const Model& model, ViewerState* state, std::string* error) {
+  // The surface at rest, encoded as a session's first keyframe and applied to the mirror.
+  std::vector<double> surface(static_cast<size_t>(model.num_external) * 3);
+  GatherSurface(model, model.atom_pos_eq, surface);
+  MeshEncoder encoder;
+  encoder.SetTopology(model.topology_version, SurfaceTriangles(model));
+  v1::Envelope keyframe;
+  if (!encoder.Encode(0, surface, &keyframe, error)) return false;
+  state->has_sample = false;
+  return state->mirror.Apply(keyframe, error) == MirrorStatus::kOk;
+}
+
+bool LoadRestState(const std::string& prefix, ViewerState* state, std::string* error) {
+  std::string fem, plg;
+  ModelPaths(prefix, &fem, &plg);
+  Model model;
+  LoadError le;
+  if (!LoadModel(fem, plg, ReadOptions{}, &model, &le)) return *error = le.ToString(), false;
+  return LoadRestState(model, state, error);
+}
+
+bool LoadRestStateText(std::string_view fem, std::string_view plg, const std::string& name, ViewerState* state,
+                       std::string* error) {
+  Model model;
+  SurfaceMesh mesh;
+  LoadError le;
+  if (!ParseFem(fem, name + ".fem", &model, &le) || !ParsePlg(plg, name + ".plg", &mesh, &le) ||
+      !AttachSurface(mesh, name + ".plg", ReadOptions{}.plg_tolerance, &model, &le))
+    return *error = le.ToString(), false;
+  FinalizeModel(model);
+  return LoadRestState(model, state, error);
+}
+
+bool RecordingPlayer::Open(const std::string& path, std::string* error) {
+  path_ = path;
+  RecordingReaderOptions options;
+  options.events = options.annotations = false;
+  if (!reader_.Open(path, options, error)) return false;
+  // The tool's radius from the recorded scene.
+  const auto scene = reader_.session().find("scene");
+  v1::Scene parsed;
+  if (scene != reader_.session().end() && google::protobuf::TextFormat::ParseFromString(scene->second, &parsed))
+    state_->SetScene(parsed);
+  position_ns_ = reader_.start_ns();
+  pending_.reset();
+  at_end_ = false;
+  return true;
+}
+
+bool RecordingPlayer::ReadNext(std::string* error) {
+  if (at_end_) return false;
+  RecordedMessage m;
+  if (!reader_.Next(&m, error)) {
+    at_end_ = true;
+    return false;
+  }
+  pending_ = std::move(m);
+  return true;
+}
+
+bool RecordingPlayer::MoveTo(double t_s, std::string* error) {
+  error->clear();
+  if (!(t_s >= 0 && t_s <= duration_s() + 1e-9)) {
+    *error = "t=" + std::to_string(t_s) + " s is outside the recording (0 to " + std::to_string(duration_s()) + " s)";
+    return false;
+  }
+  const uint64_t target = reader_.start_ns() + static_cast<uint64_t>(std::llround(t_s * 1e9));
+  // Back in time, or far ahead: seek to the keyframe before. 100 ms early, so that the device
+  // batch that was current at t_s is read too.
+  constexpr uint64_t kLeadNs = 100'000'000, kFarNs = 2'000'000'000;
+  if (target < position_ns_ || target - position_ns_ > kFarNs) {
+    const uint64_t from = std::max(reader_.start_ns(), target > kLeadNs ? target - kLeadNs : 0);
+    if (!reader_.Seek(from, error)) return false;
+    pending_.reset();
+    at_end_ = false;
+    // A fresh mirror: frames from before the seek must not stand in for the surface at t_s.
+    auto fresh = std::make_unique<ViewerState>();
+    fresh->tool_radius = state_->tool_radius;
+    state_ = std::move(fresh);
+  }
+  // Apply what was logged up to the target.
+  while (true) {
+    if (!pending_ && !ReadNext(error)) {
+      if (!error->empty()) return *error = path_ + ": " + *error, false;
+      break;
+    }
+    if (pending_->log_time_ns > target) break;
+    if (!state_->Apply(pending_->envelope, error)) return *error = path_ + ": " + *error, false;
+    pending_.reset();
+  }
+  position_ns_ = target;
+  // Before the first keyframe (the session's first instants): the first surface there is.
+  while (!state_->mirror.has_keyframe()) {
+    if (!pending_ && !ReadNext(error)) {
+      if (!error->empty()) return *error = path_ + ": " + *error, false;
+      return *error = "the recording has no surface", false;
+    }
+    if (!state_->Apply(pending_->envelope, error)) return *error = path_ + ": " + *error, false;
+    position_ns_ = pending_->log_time_ns;
+    pending_.reset();
+  }
+  return true;
+}
+
+}  // namespace idms::render
