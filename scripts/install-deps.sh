@@ -13,6 +13,7 @@ packages=(
   libmeshoptimizer-dev libbullet-dev
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
+  chromium
 )
 
 missing=()
@@ -39,7 +40,7 @@ if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
   DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends nodejs npm
 fi
 root="$(cd "$(dirname "$0")/.." && pwd)"
-for dir in tests/mcap-js; do
+for dir in tests/mcap-js viewer-web tests/web; do
   if [ ! -d "$root/$dir/node_modules" ] || [ "$root/$dir/package-lock.json" -nt "$root/$dir/node_modules" ]; then
     echo "install-deps: npm ci in $dir"
     (cd "$root/$dir" && npm ci --no-audit --no-fund --loglevel=error) && touch "$root/$dir/node_modules"
