@@ -90,3 +90,13 @@ test('zstd frame inspection names what is wrong', () => {
   const noSize = new Uint8Array([0x28, 0xb5, 0x2f, 0xfd, 0x00, 0x58, 0x01, 0x00, 0x00]);
   assert.equal(inspectZstdFrame(noSize).error, 'zstd frame does not declare its content size');
 });
+
+test('64-bit fields are numbers, set or not: an unset topology version compares equal across messages', () => {
+  const key = Envelope.decode(Envelope.encode({ meshKeyframe: { sequence: 1, quantStep: 1e-4 } }).finish());
+  const delta = Envelope.decode(Envelope.encode({ meshDelta: { sequence: 2, baseSequence: 1 } }).finish());
+  assert.equal(typeof key.meshKeyframe?.topologyVersion, 'number');
+  assert.equal(key.meshKeyframe?.topologyVersion, delta.meshDelta?.topologyVersion);
+  const state = new MeshState();
+  assert.equal(state.apply(key), 'ok');
+  assert.equal(state.apply(delta), 'ok', state.error);
+});

@@ -17,7 +17,7 @@ const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n])
 /**
  * What the page has seen, for the status line and the tests (window.__idms).
  * @typedef {{mode: string, frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
- *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string,
+ *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string, lastInvalid: string,
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
  *   contactSamples: number, forcePoints: number}} PageState
  */
@@ -30,7 +30,7 @@ const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n])
 export function sessionPage(id, role, mode) {
   /** @type {PageState} */
   const st = { mode, frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0,
-    warnings: 0, fallbacks: 0, lastError: '', annotations: 0, connection: 'connecting', ended: false,
+    warnings: 0, fallbacks: 0, lastError: '', lastInvalid: '', annotations: 0, connection: 'connecting', ended: false,
     movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0 };
   /** @type {any} */ (window).__idms = st;
 
@@ -146,7 +146,10 @@ export function sessionPage(id, role, mode) {
     } else {
       // Never drawn: the surface stays at the last frame applied until a keyframe comes.
       if (status === 'gap') st.gaps++;
-      else st.invalid++;
+      else {
+        st.invalid++;
+        st.lastInvalid = mirror.error;
+      }
       st.lastError = mirror.error;
       gapNote.textContent = `${status === 'gap' ? 'Frames lost' : 'Bad frame'}: ${mirror.error}. Waiting for a keyframe.`;
     }
@@ -155,7 +158,7 @@ export function sessionPage(id, role, mode) {
 
   /** @param {idms.v1.ISessionEvent} e */
   function addEvent(e) {
-    const kind = kEventNames.get(e.kind ?? 0) || String(e.kind);
+    const kind = e.kind ? kEventNames.get(e.kind) || String(e.kind) : 'NOTE';
     if (e.kind === v1.SessionEvent.Kind.KIND_STABILITY_FALLBACK) st.fallbacks++;
     const li = h('li', { class: `event ${kind.toLowerCase()}` }, [
       h('span', { class: 'time', text: formatTime(e.timeS || 0) }), ' ', h('strong', { text: kind }), ' ', e.message || '']);

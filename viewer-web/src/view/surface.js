@@ -51,12 +51,15 @@ export class SurfaceView {
     this.touchedVerts = new Int32Array(0);
     this.stamp = 0;
     // The tool and the force.
-    this.toolMaterial = new THREE.MeshStandardMaterial({ color: kToolFree, transparent: true, opacity: 0.85 });
+    this.toolMaterial = new THREE.MeshStandardMaterial({ color: kToolFree, transparent: true, opacity: 0.5, depthWrite: false });
     this.tool = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), this.toolMaterial);
     this.tool.visible = false;
     this.scene.add(this.tool);
     this.arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 1, 0x1d5fa8);
     this.arrow.visible = false;
+    // Drawn over everything, so that the force shows through the tool and the tissue.
+    for (const m of [this.arrow.line.material, this.arrow.cone.material]) /** @type {THREE.Material} */ (m).depthTest = false;
+    this.arrow.renderOrder = 10;
     this.scene.add(this.arrow);
     this.forceDir = new THREE.Vector3();
     this.toolRadius = 1.5;
@@ -224,7 +227,7 @@ export class SurfaceView {
     const sphere = this.geometry.boundingSphere;
     if (!sphere || !Number.isFinite(sphere.radius) || sphere.radius === 0) return;
     const r = sphere.radius;
-    this.forceScale = r / 20;
+    this.forceScale = r / 4;
     const c = sphere.center;
     this.controls.target.copy(c);
     this.camera.position.set(c.x + 0.2 * r, c.y - 2.2 * r, c.z + 1.6 * r);
