@@ -74,8 +74,9 @@ function uploadForm(done) {
       const b = e instanceof ApiError ? e.body || {} : {};
       // The parser's own place: file:line:column, then what it expected.
       const where = b.file ? `${b.file}:${b.line}:${b.column}` : '';
+      const message = e instanceof Error ? e.message : String(e);
       result.replaceChildren(h('strong', { text: 'Refused: ' }), where ? h('code', { class: 'where', text: where }) : '',
-        where ? ': ' : '', e instanceof Error ? e.message : String(e));
+        where ? ': ' : '', where && message.startsWith(`${where}: `) ? message.slice(where.length + 2) : message);
     }
   });
   return form;
