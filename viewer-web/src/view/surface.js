@@ -13,7 +13,7 @@ export class SurfaceView {
   /** @param {HTMLElement} host */
   constructor(host) {
     this.host = host;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer = new THREE.WebGLRenderer({ antialias: true });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
     this.renderer.domElement.setAttribute('aria-label', 'Tissue surface, tool and force (drag to orbit, wheel to zoom)');
     this.renderer.domElement.setAttribute('role', 'img');
