@@ -24,9 +24,11 @@ $build_only || packages+=(
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
   docker.io docker-compose debootstrap
+  chromium
 )
-npm_dirs=()
-$build_only || npm_dirs+=(tests/mcap-js)
+# The viewer's build needs viewer-web's packages; the tests need the others.
+npm_dirs=(viewer-web)
+$build_only || npm_dirs+=(tests/mcap-js tests/web)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -19,6 +19,7 @@ struct ServerOptions {
   int workers = 4;                           // threads for handlers that parse, hash or touch the disk
   std::string log_format = "text";           // text | json
   std::string models_dir;                    // shipped models to import into an empty library; "none": never
+  std::string web_root;                      // the built web viewer (index.html, assets/); empty: none served
   int64_t max_upload_bytes = int64_t{256} << 20;
   int64_t max_small_body_bytes = int64_t{64} << 10;  // every route but uploads
   int64_t max_ws_message_bytes = int64_t{16} << 20;
