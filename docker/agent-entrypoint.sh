@@ -3,7 +3,7 @@
 # $IDMS_AGENT_TOKEN, or else from the server's tokens file ($IDMS_TOKENS_FILE, the server's data
 # volume mounted read-only). Arguments go to idms-agent (default: the scripted palpation).
 set -eu
-server="${IDMS_SERVER:-ws://127.0.0.1:8080}"
+server="${IDMS_SERVER:-ws://127.0.0.1:8740}"
 token="${IDMS_AGENT_TOKEN:-}"
 if [ -z "$token" ] && [ -n "${IDMS_TOKENS_FILE:-}" ]; then
   # The server writes the file at its first start: wait for it.

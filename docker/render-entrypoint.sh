@@ -5,7 +5,7 @@
 # idms-render with them instead.
 set -eu
 [ "$#" -eq 0 ] || exec idms-render "$@"
-http="${IDMS_HTTP:-http://127.0.0.1:8080}"
+http="${IDMS_HTTP:-http://127.0.0.1:8740}"
 out="${IDMS_RENDER_OUT:-/out}"
 token="${IDMS_TOKEN:-}"
 if [ -z "$token" ] && [ -n "${IDMS_TOKENS_FILE:-}" ]; then

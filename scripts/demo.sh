@@ -10,12 +10,12 @@
 #   --headless   nothing to watch: the scripted sessions, the screenshots, the figures, then exit
 #                (what CI runs; implies --duration 0)
 #   --duration   seconds to keep the live session and the server up (default: until Ctrl-C)
-#   --port       the server's port on 127.0.0.1 (default 8080, or a free one if it is taken)
+#   --port       the server's port on 127.0.0.1 (default 8740, or a free one if it is taken)
 #   --no-build   use build/bin as it is
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-headless=false build=true duration="" port=8080 data=""
+headless=false build=true duration="" port=8740 data=""
 while (($#)); do
   case "$1" in
     --headless) headless=true ;;
