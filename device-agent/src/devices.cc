@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "device_internal.h"
@@ -145,7 +146,23 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
     }
     rest = next == std::string_view::npos ? std::string_view() : rest.substr(next + 1);
   }
-  if (human) return std::make_unique<HumanDevice>(target, name, mass, k, zeta, context.dt_s);
+  if (human) {
+    // The hand's own integrator (symplectic Euler at the loop's dt) is stable only while
+    // (w dt)^2 + 4 zeta (w dt) < 4, w = sqrt(k / m): beyond it the hand diverges on its own.
+    const double w_dt = std::sqrt(k / mass) * context.dt_s;
+    const double limit = 2 * (std::sqrt(zeta * zeta + 1) - zeta);
+    if (!(w_dt < limit)) {
+      char text[512];
+      std::snprintf(text, sizeof(text),
+                    "human: a hand of mass=%g, k=%g, zeta=%g is unstable at the loop's dt = %g s: "
+                    "sqrt(k/mass)*dt = %.3g, and its symplectic Euler step is stable only below %.3g "
+                    "(raise mass, lower k or zeta, or run the loop faster)",
+                    mass, k, zeta, context.dt_s, w_dt, limit);
+      *error = text;
+      return nullptr;
+    }
+    return std::make_unique<HumanDevice>(target, name, mass, k, zeta, context.dt_s);
+  }
   return std::make_unique<ScriptedDevice>(target, name);
 }
 

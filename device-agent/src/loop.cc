@@ -298,6 +298,15 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   // Device read, mapped into the model frame; a device without a pose leaves the tool out.
   DeviceReading reading;
   device_.Read(tick, state.time_s, &reading);
+  // A non-finite position is no pose: the tool holds where it was, and no NaN reaches the model,
+  // a sample, a recording or a viewer.
+  int pose_fault = 0;
+  if (reading.valid &&
+      !(std::isfinite(reading.pos[0]) && std::isfinite(reading.pos[1]) && std::isfinite(reading.pos[2]))) {
+    reading.valid = false;
+    pose_fault = 1;
+    counters_.pose_faults.fetch_add(1, std::memory_order_relaxed);
+  }
   ToolCommand& tool = input_.tools[0];
   if (reading.valid) {
     registration_.DeviceToModel(reading.pos, tool.pos);
@@ -340,7 +349,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.compute_us = ToMicros(written_ns - wake_ns);
   s.period_us = prev_wake_ns_ < 0 ? 0 : ToMicros(wake_ns - prev_wake_ns_);
   s.substeps = static_cast<uint32_t>(std::max(report.substeps, 0));
-  s.warnings = static_cast<uint32_t>(std::max<int64_t>(report.new_warnings, 0) + fault);
+  s.warnings = static_cast<uint32_t>(std::max<int64_t>(report.new_warnings, 0) + fault + pose_fault);
   s.num_contacts = static_cast<uint32_t>(std::max(out.contacts, 0));
   s.contact = out.contacts > 0;
   s.grasp = out.grasp_atom >= 0;

@@ -156,6 +156,7 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
       {"keyframes", up.keyframes},
       {"mesh_skipped", c.mesh_skipped.load()},
       {"force_faults", c.force_faults.load()},
+      {"pose_faults", c.pose_faults.load()},
       {"commands", up.commands},
       {"warnings", TotalWarnings(loop.state().warnings)},
       {"device", device.name()},

@@ -40,6 +40,23 @@ TEST(Devices, BadSpecsAreExplained) {
   EXPECT_NE(error.find("expected scripted:SCRIPT"), std::string::npos) << error;
 }
 
+TEST(Devices, AHandItsOwnIntegratorCannotRunIsRefusedWithTheLimit) {
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  context.dt_s = 0.001;
+  std::string error;
+  // sqrt(1000 / 0.0001) * 0.001 = 3.16, above symplectic Euler's 2 for an undamped hand.
+  EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=0.0001,k=1000,zeta=0", context, &error));
+  EXPECT_NE(error.find("sqrt(k/mass)*dt = 3.16"), std::string::npos) << error;
+  EXPECT_NE(error.find("stable only below 2 "), std::string::npos) << error;
+  // Damping lowers the limit: 2 (sqrt(zeta^2 + 1) - zeta) = 1.04 at zeta = 0.7.
+  EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=0.001,k=1200,zeta=0.7", context, &error));
+  EXPECT_NE(error.find("below 1.04"), std::string::npos) << error;
+  EXPECT_TRUE(agent::MakeDevice("human:palpate,mass=0.001,k=1000,zeta=0.7", context, &error)) << error;
+  EXPECT_TRUE(agent::MakeDevice("human:palpate", context, &error)) << error;
+}
+
 TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
   // The scripted trajectory lives in the model frame; the device reports it in device
   // coordinates, so the loop's registration maps it back onto the surface.

@@ -280,10 +280,18 @@ TEST(Loop, DeviceNeverSeesNonFiniteOrOversizeForce) {
   EXPECT_LE(f.device->max_force_, 0.5 + 1e-12);
   EXPECT_GT(f.device->max_force_, 0.4) << "the clamp should have been reached";
   f.device->poison_ = true;
-  f.Run(500);
+  std::vector<TickSample> samples;
+  f.Run(500, &samples);
   EXPECT_TRUE(f.device->all_finite_);
   EXPECT_LE(f.device->max_force_, 0.5 + 1e-12);
   EXPECT_EQ(f.device->writes_, 3500);
+  // A NaN position is no pose: counted, a warning in each sample, and nothing non-finite leaves.
+  EXPECT_EQ(f.loop->counters().pose_faults.load(), 500u);
+  ASSERT_EQ(samples.size(), 500u);
+  for (const TickSample& s : samples) {
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(std::isfinite(s.tool_pos[i]) && std::isfinite(s.force[i]));
+    ASSERT_GE(s.warnings, 1u);
+  }
 }
 
 TEST(Loop, SanitizeDeviceForceZeroesNaNAndClamps) {

@@ -90,6 +90,7 @@ struct LoopCounters {
   std::atomic<uint64_t> samples_lost{0};  // the sample ring was full (the I/O thread stalled)
   std::atomic<uint64_t> mesh_skipped{0};  // no free surface buffer at a snapshot time
   std::atomic<uint64_t> force_faults{0};  // non-finite device force zeroed at the write
+  std::atomic<uint64_t> pose_faults{0};   // non-finite device positions, treated as no pose
   std::atomic<uint64_t> commands{0};
   // Wake-ups one full period or more after their scheduled time (the tick's deadline passed
   // before it started): the loop's count of what cyclictest reports as latency >= the period.
