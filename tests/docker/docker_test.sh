@@ -20,9 +20,14 @@ docker="${IDMS_DOCKER_CLIENT:-/usr/bin/docker}"
 bash "$src/docker/base-image.sh"
 
 export DOCKER_BUILDKIT=1
+# The machine's CA bundle for npm inside the build (this network's proxy re-signs TLS).
+secret=()
+ca=/etc/ssl/certs/ca-certificates.crt
+[ -s "$ca" ] && secret=(--secret "id=ca,src=$ca")
 start=$(date +%s)
 for target in server agent render; do
-  "$docker" build -q --network host -f "$src/docker/Dockerfile" --target "$target" -t "idms-$target:local" "$src" \
+  "$docker" build -q --network host "${secret[@]}" -f "$src/docker/Dockerfile" --target "$target" \
+    -t "idms-$target:local" "$src" \
     > "$work/build-$target.log" 2>&1 || { tail -40 "$work/build-$target.log"; exit 1; }
 done
 echo "images built in $(( $(date +%s) - start )) s"
