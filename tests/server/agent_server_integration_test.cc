@@ -25,29 +25,6 @@ json ReadJson(const std::string& path) { return json::parse(ReadText(path)); }
 
 std::string WsUrl(const ServerProcess& server) { return "ws://127.0.0.1:" + server.port_string(); }
 
-// The first live session's id, once it has `samples` samples.
-std::string WaitForLiveSession(const ServerProcess& server, const std::string& token, int samples) {
-  std::string id;
-  Eventually([&] {
-    const json s = Sessions(server.port(), token);
-    if (s.empty() || s[0]["state"] != "live" || s[0]["samples"].get<int>() < samples) return false;
-    id = s[0]["id"];
-    return true;
-  });
-  return id;
-}
-
-// A counter's value in /metrics (the whole line up to the value must match), or -1.
-double MetricValue(uint16_t port, const std::string& token, const std::string& series) {
-  const HttpReply r = Get(port, "/metrics", token);
-  std::istringstream lines(r.body);
-  for (std::string line; std::getline(lines, line);) {
-    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 && line[series.size()] == ' ')
-      return std::stod(line.substr(series.size() + 1));
-  }
-  return -1;
-}
-
 TEST(AgentAndServer, ABacklogThatOverflowsWhileTheServerIsDownIsDroppedCountedAndRecorded) {
   const std::string dir = TempDir("agent-overflow");
   auto server = std::make_unique<ServerProcess>(dir + "/data");
@@ -59,7 +36,7 @@ TEST(AgentAndServer, ABacklogThatOverflowsWhileTheServerIsDownIsDroppedCountedAn
                       "--cache-dir", dir + "/cache", "--device", "scripted:stroke-slow", "--duration", "4", "--backlog",
                       "300", "--summary-json", dir + "/summary.json"},
                      dir + "/agent.log");
-  const std::string id = WaitForLiveSession(*server, observer, 800);
+  const std::string id = WaitForLiveSession(server->port(), observer, 800);
   ASSERT_FALSE(id.empty()) << server->Log() << agent.Log();
   server->process().Signal(SIGKILL);
   ASSERT_TRUE(server->process().Wait(seconds(30)));
@@ -100,7 +77,7 @@ TEST(AgentAndServer, CommandsFromAnAdminReachTheLoopAndSigtermEndsWithEveryTickR
       {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
        dir + "/cache", "--device", "human:stroke-slow", "--summary-json", dir + "/summary.json"},
       dir + "/agent.log");
-  const std::string id = WaitForLiveSession(server, observer, 300);
+  const std::string id = WaitForLiveSession(server.port(), observer, 300);
   ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
   {
     TestViewer admin(server.port(), id, server.Token("admin"));

@@ -6,7 +6,10 @@
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
+#include <cmath>
 #include <fstream>
+#include <limits>
+#include <sstream>
 
 #include "child_process.h"
 #include "idms/protocol/envelope.h"
@@ -18,6 +21,27 @@ namespace idms::test {
 nlohmann::json Sessions(uint16_t port, const std::string& token) {
   const HttpReply r = Get(port, "/api/sessions", token);
   return r.status == 200 ? nlohmann::json::parse(r.body)["sessions"] : nlohmann::json::array();
+}
+
+std::string WaitForLiveSession(uint16_t port, const std::string& token, int samples) {
+  std::string id;
+  Eventually([&] {
+    const nlohmann::json s = Sessions(port, token);
+    if (s.empty() || s[0]["state"] != "live" || s[0]["samples"].get<int>() < samples) return false;
+    id = s[0]["id"];
+    return true;
+  });
+  return id;
+}
+
+double MetricValue(uint16_t port, const std::string& token, const std::string& series) {
+  const HttpReply r = Get(port, "/metrics", token);
+  std::istringstream lines(r.body);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 && line[series.size()] == ' ')
+      return std::stod(line.substr(series.size() + 1));
+  }
+  return -1;
 }
 
 bool DownloadRecording(uint16_t port, const std::string& id, const std::string& token, const std::string& path) {
@@ -165,6 +189,14 @@ void TestViewer::Read() {
     buffer.consume(buffer.size());
   }
   closed_ = true;
+}
+
+double MaxMirrorError(TestViewer& viewer, const std::vector<double>& truth) {
+  const std::vector<float> seen = viewer.Positions();
+  if (seen.size() != truth.size()) return std::numeric_limits<double>::infinity();
+  double worst = 0;
+  for (size_t i = 0; i < truth.size(); ++i) worst = std::max(worst, std::abs(seen[i] - truth[i]));
+  return worst;
 }
 
 void IndependentReaderAccepts(const std::string& path, size_t ticks) {

@@ -23,6 +23,12 @@ namespace idms::test {
 // GET /api/sessions' "sessions" array (empty on any error).
 nlohmann::json Sessions(uint16_t port, const std::string& token);
 
+// The newest session's id once it is live with at least `samples` samples ("" after 20 s).
+std::string WaitForLiveSession(uint16_t port, const std::string& token, int samples = 0);
+
+// A series' value in /metrics (the whole line up to the value must match `series`), or -1.
+double MetricValue(uint16_t port, const std::string& token, const std::string& series);
+
 // GET /api/sessions/{id}/recording.mcap into `path`; false (with a test failure) unless 200.
 bool DownloadRecording(uint16_t port, const std::string& id, const std::string& token, const std::string& path);
 
@@ -77,5 +83,8 @@ class TestViewer {
   std::atomic<bool> closed_{false};
   std::atomic<int> gaps_{0};
 };
+
+// max |mirror - truth| over a viewer's surface (truth: x y z per vertex); infinity when the sizes differ.
+double MaxMirrorError(TestViewer& viewer, const std::vector<double>& truth);
 
 }  // namespace idms::test

@@ -61,13 +61,8 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   const std::string observer = server.Token("observer"), admin = server.Token("admin");
   ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(server, dir, 4), dir + "/agent.log");
   // The session appears, live.
-  std::string id;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(port, observer);
-    if (s.empty() || s[0]["state"] != "live") return false;
-    id = s[0]["id"];
-    return true;
-  })) << server.Log();
+  const std::string id = WaitForLiveSession(port, observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
   TestViewer a(port, id, observer), b(port, id, admin);
   // A late joiner: Welcome, then a keyframe from the server's mirror straight away.
   ASSERT_TRUE(Eventually([&] { return Sessions(port, observer)[0]["samples"].get<int>() > 1500; }));
@@ -116,11 +111,7 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
     ASSERT_TRUE(v->WaitClosed(seconds(20)));
     EXPECT_EQ(v->gaps(), 0);
     const std::vector<double> truth = ReadNumbersAfterFirstLine(dir + "/final.txt");
-    const std::vector<float> seen = v->Positions();
-    ASSERT_EQ(seen.size(), truth.size());
-    double worst = 0;
-    for (size_t i = 0; i < truth.size(); ++i) worst = std::max(worst, std::abs(seen[i] - truth[i]));
-    EXPECT_LE(worst, v->quant_step()) << "max |mirror - agent| over the surface";
+    EXPECT_LE(MaxMirrorError(*v, truth), v->quant_step()) << "max |mirror - agent| over the surface";
   }
   const json summary = json::parse(ReadText(dir + "/summary.json"));
   EXPECT_GE(summary["commands"].get<int>(), 1);
@@ -174,18 +165,9 @@ TEST(Sessions, AStalledViewerIsResynchronisedOrClosedAndSlowsNobody) {
   args.erase(std::find(args.begin(), args.end(), "--no-realtime"));  // 14 s of wall time
   args[std::find(args.begin(), args.end(), "--device") - args.begin() + 1] = "scripted:stroke-slow";
   ChildProcess agent(IDMS_AGENT_BIN, args, dir + "/agent.log");
-  std::string id;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(port, observer);
-    if (s.empty() || s[0]["state"] != "live") return false;
-    id = s[0]["id"];
-    return true;
-  })) << server.Log();
-  const auto metric = [&](const std::string& name) {
-    const HttpReply r = Get(port, "/metrics", observer);
-    const size_t at = r.body.find("\n" + name + " ");
-    return at == std::string::npos ? -1.0 : std::stod(r.body.substr(at + name.size() + 2));
-  };
+  const std::string id = WaitForLiveSession(port, observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
+  const auto metric = [&](const std::string& name) { return MetricValue(port, observer, name); };
   // 4 KB of receive window and 8 KiB of send buffer: once a viewer stops reading, the server's
   // queue for it fills in a second or two.
   TestViewerOptions small;
@@ -210,11 +192,7 @@ TEST(Sessions, AStalledViewerIsResynchronisedOrClosedAndSlowsNobody) {
   for (TestViewer* v : {&steady, &slow}) {
     ASSERT_TRUE(v->WaitClosed(seconds(20)));
     EXPECT_EQ(v->gaps(), 0);
-    const std::vector<float> seen = v->Positions();
-    ASSERT_EQ(seen.size(), truth.size());
-    double worst = 0;
-    for (size_t i = 0; i < truth.size(); ++i) worst = std::max(worst, std::abs(seen[i] - truth[i]));
-    EXPECT_LE(worst, v->quant_step());
+    EXPECT_LE(MaxMirrorError(*v, truth), v->quant_step());
   }
   // Nothing upstream was slowed: every tick recorded, no overruns from the stall.
   const json summary = json::parse(ReadText(dir + "/summary.json"));
