@@ -10,6 +10,7 @@
 #include <boost/asio/post.hpp>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 
 #include "idms/protocol/envelope.h"
@@ -31,6 +32,31 @@ uint64_t UnixNs() {
   return static_cast<uint64_t>(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count());
+}
+
+// "2026-11-23T19:04:05Z" (as UtcNow writes it) as Unix ns; 0 when it does not parse.
+uint64_t ParseUtcNs(const std::string& iso) {
+  std::tm tm{};
+  const char* end = strptime(iso.c_str(), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  if (end == nullptr || *end != '\0') return 0;
+  const time_t t = timegm(&tm);
+  return t < 0 ? 0 : static_cast<uint64_t>(t) * 1000000000ull;
+}
+
+// The simulation time a frame speaks of, s; 0 when it carries none.
+double FrameTimeS(const v1::Envelope& e) {
+  switch (e.body_case()) {
+    case v1::Envelope::kDeviceSamples: {
+      const auto& s = e.device_samples().samples();
+      return s.empty() ? 0 : s[s.size() - 1].time_s();
+    }
+    case v1::Envelope::kMeshKeyframe: return e.mesh_keyframe().time_s();
+    case v1::Envelope::kMeshDelta: return e.mesh_delta().time_s();
+    case v1::Envelope::kTopologyEvent: return e.topology_event().time_s();
+    case v1::Envelope::kSessionEvent: return e.session_event().time_s();
+    case v1::Envelope::kAnnotation: return e.annotation().time_s();
+    default: return 0;
+  }
 }
 
 std::string RandomHex(size_t bytes) {
@@ -115,10 +141,10 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
     });
   }
 
-  void Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t t_ns) {
-    asio::post(strand_, [self = shared_from_this(), envelope = std::move(envelope), t_ns] {
+  void Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t log_ns, uint64_t publish_ns) {
+    asio::post(strand_, [self = shared_from_this(), envelope = std::move(envelope), log_ns, publish_ns] {
       std::string error;
-      if (self->open_ && !self->writer_.Write(*envelope, t_ns, t_ns, &error)) self->Failed(error);
+      if (self->open_ && !self->writer_.Write(*envelope, log_ns, publish_ns, &error)) self->Failed(error);
       self->CountBytes();
     });
   }
@@ -320,7 +346,10 @@ LiveSession::LiveSession(ServerCore& core, SessionRow row, v1::Scene scene, std:
       timer_(strand_),
       recorder_(std::move(recorder)),
       next_tick_(row.next_tick),
-      row_(std::move(row)) {}
+      row_(std::move(row)) {
+  epoch_ns_ = ParseUtcNs(row_.started);
+  if (epoch_ns_ == 0) epoch_ns_ = UnixNs();
+}
 
 void LiveSession::Start() {
   asio::post(strand_, [self = shared_from_this()] { self->Tick(); });
@@ -362,7 +391,12 @@ void LiveSession::Tick() {
 }
 
 void LiveSession::Record(std::shared_ptr<const v1::Envelope> envelope) {
-  recorder_->Write(std::move(envelope), UnixNs());
+  // On the session's clock (a frame without a time of its own: the session's latest); the
+  // publish time is when the server got it.
+  double t_s = FrameTimeS(*envelope);
+  if (!(t_s > 0) || !std::isfinite(t_s)) t_s = std::max(summary_.last_time_s, 0.0);
+  const uint64_t log_ns = epoch_ns_ + static_cast<uint64_t>(std::llround(t_s * 1e9));
+  recorder_->Write(std::move(envelope), log_ns, UnixNs());
 }
 
 void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer) {

@@ -92,6 +92,10 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
   uint64_t annotations_ = 0;
+  // Recordings are on the session's clock: log time = epoch + the frame's simulation time, so the
+  // replay's timeline, seek times, annotations and ?t= links all speak session time, however late
+  // frames arrived. The epoch is the session's start (second precision), stable across restarts.
+  uint64_t epoch_ns_ = 0;
   mutable std::mutex row_mu_;  // row_ is read by the REST handlers
   SessionRow row_;
   std::atomic<int> num_viewers_{0};
