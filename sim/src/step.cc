@@ -51,8 +51,8 @@ const char* IntegratorName(Integrator integrator) {
 }
 
 bool ParseIntegratorName(std::string_view name, Integrator* integrator) {
-  for (Integrator i : {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4,
-                       Integrator::kImplicitEuler}) {
+  for (Integrator i :
+       {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4, Integrator::kImplicitEuler}) {
     if (name == IntegratorName(i)) {
       *integrator = i;
       return true;
@@ -143,7 +143,9 @@ int32_t MakePlans(const Model& m, State& s, Workspace& ws, StepReport* report, P
 // Whether this tick's attempts can change the eq. 4.6 filter state: only the configured scheme
 // reads it (the implicit fallback uses the analytic rate), and only when some b > 0. When not,
 // the filter arrays need no rollback copy (leave out what the scene does not need).
-bool FilterInUse(const Workspace& ws) { return ws.any_damping && internal::UsesFilter(ws.options, ws.options.integrator); }
+bool FilterInUse(const Workspace& ws) {
+  return ws.any_damping && internal::UsesFilter(ws.options, ws.options.integrator);
+}
 
 // Non-finite atoms or filter states found at a tick's start (a State that came in broken) are
 // reset to rest, so that one bad value cannot poison every later tick.
@@ -185,7 +187,8 @@ void CopyRegion(State& s, Workspace& ws) {
   };
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
-    for (int c = 0; c < 3; ++c) copy(s.atom_pos[3 * a + c], ws.backup_pos[3 * i + c]), copy(s.atom_vel[3 * a + c], ws.backup_vel[3 * i + c]);
+    for (int c = 0; c < 3; ++c)
+      copy(s.atom_pos[3 * a + c], ws.backup_pos[3 * i + c]), copy(s.atom_vel[3 * a + c], ws.backup_vel[3 * i + c]);
   }
   const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
   for (int32_t i = 0; i < num_elems; ++i) {
@@ -276,6 +279,7 @@ void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, in
   const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
   const double excess_decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
   double excess = s.energy_excess * excess_decay;
+  const double allowance = std::max(tolerance, s.energy_allowance * excess_decay);
   report->checks_ns += NowNs() - t0;
 
   bool accepted = false;
@@ -293,7 +297,7 @@ void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, in
       report->energy_after = ActiveEnergy(m, s, ws).h;
       const double gain = report->energy_after - before.h;
       excess = std::max(0.0, s.energy_excess * excess_decay + gain);
-      accepted = gain <= tolerance && excess <= tolerance;  // false for NaN
+      accepted = gain <= tolerance && excess <= allowance;  // false for NaN
     } else {
       accepted = ActiveFinite(s, ws);
     }
@@ -305,6 +309,7 @@ void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, in
   }
   t0 = NowNs();
   s.energy_excess = accepted && std::isfinite(excess) ? excess : s.energy_excess * excess_decay;
+  if (std::isfinite(allowance)) s.energy_allowance = allowance;
   if (!accepted) {
     Freeze(s, ws, clock);
     report->unrecovered = true;
@@ -330,7 +335,9 @@ bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, inte
   const Plan& plan = plans[0];
   if (plan.integrator == ws.options.integrator && RunFused(m, s, ws, plan.integrator, plan.substeps, times)) {
     t0 = NowNs();
-    s.energy_excess *= std::exp(-ws.options.dt_s / ws.options.stability.energy_memory_s);
+    const double decay = std::exp(-ws.options.dt_s / ws.options.stability.energy_memory_s);
+    s.energy_excess *= decay;
+    s.energy_allowance *= decay;
     report->attempts = 1;
     report->substeps = plan.substeps;
     report->integrator_used = plan.integrator;

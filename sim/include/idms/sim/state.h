@@ -89,6 +89,10 @@ struct State {
   // Energy the dynamics gained with the tools held still, accumulated over recent ticks
   // (StabilityOptions::energy_memory_s): catches a divergence too slow for one tick's check.
   double energy_excess = 0;
+  // The tolerance the excess is held to, with the same memory: max(tolerance, decay * allowance).
+  // What contact was allowed to gain is forgotten no faster than the gain itself, so a tolerance
+  // that shrinks when contact ends cannot fail every later tick on old, accepted gains.
+  double energy_allowance = 0;
   WarningCounters warnings;
 };
 

@@ -49,8 +49,10 @@ struct StabilityOptions {
   double energy_abs_tol = 1e-9;
   // A slow divergence gains a little every tick. The gains H_after - H_before are also summed in
   // State::energy_excess = max(0, decay * excess + gain), decay = exp(-dt / energy_memory_s),
-  // and a tick also fails when that sum passes the same tolerance. A stable damped scheme's
-  // gains average out below zero; an unstable one's compound.
+  // and a tick also fails when that sum passes the tolerance remembered the same way
+  // (State::energy_allowance = max(tolerance, decay * allowance)): gains accepted under an
+  // earlier, larger tolerance decay with it. A stable damped scheme's gains average out below
+  // zero; an unstable one's compound.
   double energy_memory_s = 1.0;
   int32_t cg_max_iterations = 200;
   double cg_tolerance = 1e-8;  // relative residual
