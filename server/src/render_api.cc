@@ -250,6 +250,7 @@ ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req)
   if (!service.TryReserve()) return Busy(req);
   Slot slot{&service};
   // The surface at t, as a viewer of the replay holds it.
+  const auto t_load = Clock::now();
   render::RecordingPlayer player;
   if (!player.Open(path, &error)) return JsonError(req, http::status::internal_server_error, error);
   const double t = q.t_s < 0 ? player.duration_s() : q.t_s;
@@ -261,8 +262,11 @@ ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req)
   if (!player.MoveTo(t, &error)) return JsonError(req, http::status::bad_request, error);
   std::shared_ptr<const std::string> png;
   std::string timing;
+  const double load_ms = Ms(t_load, Clock::now());
   if (auto failed = RenderAndStore(service, req, player.state(), q.options, key, &png, &timing)) return *failed;
-  return Png(req, png, etag, kCacheControl, timing);
+  char load[48];
+  std::snprintf(load, sizeof load, ", load;dur=%.2f", load_ms);
+  return Png(req, png, etag, kCacheControl, timing + load);
 }
 
 ApiResponse Thumbnail(RenderService& service, ApiContext& ctx, ApiRequest& req) {
@@ -292,13 +296,17 @@ ApiResponse Thumbnail(RenderService& service, ApiContext& ctx, ApiRequest& req) 
   std::string fem, plg;
   if (!ctx.library->blobs().Get(v->fem_sha256, &fem) || !ctx.library->blobs().Get(v->plg_sha256, &plg))
     return JsonError(req, http::status::internal_server_error, "the stored files of " + name + " are missing");
+  const auto t_load = Clock::now();
   ViewerState state;
   if (!render::LoadRestStateText(fem, plg, name, &state, &error))
     return JsonError(req, http::status::internal_server_error, "model " + name + ": " + error);
+  const double load_ms = Ms(t_load, Clock::now());
   std::shared_ptr<const std::string> png;
   std::string timing;
   if (auto failed = RenderAndStore(service, req, state, q.options, key, &png, &timing)) return *failed;
-  return Png(req, png, etag, cache_control, timing);
+  char load[48];
+  std::snprintf(load, sizeof load, ", load;dur=%.2f", load_ms);
+  return Png(req, png, etag, cache_control, timing + load);
 }
 
 }  // namespace
