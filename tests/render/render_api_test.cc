@@ -189,6 +189,10 @@ TEST_F(RenderApiTest, TheCommandLineRendersRecordingsAndALiveSession) {
     }
     return !live_id.empty();
   }));
+  // The server's screenshot of the live session: from its recording so far.
+  ASSERT_TRUE(Eventually([&] {
+    return Get(port_, "/api/sessions/" + live_id + "/screenshot.png?size=320x240", observer_).status == 200;
+  }, std::chrono::seconds(5)));
   ChildProcess live(IDMS_RENDER_BIN,
                     {"--server", "http://127.0.0.1:" + Session().server->port_string(), "--session", live_id,
                      "--token", observer_, "--out", dir + "/live.png", "--show-tool"},
