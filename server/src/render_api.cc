@@ -55,8 +55,24 @@ class RenderService {
     std::lock_guard lock(mu_);
     const auto it = cache_.find(key);
     if (it == cache_.end()) return nullptr;
+    ++hits_;
     lru_.splice(lru_.begin(), lru_, it->second.lru);
     return it->second.png;
+  }
+
+  // Prometheus lines for /metrics.
+  std::string MetricsText() {
+    std::lock_guard lock(mu_);
+    auto counter = [](const char* name, const char* help, const std::string& v) {
+      return std::string("# HELP ") + name + " " + help + "\n# TYPE " + name + " counter\n" + name + " " + v + "\n";
+    };
+    return counter("idms_render_images_total", "Screenshots and thumbnails rendered.", std::to_string(renders_)) +
+           counter("idms_render_cache_hits_total", "Screenshots and thumbnails served from the cache.", std::to_string(hits_)) +
+           counter("idms_render_busy_total", "Render requests refused with 503 (every slot taken).", std::to_string(busy_)) +
+           counter("idms_render_seconds_total", "Time spent drawing (the render thread), s.",
+                   std::to_string(render_s_)) +
+           "# HELP idms_render_cache_bytes PNG bytes in the render cache.\n# TYPE idms_render_cache_bytes gauge\n"
+           "idms_render_cache_bytes " + std::to_string(cache_bytes_) + "\n";
   }
 
   void Store(const std::string& key, std::shared_ptr<const std::string> png) {
@@ -76,7 +92,7 @@ class RenderService {
   // A render slot, held for the whole request; false when all are taken.
   bool TryReserve() {
     std::lock_guard lock(mu_);
-    if (reserved_ >= kMaxRenders) return false;
+    if (reserved_ >= kMaxRenders) return ++busy_, false;
     ++reserved_;
     return true;
   }
@@ -87,7 +103,14 @@ class RenderService {
 
   // Draws on the render thread; blocks the caller (a worker holding a slot) until it is done.
   bool Draw(const ViewerState& state, const RenderOptions& options, Image* image, std::string* error) {
-    std::packaged_task<bool()> task([&] { return renderer_->Render(state.View(), options, image, error); });
+    std::packaged_task<bool()> task([&] {
+      const auto t0 = Clock::now();
+      const bool ok = renderer_->Render(state.View(), options, image, error);
+      std::lock_guard lock(mu_);
+      ++renders_;
+      render_s_ += std::chrono::duration<double>(Clock::now() - t0).count();
+      return ok;
+    });
     std::future<bool> done = task.get_future();
     {
       std::lock_guard lock(mu_);
@@ -123,6 +146,8 @@ class RenderService {
   std::deque<std::packaged_task<bool()>> queue_;  // at most kMaxRenders
   bool stop_ = false;
   int reserved_ = 0;
+  uint64_t renders_ = 0, hits_ = 0, busy_ = 0;
+  double render_s_ = 0;
   std::unordered_map<std::string, Entry> cache_;
   std::list<std::string> lru_;  // most recent first
   size_t cache_bytes_ = 0;
@@ -323,6 +348,10 @@ void AppendRenderRoutes(ServerCore& core, std::vector<Route>* routes) {
        [service](ApiContext& ctx, ApiRequest& req) { return Thumbnail(*service, ctx, req); }, true},
   };
   routes->insert(routes->begin(), ours.begin(), ours.end());
+  // Its figures after the others' on /metrics.
+  core.ctx.more_metrics = [previous = core.ctx.more_metrics, service] {
+    return (previous ? previous() : std::string()) + service->MetricsText();
+  };
 }
 
 }  // namespace idms::server

@@ -143,6 +143,11 @@ TEST_F(RenderApiTest, ABurstBeyondTheRenderQueueGets503AndRetryAfter) {
   }
   EXPECT_GT(busy, 0) << "no 503 in " << round << " bursts";
   EXPECT_GT(ok, 0);
+  // /metrics counts them.
+  const std::string metrics = Get(port_, "/metrics", observer_).body;
+  EXPECT_NE(metrics.find("idms_render_busy_total "), std::string::npos) << metrics;
+  EXPECT_EQ(metrics.find("idms_render_busy_total 0\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("idms_live_sessions "), std::string::npos) << "the sessions' lines stay";
   // Afterwards the server renders again.
   EXPECT_EQ(Shot("?t=0.2&size=320x200", observer_).status, 200);
 }
