@@ -78,10 +78,10 @@ class Renderer {
   std::string error_;
 };
 
-// The automatic camera for a surface (its bounding sphere seen from above and in front); with
-// tool_radius > 0, the tool sphere at tool_pos is framed too.
-Camera AutoCamera(std::span<const float> positions, double aspect, const std::array<double, 3>& tool_pos = {},
-                  double tool_radius = 0);
+// The automatic camera for a surface: from above and in front (z up), far enough back that its
+// bounding box is in view, and the boxes of `spheres` (x, y, z, radius: the tool, the arrow's tip).
+Camera AutoCamera(std::span<const float> positions, double aspect,
+                  std::span<const std::array<double, 4>> spheres = {});
 // The camera Render uses for `scene` with `options` (the automatic one, or the options').
 Camera CameraFor(const SceneView& scene, const RenderOptions& options);
 
