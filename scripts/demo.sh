@@ -1,69 +1,134 @@
 #!/usr/bin/env bash
-# Installs dependencies, builds, and runs the demo of what exists today: the thesis's hex
-# fragment (figure 3-1) is generated, validated and compared with the shipped model library,
-# then palpated, stroked and plucked offline (thesis chapter 6) with plots in build/demo/; the
-# device agent runs its 1 kHz loop on a scripted palpation for two seconds; then idms-server
-# serves the library over HTTP, takes an upload, refuses a broken one, and records a session the
-# agent publishes after fetching its model by name.
+# The whole system on this machine: installs and builds, starts idms-server (an empty temporary
+# data directory unless --data is given: it imports the shipped models and writes a token per
+# role), lets idms-agent palpate, stroke and pluck the thesis fragment (figure 3-1, fetched from
+# the server's library by name; each a recorded session), shows a broken upload refused at its
+# line, renders the palpation's dent with idms-render, then keeps a live session running and
+# prints where to watch it in the browser and what to log in with, until Ctrl-C or --duration.
+#
+# Usage: scripts/demo.sh [--headless] [--duration SECONDS] [--port N] [--data DIR] [--no-build]
+#   --headless   nothing to watch: the scripted sessions, the screenshots, the figures, then exit
+#                (what CI runs; implies --duration 0)
+#   --duration   seconds to keep the live session and the server up (default: until Ctrl-C)
+#   --port       the server's port on 127.0.0.1 (default 8080, or a free one if it is taken)
+#   --no-build   use build/bin as it is
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-bash scripts/build.sh
+headless=false build=true duration="" port=8080 data=""
+while (($#)); do
+  case "$1" in
+    --headless) headless=true ;;
+    --duration) duration="$2"; shift ;;
+    --port) port="$2"; shift ;;
+    --data) data="$2"; shift ;;
+    --no-build) build=false ;;
+    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+$headless && duration=0
+
+$build && bash scripts/build.sh
 bin=build/bin
 out=build/demo
-mkdir -p "$out"
+rm -rf "$out" && mkdir -p "$out"
+[ -n "$data" ] || data=$(mktemp -d -t idms-demo-XXXXXX)
 
-echo "== 1. generate the hex fragment of thesis figure 3-1 (appendix B: 'hex 58 141')"
-"$bin/idms-sim" generate slab --rows 5 --cols 4 --out "$out/hex_4x5_home"
-echo "== 2. validate it"
-"$bin/idms-sim" validate "$out/hex_4x5_home.fem" "$out/hex_4x5_home.plg"
-echo "== 3. the shipped library agrees byte for byte"
-for name in hex_4x5_home; do
-  cmp "$out/$name.fem" "models/$name.fem" && cmp "$out/$name.plg" "models/$name.plg" && echo "models/$name: identical"
-done
-for name in slab_40x40 slab_40x40_tumour; do
-  "$bin/idms-sim" validate "models/$name.fem" "models/$name.plg" --json
-done
-echo "== 4. a malformed model is rejected with FILE:LINE:COL"
-sed 's/^0.5 0 0 0.002 1001 2001$/0.5 0 nan 0.002 1001 2001/' models/hex_4x5_home.fem > "$out/broken.fem"
-"$bin/idms-sim" validate "$out/broken.fem" || true
-echo "== 5. the thesis's interactions offline (figures 6-2, 6-3, 6-5, 6-6, 6-8)"
-for script in palpate stroke-slow stroke-fast pluck; do
-  "$bin/idms-sim" run --model models/hex_4x5_home --script "$script" --csv "$out/$script.csv" --plot "$out/$script.png"
-done
-"$bin/idms-sim" run --model models/hex_4x5_home --script palpate --fit-plot "$out/palpate-fit.png" --json
-echo "== 6. the haptic window's stability (thesis 4.2) at the nominal parameters"
-"$bin/idms-sim" stability --k 15 --b 0.45 --m 0.002 --dt 0.001
-echo "== 7. the device agent's 1 kHz DSM loop, offline (--server none), 2 s of scripted palpation"
-"$bin/idms-agent" --server none --model-file models/hex_4x5_home --device scripted:palpate \
-  --scene models/palpate.scene --duration 2 --summary-json "$out/agent.json"
-echo "== 8. idms-server: the model library over the network (empty data directory: it imports models/)"
-data=$(mktemp -d)
-"$bin/idms-server" --listen 127.0.0.1:0 --data "$data" > "$out/server.out" 2> "$out/server.log" &
-server_pid=$!
-trap 'kill "$server_pid" 2>/dev/null || true' EXIT
-for _ in $(seq 100); do grep -q listening "$out/server.out" 2>/dev/null && break; sleep 0.1; done
-cat "$out/server.out"
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+}
+trap cleanup EXIT
+trap 'echo; echo "demo: stopping"; exit 0' INT TERM
+
+start_server() {  # $1: listen address
+  "$bin/idms-server" --listen "$1" --data "$data" > "$out/server.out" 2> "$out/server.log" &
+  server_pid=$!
+  for _ in $(seq 100); do
+    grep -q "listening on" "$out/server.out" 2>/dev/null && return 0
+    kill -0 "$server_pid" 2>/dev/null || return 1
+    sleep 0.1
+  done
+  return 1
+}
+echo "== idms-server (data: $data)"
+if ! start_server "127.0.0.1:$port"; then
+  echo "demo: port $port is taken; using a free one"
+  start_server "127.0.0.1:0" || { cat "$out/server.log"; exit 1; }
+fi
+pids+=("$server_pid")
 url=$(sed -n 's/^idms-server listening on //p' "$out/server.out")
-admin=$(awk '$1=="admin"{print $2}' "$data/tokens")
-agent=$(awk '$1=="agent"{print $2}' "$data/tokens")
-echo "-- GET /api/models"
-curl -sf -H "Authorization: Bearer $admin" "$url/api/models"; echo
-echo "-- PUT /api/models/my_fragment (the fragment generated in step 1, as a new model)"
-curl -sf -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/hex_4x5_home.fem" -F plg=@"$out/hex_4x5_home.plg" \
-  -F description="generated by the demo" "$url/api/models/my_fragment"; echo
-echo "-- a malformed upload is refused at its line, and nothing is stored"
-curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F plg=@"$out/hex_4x5_home.plg" \
-  "$url/api/models/my_fragment"; echo
-echo "-- the device agent fetches its model from the library by name and publishes a session, recorded"
-"$bin/idms-agent" --server "ws://${url#http://}" --token "$agent" --model my_fragment --device scripted:palpate \
-  --duration 3 --no-realtime --cache-dir "$out/agent-cache" --flush-timeout 1 > "$out/agent-fetch.log" 2>&1 || true
-ls "$out/agent-cache/blobs"
-echo "-- GET /api/sessions, and the recording"
-curl -sf -H "Authorization: Bearer $admin" "$url/api/sessions"; echo
-id=$(curl -sf -H "Authorization: Bearer $admin" "$url/api/sessions" | sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1)
-curl -sf -H "Authorization: Bearer $admin" -o "$out/session.mcap" "$url/api/sessions/$id/recording.mcap"
-"$bin/idms-mcap" info "$out/session.mcap"
-kill "$server_pid"; wait "$server_pid" || true
-echo "server log: $out/server.log (one line per request; no token in it)"
-echo "plots: $out/*.png; the agent's figures: $out/agent.json"
+admin=$(awk '$1 == "admin" {print $2}' "$data/tokens")
+agent=$(awk '$1 == "agent" {print $2}' "$data/tokens")
+observer=$(awk '$1 == "observer" {print $2}' "$data/tokens")
+echo "$url; the library:"
+curl -sf -H "Authorization: Bearer $observer" "$url/api/models" | tr '{' '\n' | sed -n 's/.*"name":"\([^"]*\)".*/  \1/p'
+echo
+
+echo "== a malformed model is refused at its line, and nothing is stored"
+sed 's/^0.5 0 0 0.002 1001 2001$/0.5 0 nan 0.002 1001 2001/' models/hex_4x5_home.fem > "$out/broken.fem"
+curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F plg=@models/hex_4x5_home.plg \
+  "$url/api/models/broken_fragment"; echo
+
+# One recorded session per interaction of thesis chapter 6, the model fetched by name.
+ws="ws://${url#http://}"
+for script in palpate stroke-slow pluck; do
+  echo "== idms-agent: $script on hex_4x5_home, 3 s at 1 kHz, published and recorded"
+  "$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device "scripted:$script" \
+    --duration 3 --no-realtime --cache-dir "$out/agent-cache" --summary-json "$out/$script.json" \
+    > "$out/agent-$script.log" 2>&1
+  id=$(sed -n 's/.*"session_id": *"\([^"]*\)".*/\1/p' "$out/$script.json")
+  curl -sf -H "Authorization: Bearer $observer" -o "$out/$script.mcap" "$url/api/sessions/$id/recording.mcap"
+  echo "   session $id: $(sed -n 's/.*"ticks": *\([0-9]*\).*/\1/p' "$out/$script.json") ticks," \
+    "recording $out/$script.mcap ($(stat -c %s "$out/$script.mcap") bytes)"
+  eval "id_${script//-/_}=$id"
+done
+
+echo "== idms-render: the palpation's dent at t = 2.5 s, and the tissue at rest"
+"$bin/idms-render" --recording "$out/palpate.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
+  --out "$out/palpate.png"
+"$bin/idms-render" --model models/hex_4x5_home --size 1280x720 --out "$out/rest.png"
+"$bin/idms-render" --recording "$out/pluck.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
+  --out "$out/pluck.png"
+ls -l "$out"/*.png | awk '{print "   " $NF " (" $5 " bytes)"}'
+
+if $headless; then
+  echo "== headless: done. Recordings and screenshots in $out/, server log $out/server.log"
+  exit 0
+fi
+
+echo "== a live session to watch: a simulated hand stroking the fragment"
+"$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device human:stroke-slow \
+  --duration "${duration:-0}" --no-realtime --cache-dir "$out/agent-cache" > "$out/agent-live.log" 2>&1 &
+pids+=("$!")
+live=""
+for _ in $(seq 100); do
+  live=$(curl -sf -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' |
+         grep '"state":"live"' | sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1) || true
+  [ -n "$live" ] && break
+  sleep 0.1
+done
+cat <<MSG
+
+  Open in a browser:   $url/login
+    log in with the admin token:    $admin
+    (or the observer token:         $observer)
+  The live session:    $url/session/$live
+  Replays:             $url/replay/$id_palpate?t=2.5   (palpation)
+                       $url/replay/$id_pluck           (pluck)
+  The model library:   $url/models
+  Screenshots:         $out/palpate.png, $out/pluck.png, $out/rest.png
+  Recordings:          $out/*.mcap (and $data/recordings/)
+  Tokens:              $data/tokens
+
+MSG
+if [ -n "$duration" ] && [ "$duration" != 0 ]; then
+  echo "demo: running for $duration s"
+  sleep "$duration"
+else
+  echo "demo: running until Ctrl-C"
+  wait "$server_pid"
+fi

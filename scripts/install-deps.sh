@@ -1,24 +1,45 @@
 #!/usr/bin/env bash
-# Installs every Debian package idms needs. Idempotent: quick when everything is present.
+# Installs every Debian package idms needs, and the npm packages from the committed lockfiles.
+# Idempotent: quick when everything is present.
+# Usage: scripts/install-deps.sh [--build-only]
+#   --build-only: what building the programs needs (docker/'s build stage), without the fuzzers'
+#                 clang, the benches' and tests' tools, or the test-only npm packages.
 set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+build_only=false
+[ "${1:-}" = "--build-only" ] && build_only=true
 
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
-  clang libclang-rt-14-dev
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libzstd-dev zlib1g-dev libssl-dev
   libosmesa6-dev libpng-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
+  nodejs npm
+)
+$build_only || packages+=(
+  clang libclang-rt-14-dev
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
+  docker.io docker-compose debootstrap
+  chromium
 )
+# The viewer's build needs viewer-web's packages; the tests need the others.
+npm_dirs=(viewer-web)
+$build_only || npm_dirs+=(tests/mcap-js tests/web)
 
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+# A machine with its own Node.js (node and npm on the PATH) keeps it.
+if command -v node >/dev/null && command -v npm >/dev/null; then
+  missing=("${missing[@]/#nodejs/}")
+  missing=("${missing[@]/#npm/}")
+  read -r -a missing <<< "${missing[*]}"
+fi
 
 if ((${#missing[@]})); then
   echo "install-deps: installing ${missing[*]}"
@@ -31,15 +52,8 @@ else
   echo "install-deps: all ${#packages[@]} packages present"
 fi
 
-# Node.js (Debian's, unless the machine has one) and the npm packages the tests use, from the
-# committed lockfiles: npm ci only when node_modules is missing or older than its lockfile.
-if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
-  sudo_cmd=""
-  [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
-  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends nodejs npm
-fi
-root="$(cd "$(dirname "$0")/.." && pwd)"
-for dir in tests/mcap-js; do
+# npm ci only when node_modules is missing or older than its lockfile.
+for dir in "${npm_dirs[@]}"; do
   if [ ! -d "$root/$dir/node_modules" ] || [ "$root/$dir/package-lock.json" -nt "$root/$dir/node_modules" ]; then
     echo "install-deps: npm ci in $dir"
     (cd "$root/$dir" && npm ci --no-audit --no-fund --loglevel=error) && touch "$root/$dir/node_modules"

@@ -132,7 +132,7 @@ ApiResponse JsonError(const ApiRequest& req, http::status status, const std::str
 std::vector<Route> MakeRoutes() {
   using P = Permission;
   using V = http::verb;
-  return {
+  std::vector<Route> routes = {
       {V::get, "/api/health", std::nullopt, false, false, Health},
       {V::post, "/api/login", std::nullopt, false, false, Login},
       {V::post, "/api/logout", P::kRead, false, false, Logout},
@@ -148,6 +148,8 @@ std::vector<Route> MakeRoutes() {
       {V::get, "/ws/session/{id}", P::kRead, false, true, nullptr},
       {V::get, "/ws/replay/{id}", P::kRead, false, true, nullptr},
   };
+  AppendViewerRoutes(&routes);  // the web viewer's pages and assets (static_files.cc)
+  return routes;
 }
 
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req) {

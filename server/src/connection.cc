@@ -6,6 +6,7 @@
 #include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/ssl/stream.hpp>
+#include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
 #include <boost/asio/write.hpp>
 #include <boost/beast/core.hpp>
@@ -31,6 +32,9 @@ using Clock = std::chrono::steady_clock;
 
 constexpr uint64_t kLargeBody = 1 << 20;     // bodies above this take an upload slot
 constexpr size_t kMaxQueuedMessages = 1024;  // per WebSocket; the oldest is dropped beyond (as Foxglove's SDK)
+// A WebSocket told to close that has not finished within this long (a peer that stopped reading,
+// so neither its queue nor the close frame can go out) loses its TCP connection.
+constexpr auto kCloseGrace = std::chrono::seconds(5);
 
 template <class Stream>
 constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
@@ -65,6 +69,11 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
 
   void Run(http::request<http::string_body> req) {
     beast::get_lowest_layer(ws_).expires_never();  // the WebSocket's own timeouts from here on
+    if (core_.options.ws_send_buffer_bytes > 0) {
+      beast::error_code ignored;  // a refused size leaves the system's: not worth failing for
+      beast::get_lowest_layer(ws_).socket().set_option(
+          asio::socket_base::send_buffer_size(core_.options.ws_send_buffer_bytes), ignored);
+    }
     ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
     ws_.set_option(websocket::stream_base::decorator(
         [](websocket::response_type& res) { res.set(http::field::server, "idms-server"); }));
@@ -88,6 +97,13 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
       if (!self->open_ || self->close_pending_) return;
       self->close_pending_ = true;
       self->close_reason_ = websocket::close_reason(static_cast<websocket::close_code>(code), reason);
+      self->close_timer_.expires_after(kCloseGrace);
+      self->close_timer_.async_wait([self](beast::error_code ec) {
+        if (ec || !self->open_) return;
+        Log(LogLevel::kWarn, "websocket",
+            {{"what", "close"}, {"error", "peer not reading; connection dropped"}, {"peer", self->peer_}});
+        beast::get_lowest_layer(self->ws_).close();  // the pending write and close end with an error
+      });
       if (self->queue_.empty()) self->DoClose();
     });
   }
@@ -159,6 +175,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
 
   // Once, whichever side ended it: the endpoint lets go of this connection.
   void Closed() {
+    close_timer_.cancel();
     queue_.clear();
     queued_.store(0, std::memory_order_relaxed);
     if (!open_) return;
@@ -176,6 +193,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   bool open_ = false;
   bool close_pending_ = false;
   websocket::close_reason close_reason_;
+  asio::steady_timer close_timer_{ws_.get_executor()};
   Clock::time_point window_start_;
   int window_count_ = 0;
 };

@@ -34,7 +34,8 @@ bool SplitListen(const std::string& text, std::string* host, uint16_t* port) {
 int main(int argc, char** argv) {
   ServerOptions o;
   std::string listen = "127.0.0.1:8740";
-  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30, resume_window_s = 600;
+  int max_upload_mb = 256, max_ws_mb = 16, header_timeout_s = 15, body_timeout_s = 30, resume_window_s = 600,
+      viewer_stall_timeout_s = 10, ws_send_buffer_kb = 256;
 
   CLI::App app{
       "idms-server: the idms session server. HTTP and WebSocket on one port (TLS optional): the model library "
@@ -58,6 +59,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--models-dir", o.models_dir,
                  "Models imported into an empty library (default: the shipped models/; 'none': no import)");
+#ifdef IDMS_DEFAULT_WEB_ROOT
+  o.web_root = IDMS_DEFAULT_WEB_ROOT;
+#endif
+  app.add_option("--web-root", o.web_root, "The built web viewer served at / (index.html, assets/)")->capture_default_str();
   app.add_option("--max-upload-mb", max_upload_mb, "Largest request body, MiB (413 beyond, before it is read)")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
@@ -77,6 +82,17 @@ int main(int argc, char** argv) {
   app.add_option("--resume-window", resume_window_s,
                  "Seconds a live session waits for its agent to come back before it is closed as interrupted")
       ->check(CLI::Range(1, 86400))
+      ->capture_default_str();
+
+  app.add_option("--viewer-stall-timeout", viewer_stall_timeout_s,
+                 "Seconds a live viewer may stay a full queue behind before it is closed (until then it skips "
+                 "mesh deltas and is resynchronised with a keyframe)")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
+
+  app.add_option("--ws-send-buffer-kb", ws_send_buffer_kb,
+                 "Kernel send buffer of each WebSocket in KiB (bounds a slow viewer's latency; 0: autotuned)")
+      ->check(CLI::Range(0, 65536))
       ->capture_default_str();
 
   // idms-server token create ROLE --tokens FILE
@@ -112,6 +128,8 @@ int main(int argc, char** argv) {
   o.header_timeout = std::chrono::seconds(header_timeout_s);
   o.body_timeout = std::chrono::seconds(body_timeout_s);
   o.resume_window = std::chrono::seconds(resume_window_s);
+  o.viewer_stall_timeout = std::chrono::seconds(viewer_stall_timeout_s);
+  o.ws_send_buffer_bytes = ws_send_buffer_kb << 10;
   idms::server::SetLogFormat(o.log_format);
 
   idms::server::Server server(o);

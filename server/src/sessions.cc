@@ -23,8 +23,7 @@ using json = nlohmann::json;
 
 namespace {
 
-constexpr size_t kViewerQueueLimit = 256;                     // frames queued for a viewer before deltas are skipped
-constexpr auto kViewerStallLimit = std::chrono::seconds(10);  // behind that long: closed with a reason
+constexpr size_t kViewerQueueLimit = 256;  // frames queued for a viewer before deltas are skipped
 constexpr uint16_t kPolicyError = 1008;
 constexpr uint16_t kGoingAway = 1001;
 
@@ -92,8 +91,14 @@ bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* 
 // ID.mcap when finished; a resume after a restart first copies the finished file back in.
 class Recorder : public std::enable_shared_from_this<Recorder> {
  public:
-  Recorder(asio::thread_pool& pool, std::string dir, std::string id)
-      : strand_(asio::make_strand(pool)), dir_(std::move(dir)), id_(std::move(id)) {}
+  // `bytes` and `failures` are the hub's counters for /metrics.
+  Recorder(asio::thread_pool& pool, std::string dir, std::string id, std::atomic<uint64_t>* bytes,
+           std::atomic<uint64_t>* failures)
+      : strand_(asio::make_strand(pool)),
+        dir_(std::move(dir)),
+        id_(std::move(id)),
+        bytes_counter_(bytes),
+        failures_counter_(failures) {}
 
   std::string live_path() const { return dir_ + "/" + id_ + ".live.mcap"; }
   std::string final_path() const { return dir_ + "/" + id_ + ".mcap"; }
@@ -114,6 +119,7 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
     asio::post(strand_, [self = shared_from_this(), envelope = std::move(envelope), t_ns] {
       std::string error;
       if (self->open_ && !self->writer_.Write(*envelope, t_ns, t_ns, &error)) self->Failed(error);
+      self->CountBytes();
     });
   }
 
@@ -121,6 +127,7 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
     asio::post(strand_, [self = shared_from_this()] {
       std::string error;
       if (self->open_ && !self->writer_.Flush(UnixNs(), &error)) self->Failed(error);
+      self->CountBytes();
     });
   }
 
@@ -133,9 +140,11 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
         std::error_code ec;
         if (!self->writer_.Close(&error)) {
           self->Failed(error);
-        } else {
-          fs::rename(self->live_path(), self->final_path(), ec);
+        } else if (fs::rename(self->live_path(), self->final_path(), ec); ec) {
+          // The finished file stays under its .live name; the next start-up repairs and indexes it.
+          self->Failed("rename " + self->live_path() + " -> " + self->final_path() + ": " + ec.message());
         }
+        self->CountBytes();
       }
       if (done) done();
     });
@@ -144,13 +153,22 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
  private:
   void Failed(const std::string& error) {
     open_ = false;
+    ++*failures_counter_;
     Log(LogLevel::kError, "recording failed", {{"session", id_}, {"error", error}});
+  }
+  void CountBytes() {
+    const uint64_t now = writer_.mcap().bytes_written();
+    if (now > bytes_counted_) *bytes_counter_ += now - bytes_counted_;
+    bytes_counted_ = now;
   }
 
   asio::strand<asio::thread_pool::executor_type> strand_;
   std::string dir_, id_;
   RecordingWriter writer_;
   bool open_ = false;
+  std::atomic<uint64_t>* bytes_counter_;
+  std::atomic<uint64_t>* failures_counter_;
+  uint64_t bytes_counted_ = 0;
 };
 
 void SessionSummary::Add(const v1::DeviceSamples& ds) {
@@ -245,9 +263,11 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
       // resynchronised with a keyframe once it drains) and sample batches (counted).
       const auto now = std::chrono::steady_clock::now();
       if (!behind_since_) behind_since_ = now;
-      if (now - *behind_since_ > kViewerStallLimit) {
+      const std::chrono::seconds limit = hub_.core().options.viewer_stall_timeout;
+      if (now - *behind_since_ > limit) {
         ++hub_.stalled_closed;
-        peer_->Close(kPolicyError, "viewer stalled: more than 256 frames behind for 10 s");
+        peer_->Close(kPolicyError, "viewer stalled: more than " + std::to_string(kViewerQueueLimit) +
+                                       " frames behind for " + std::to_string(limit.count()) + " s");
         peer_.reset();
         return;
       }
@@ -634,7 +654,8 @@ std::shared_ptr<LiveSession> SessionHub::OpenForAgent(const v1::Hello& hello, co
 std::shared_ptr<LiveSession> SessionHub::StartSession(const SessionRow& row, const v1::Scene& scene,
                                                       bool continue_finished) {
   // Its recording (with the session's id, model and scene as metadata), then the session itself.
-  auto recorder = std::make_shared<Recorder>(core_.recorder, recordings_dir_, row.id);
+  auto recorder =
+      std::make_shared<Recorder>(core_.recorder, recordings_dir_, row.id, &recording_bytes, &recording_failures);
   RecordingWriterOptions options;
   options.session = {{"session_id", row.id}, {"model", row.model}, {"scene", row.scene_text}};
   recorder->Start(options, continue_finished);
@@ -698,6 +719,9 @@ std::string SessionHub::MetricsText() {
          Counter("idms_viewer_deltas_skipped_total", "Mesh deltas slow viewers skipped.", deltas_skipped) +
          Counter("idms_viewer_samples_dropped_total", "Sample batches slow viewers did not get.", samples_dropped) +
          Counter("idms_viewer_resyncs_total", "Keyframes sent to put a slow viewer right.", resyncs) +
+         Counter("idms_recording_bytes_total", "Bytes written to session recordings (MCAP files).", recording_bytes) +
+         Counter("idms_recording_failures_total", "Recordings that stopped on an error (see the log).",
+                 recording_failures) +
          Counter("idms_viewer_stalled_closed_total", "Viewers closed for staying stalled.", stalled_closed) +
          "# HELP idms_session_samples Device samples received, per live session.\n"
          "# TYPE idms_session_samples gauge\n" +

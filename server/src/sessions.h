@@ -118,10 +118,11 @@ class SessionHub {
   bool Delete(const std::string& id, std::string* error);  // not while live
   void StopAll();
   SessionIndex& index() { return *index_; }
+  ServerCore& core() { return core_; }
 
   // Fan-out counters over all viewers (for /metrics and the bench).
   std::atomic<uint64_t> viewer_frames{0}, viewer_bytes{0}, deltas_skipped{0}, samples_dropped{0}, resyncs{0},
-      stalled_closed{0};
+      stalled_closed{0}, recording_bytes{0}, recording_failures{0};
   int live_count();
   // Prometheus lines: live sessions, viewers, and per live session its samples, tick p99 and overruns.
   std::string MetricsText();

@@ -36,12 +36,9 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
   std::mutex mu;
   std::condition_variable cv;
   std::vector<ConnectionRecord> connections;
-  std::map<std::string, int> http_requests;
   int64_t samples = 0;
   int64_t next_tick = 0;  // the first tick not received yet (for Welcome.next_tick on resume)
   bool dropped_once = false;
-  std::chrono::steady_clock::time_point down_until{};
-  int upgrades_refused = 0;
 
   // A connection: HTTP request first, then maybe a WebSocket.
   struct Session : std::enable_shared_from_this<Session> {
@@ -77,28 +74,11 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
 
     void OnRequest() {
       const std::string target(request.target());
-      // Plain HTTP: the model library.
-      if (!websocket::is_upgrade(request)) {
-        {
-          std::lock_guard lock(impl.mu);
-          ++impl.http_requests[target];
-        }
-        impl.cv.notify_all();
-        if (!Authorized()) return Respond(http::status::unauthorized, "bad token");
-        const auto it = impl.options.files.find(target);
-        if (it == impl.options.files.end()) return Respond(http::status::not_found, "no such model");
-        return Respond(http::status::ok, it->second);
+      // WebSocket only: the token on the upgrade request, then Hello.
+      if (!websocket::is_upgrade(request) || target != "/ws/agent") {
+        return Respond(http::status::not_found, "no such endpoint");
       }
-      // WebSocket: the token on the upgrade request, then Hello.
-      if (target != "/ws/agent") return Respond(http::status::not_found, "no such endpoint");
       if (!Authorized()) return Respond(http::status::unauthorized, "bad token");
-      {
-        std::lock_guard lock(impl.mu);
-        if (std::chrono::steady_clock::now() < impl.down_until) {
-          ++impl.upgrades_refused;
-          return Respond(http::status::service_unavailable, "restarting");
-        }
-      }
       ws = std::make_unique<websocket::stream<beast::tcp_stream>>(std::move(stream));
       ws->binary(true);
       ws->async_accept(request, [self = shared_from_this()](beast::error_code ec) {
@@ -181,7 +161,6 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
         if (!impl.dropped_once && impl.options.drop_after_samples >= 0 &&
             impl.samples >= impl.options.drop_after_samples) {
           impl.dropped_once = true;
-          impl.down_until = std::chrono::steady_clock::now() + impl.options.down_after_drop;
           r.dropped_by_endpoint = true;
           r.ended = true;
           drop = true;
@@ -219,14 +198,12 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
     }
   };
 
-  std::weak_ptr<Session> current;
   std::vector<std::weak_ptr<Session>> sessions;  // to close at shutdown
 
   void Accept() {
     acceptor.async_accept([self = shared_from_this()](beast::error_code ec, tcp::socket socket) {
       if (ec) return;
       auto session = std::make_shared<Session>(*self, std::move(socket));
-      self->current = session;
       self->sessions.push_back(session);
       session->Start();
       self->Accept();
@@ -263,41 +240,9 @@ TestEndpoint::~TestEndpoint() {
   thread_.join();
 }
 
-bool TestEndpoint::WaitFor(const std::function<bool(const std::vector<ConnectionRecord>&)>& pred,
-                           std::chrono::milliseconds timeout) {
-  std::unique_lock lock(impl_->mu);
-  return impl_->cv.wait_for(lock, timeout, [&] { return pred(impl_->connections); });
-}
-
 std::vector<ConnectionRecord> TestEndpoint::Connections() {
   std::lock_guard lock(impl_->mu);
   return impl_->connections;
-}
-
-int64_t TestEndpoint::SamplesReceived() {
-  std::lock_guard lock(impl_->mu);
-  return impl_->samples;
-}
-
-int TestEndpoint::UpgradesRefused() {
-  std::lock_guard lock(impl_->mu);
-  return impl_->upgrades_refused;
-}
-
-int TestEndpoint::HttpRequests(const std::string& target) {
-  std::lock_guard lock(impl_->mu);
-  const auto it = impl_->http_requests.find(target);
-  return it == impl_->http_requests.end() ? 0 : it->second;
-}
-
-void TestEndpoint::SendCommand(const v1::Command& command) {
-  v1::Envelope envelope;
-  *envelope.mutable_command() = command;
-  std::string bytes;
-  SerializeEnvelope(envelope, &bytes);
-  asio::post(impl_->io, [impl = impl_, bytes = std::move(bytes)]() mutable {
-    if (auto session = impl->current.lock(); session && session->ws) session->Send(std::move(bytes));
-  });
 }
 
 }  // namespace idms::test

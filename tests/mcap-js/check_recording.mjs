@@ -60,6 +60,9 @@ for await (const message of reader.readMessages()) {
 if (decoded !== streamed) fail(`${decoded} messages through the index, ${streamed} in the stream`);
 const statistics = reader.statistics ? Number(reader.statistics.messageCount) : undefined;
 if (statistics !== undefined && statistics !== decoded) fail(`statistics say ${statistics} messages, read ${decoded}`);
+for (let i = 1; i < ticks.length; i++) {
+  if (ticks[i] <= ticks[i - 1]) fail(`tick ${ticks[i]} after ${ticks[i - 1]}: device ticks not strictly increasing`);
+}
 if (expectTicks !== undefined) {
   if (ticks.length !== expectTicks) fail(`${ticks.length} ticks, expected ${expectTicks}`);
   ticks.forEach((t, i) => {

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <algorithm>
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
@@ -20,6 +21,7 @@
 #include "idms/protocol/mesh_mirror.h"
 #include "idms/protocol/recording.h"
 #include "server_process.h"
+#include "session_checks.h"
 
 namespace idms::test {
 namespace {
@@ -30,110 +32,6 @@ namespace websocket = beast::websocket;
 using json = nlohmann::json;
 using std::chrono::milliseconds;
 using std::chrono::seconds;
-
-// A viewer on its own thread: every frame kept, mesh frames applied to a mirror.
-class TestViewer {
- public:
-  TestViewer(uint16_t port, const std::string& session, const std::string& token) {
-    ws_.set_option(websocket::stream_base::decorator(
-        [token](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
-    beast::get_lowest_layer(ws_).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-    ws_.handshake("127.0.0.1", "/ws/session/" + session);
-    thread_ = std::thread([this] { Read(); });
-  }
-  ~TestViewer() {
-    beast::error_code ec;
-    beast::get_lowest_layer(ws_).socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
-    thread_.join();
-  }
-  void Send(const v1::Envelope& e) {
-    std::string bytes;
-    SerializeEnvelope(e, &bytes);
-    std::lock_guard lock(write_mu_);
-    ws_.binary(true);
-    beast::error_code ec;
-    ws_.write(asio::buffer(bytes), ec);
-  }
-  bool WaitClosed(milliseconds timeout) {
-    return Eventually([&] { return closed_.load(); }, timeout);
-  }
-  std::vector<v1::Envelope> Frames() {
-    std::lock_guard lock(mu_);
-    return frames_;
-  }
-  std::vector<float> Positions() {
-    std::lock_guard lock(mu_);
-    auto p = mirror_.positions();
-    return std::vector<float>(p.begin(), p.end());
-  }
-  double quant_step() {
-    std::lock_guard lock(mu_);
-    return mirror_.quant_step();
-  }
-  int gaps() const { return gaps_.load(); }
-
- private:
-  void Read() {
-    beast::flat_buffer buffer;
-    while (true) {
-      beast::error_code ec;
-      ws_.read(buffer, ec);
-      if (ec) break;
-      v1::Envelope e;
-      std::string error;
-      const auto data = buffer.data();
-      if (ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error)) {
-        std::lock_guard lock(mu_);
-        if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
-          if (mirror_.Apply(e, &error) != MirrorStatus::kOk) ++gaps_;
-        }
-        frames_.push_back(std::move(e));
-      }
-      buffer.consume(buffer.size());
-    }
-    closed_ = true;
-  }
-
-  asio::io_context io_;
-  websocket::stream<beast::tcp_stream> ws_{io_};
-  std::thread thread_;
-  std::mutex mu_, write_mu_;
-  std::vector<v1::Envelope> frames_;
-  MeshMirror mirror_;
-  std::atomic<bool> closed_{false};
-  std::atomic<int> gaps_{0};
-};
-
-json Sessions(uint16_t port, const std::string& token) {
-  const HttpReply r = Get(port, "/api/sessions", token);
-  return r.status == 200 ? json::parse(r.body)["sessions"] : json::array();
-}
-
-// Every device tick in a recording, in order.
-std::vector<uint64_t> RecordedTicks(const std::string& path) {
-  RecordingReader reader;
-  RecordingReaderOptions options;
-  options.mesh = options.events = false;
-  std::string error;
-  std::vector<uint64_t> ticks;
-  EXPECT_TRUE(reader.Open(path, options, &error)) << error;
-  RecordedMessage m;
-  while (reader.Next(&m, &error)) {
-    for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) ticks.push_back(s.tick());
-  }
-  EXPECT_EQ(error, "");
-  return ticks;
-}
-
-// The MCAP project's own reader (@mcap/core, from npm) and protobufjs agree: every record and CRC,
-// every message decoded from the schemas stored in the file, and every tick once, in order.
-void IndependentReaderAccepts(const std::string& path, size_t ticks) {
-  ChildProcess node(IDMS_NODE_BIN,
-                    {std::string(IDMS_SOURCE_DIR) + "/tests/mcap-js/check_recording.mjs", path, "--expect-ticks",
-                     std::to_string(ticks)},
-                    path + ".check.log");
-  EXPECT_EQ(node.Wait(seconds(60)), 0) << node.Log();
-}
 
 std::vector<std::string> AgentArgs(const ServerProcess& server, const std::string& dir, double duration) {
   return {"--server",
@@ -263,6 +161,71 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   EXPECT_EQ(Get(port, "/api/sessions/" + id + "/recording.mcap", observer).status, 404);
 }
 
+// A viewer that stops reading loses mesh deltas (never the others' frames), is put right with a
+// keyframe when it reads again, and is closed when it stays stalled; the agent, the recording and
+// the other viewers go on untouched.
+TEST(Sessions, AStalledViewerIsResynchronisedOrClosedAndSlowsNobody) {
+  const std::string dir = TempDir("sessions-stalled");
+  ServerProcess server(dir + "/data", {"--viewer-stall-timeout", "2", "--ws-send-buffer-kb", "8"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const std::string observer = server.Token("observer");
+  std::vector<std::string> args = AgentArgs(server, dir, 14);
+  args.erase(std::find(args.begin(), args.end(), "--no-realtime"));  // 14 s of wall time
+  args[std::find(args.begin(), args.end(), "--device") - args.begin() + 1] = "scripted:stroke-slow";
+  ChildProcess agent(IDMS_AGENT_BIN, args, dir + "/agent.log");
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(port, observer);
+    if (s.empty() || s[0]["state"] != "live") return false;
+    id = s[0]["id"];
+    return true;
+  })) << server.Log();
+  const auto metric = [&](const std::string& name) {
+    const HttpReply r = Get(port, "/metrics", observer);
+    const size_t at = r.body.find("\n" + name + " ");
+    return at == std::string::npos ? -1.0 : std::stod(r.body.substr(at + name.size() + 2));
+  };
+  // 4 KB of receive window and 8 KiB of send buffer: once a viewer stops reading, the server's
+  // queue for it fills in a second or two.
+  TestViewerOptions small;
+  small.receive_buffer_bytes = 4096;
+  TestViewer steady(port, id, observer), slow(port, id, observer, small), stuck(port, id, observer, small);
+  ASSERT_TRUE(Eventually([&] { return slow.Keyframes() >= 1 && stuck.Keyframes() >= 1; }));
+  slow.Pause();
+  ASSERT_TRUE(Eventually([&] { return metric("idms_viewer_deltas_skipped_total") > 0; }, seconds(20)));
+  const double resyncs = metric("idms_viewer_resyncs_total");
+  slow.Resume();
+  ASSERT_TRUE(Eventually([&] { return metric("idms_viewer_resyncs_total") > resyncs; }, seconds(20)));
+  // The other stops reading for good: closed after the stall timeout (2 s) and the close grace.
+  stuck.Pause();
+  ASSERT_TRUE(Eventually([&] { return metric("idms_viewer_stalled_closed_total") >= 1; }, seconds(30)));
+  EXPECT_FALSE(slow.closed());
+  stuck.Resume();
+  ASSERT_TRUE(stuck.WaitClosed(seconds(20))) << "the server dropped the stalled viewer's connection";
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+  // The steady viewer lost nothing (a skipped delta would be a gap in its mirror), and the slow one,
+  // resynchronised, ends on the agent's surface as well.
+  const std::vector<double> truth = ReadNumbersAfterFirstLine(dir + "/final.txt");
+  for (TestViewer* v : {&steady, &slow}) {
+    ASSERT_TRUE(v->WaitClosed(seconds(20)));
+    EXPECT_EQ(v->gaps(), 0);
+    const std::vector<float> seen = v->Positions();
+    ASSERT_EQ(seen.size(), truth.size());
+    double worst = 0;
+    for (size_t i = 0; i < truth.size(); ++i) worst = std::max(worst, std::abs(seen[i] - truth[i]));
+    EXPECT_LE(worst, v->quant_step());
+  }
+  // Nothing upstream was slowed: every tick recorded, no overruns from the stall.
+  const json summary = json::parse(ReadText(dir + "/summary.json"));
+  EXPECT_EQ(summary["samples_dropped"], 0);
+  const std::string rec = dir + "/rec.mcap";
+  ASSERT_TRUE(Eventually([&] { return Sessions(port, observer)[0]["state"] == "ended"; }));
+  ASSERT_TRUE(DownloadRecording(port, id, observer, rec));
+  EXPECT_EQ(RecordedTicks(rec).size(), 14000u);
+  EXPECT_GT(metric("idms_recording_bytes_total"), 0);
+}
+
 TEST(Sessions, TheRealAgentIsRefusedAWrongTokenAndAnObserversOne) {
   const std::string dir = TempDir("sessions-refused");
   ServerProcess server(dir + "/data");
@@ -270,11 +233,11 @@ TEST(Sessions, TheRealAgentIsRefusedAWrongTokenAndAnObserversOne) {
   const std::string url = "ws://127.0.0.1:" + server.port_string();
   for (const auto& [token, status] : std::vector<std::pair<std::string, std::string>>{
            {"wrong-token-xxxxxxxxxxx", "HTTP 401"}, {server.Token("observer"), "HTTP 403"}}) {
-    ChildProcess agent(IDMS_AGENT_BIN,
-                       {"--server", url, "--token", token, "--model-file",
-                        std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home", "--device", "scripted:palpate",
-                        "--no-realtime", "--duration", "2"},
-                       dir + "/agent.log");
+    ChildProcess agent(
+        IDMS_AGENT_BIN,
+        {"--server", url, "--token", token, "--model-file", std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home",
+         "--device", "scripted:palpate", "--no-realtime", "--duration", "2"},
+        dir + "/agent.log");
     EXPECT_EQ(agent.Wait(seconds(30)), 2) << agent.Log();
     EXPECT_NE(agent.Log().find("refused the token (" + status), std::string::npos) << agent.Log();
   }

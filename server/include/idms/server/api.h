@@ -71,6 +71,10 @@ struct Route {
 // The routes of this server, in match order.
 std::vector<Route> MakeRoutes();
 
+// The web viewer's routes (static_files.cc): its page URLs serve index.html, /assets/{file} the
+// build's files, from ServerOptions::web_root; no token needed (the page asks for a login).
+void AppendViewerRoutes(std::vector<Route>* routes);
+
 // What admission decided: either a response to send at once (error set) or the route to run.
 struct Admission {
   std::optional<ApiResponse> error;  // 4xx / 5xx, already complete

@@ -19,6 +19,7 @@ struct ServerOptions {
   int workers = 4;                           // threads for handlers that parse, hash or touch the disk
   std::string log_format = "text";           // text | json
   std::string models_dir;                    // shipped models to import into an empty library; "none": never
+  std::string web_root;                      // the built web viewer (index.html, assets/); empty: none served
   int64_t max_upload_bytes = int64_t{256} << 20;
   int64_t max_small_body_bytes = int64_t{64} << 10;  // every route but uploads
   int64_t max_ws_message_bytes = int64_t{16} << 20;
@@ -32,6 +33,12 @@ struct ServerOptions {
   // A live session whose agent has been gone this long is closed as "interrupted" (recording
   // finished); its agent can still resume it later, as after a restart.
   std::chrono::seconds resume_window{600};
+  // A live viewer that stays this long more than a queue's worth of frames behind is closed.
+  std::chrono::seconds viewer_stall_timeout{10};
+  // SO_SNDBUF of every WebSocket: a fixed kernel send buffer instead of Linux's autotuning (up to
+  // 4 MiB), so that a slow peer's backlog builds in the server's queue, where deltas are skipped
+  // and keyframes resynchronise, not as seconds of stale frames in the kernel. 0: the system's.
+  int ws_send_buffer_bytes = 256 << 10;
 };
 
 }  // namespace idms::server

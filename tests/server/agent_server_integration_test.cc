@@ -1,0 +1,186 @@
+// The real idms-agent against the real idms-server on loopback, for what the agent does at its
+// end of a session: a backlog that overflows while the server is down (dropped, counted, told and
+// recorded), a SIGTERM that ends the session with every tick recorded, commands from an admin
+// viewer reaching the loop, the model library download and cache, an unknown model refused.
+// (tests/agent keeps a stand-in endpoint only for a fault the real server does not produce: a
+// connection dropped without a close frame while the server stays up.)
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <regex>
+
+#include "server_process.h"
+#include "session_checks.h"
+
+namespace idms::test {
+namespace {
+
+using json = nlohmann::json;
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+
+json ReadJson(const std::string& path) { return json::parse(ReadText(path)); }
+
+std::string WsUrl(const ServerProcess& server) { return "ws://127.0.0.1:" + server.port_string(); }
+
+// The first live session's id, once it has `samples` samples.
+std::string WaitForLiveSession(const ServerProcess& server, const std::string& token, int samples) {
+  std::string id;
+  Eventually([&] {
+    const json s = Sessions(server.port(), token);
+    if (s.empty() || s[0]["state"] != "live" || s[0]["samples"].get<int>() < samples) return false;
+    id = s[0]["id"];
+    return true;
+  });
+  return id;
+}
+
+// A counter's value in /metrics (the whole line up to the value must match), or -1.
+double MetricValue(uint16_t port, const std::string& token, const std::string& series) {
+  const HttpReply r = Get(port, "/metrics", token);
+  std::istringstream lines(r.body);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 && line[series.size()] == ' ')
+      return std::stod(line.substr(series.size() + 1));
+  }
+  return -1;
+}
+
+TEST(AgentAndServer, ABacklogThatOverflowsWhileTheServerIsDownIsDroppedCountedAndRecorded) {
+  const std::string dir = TempDir("agent-overflow");
+  auto server = std::make_unique<ServerProcess>(dir + "/data");
+  ASSERT_TRUE(server->ready()) << server->Log();
+  const std::string port = server->port_string(), observer = server->Token("observer");
+  // Real time: the loop goes on at 1 kHz while the server is away for 1.5 s; 300 samples kept.
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", WsUrl(*server), "--token", server->Token("agent"), "--model", "hex_4x5_home",
+                      "--cache-dir", dir + "/cache", "--device", "scripted:stroke-slow", "--duration", "4", "--backlog",
+                      "300", "--summary-json", dir + "/summary.json"},
+                     dir + "/agent.log");
+  const std::string id = WaitForLiveSession(*server, observer, 800);
+  ASSERT_FALSE(id.empty()) << server->Log() << agent.Log();
+  server->process().Signal(SIGKILL);
+  ASSERT_TRUE(server->process().Wait(seconds(30)));
+  std::this_thread::sleep_for(milliseconds(1500));  // the outage itself is what is tested
+  server = std::make_unique<ServerProcess>(dir + "/data", std::vector<std::string>{"--listen", "127.0.0.1:" + port});
+  ASSERT_TRUE(server->ready()) << server->Log();
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+
+  const json summary = ReadJson(dir + "/summary.json");
+  EXPECT_EQ(summary["session_id"], id);
+  const uint64_t ticks_run = summary["ticks"], dropped = summary["samples_dropped"];
+  EXPECT_EQ(ticks_run, 4000u);
+  EXPECT_GT(dropped, 1000u) << "1.5 s away with room for 300 samples";
+  ASSERT_TRUE(Eventually([&] { return Sessions(server->port(), observer)[0]["state"] == "ended"; })) << server->Log();
+  ASSERT_TRUE(DownloadRecording(server->port(), id, observer, dir + "/rec.mcap"));
+  // Every tick either recorded once, in order, or dropped and counted; the last one is there.
+  const std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
+  ASSERT_FALSE(ticks.empty());
+  for (size_t i = 1; i < ticks.size(); ++i) ASSERT_LT(ticks[i - 1], ticks[i]) << "recorded tick " << i;
+  EXPECT_EQ(ticks.size() + dropped, ticks_run);
+  EXPECT_EQ(ticks.back() + 1, ticks_run);
+  // The server was told, and the recording says so: SAMPLES_DROPPED events adding up to the count.
+  uint64_t told = 0;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/rec.mcap")) {
+    if (e.kind() == v1::SessionEvent::KIND_SAMPLES_DROPPED) told += e.count();
+  }
+  EXPECT_EQ(told, dropped);
+  IndependentReaderAccepts(dir + "/rec.mcap", 0);
+}
+
+TEST(AgentAndServer, CommandsFromAnAdminReachTheLoopAndSigtermEndsWithEveryTickRecorded) {
+  const std::string dir = TempDir("agent-sigterm");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
+       dir + "/cache", "--device", "human:stroke-slow", "--summary-json", dir + "/summary.json"},
+      dir + "/agent.log");
+  const std::string id = WaitForLiveSession(server, observer, 300);
+  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
+  {
+    TestViewer admin(server.port(), id, server.Token("admin"));
+    ASSERT_TRUE(Eventually([&] { return admin.Keyframes() >= 1; }));
+    const int keyframes = admin.Keyframes();
+    for (v1::Command::Kind kind : {v1::Command::KIND_RESET, v1::Command::KIND_KEYFRAME_REQUEST}) {
+      v1::Envelope e;
+      e.mutable_command()->set_kind(kind);
+      admin.Send(e);
+    }
+    // The requested keyframe arrives (a reset also restarts the mesh stream with one).
+    ASSERT_TRUE(Eventually([&] { return admin.Keyframes() > keyframes; })) << agent.Log();
+  }
+  agent.Signal(SIGTERM);
+  ASSERT_EQ(agent.Wait(seconds(30)), 0) << agent.Log();
+  EXPECT_NE(agent.Log().find("SIGTERM"), std::string::npos) << agent.Log();
+  const json summary = ReadJson(dir + "/summary.json");
+  EXPECT_EQ(summary["commands"], 2);
+  EXPECT_EQ(summary["samples_dropped"], 0);
+  EXPECT_EQ(summary["ended_cleanly"], true);
+  // Everything the loop ran was delivered before the close, and the session ended (not interrupted).
+  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+  ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
+  const std::vector<uint64_t> ticks = RecordedTicks(dir + "/rec.mcap");
+  ASSERT_EQ(ticks.size(), summary["ticks"].get<uint64_t>());
+  for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
+  const std::vector<v1::SessionEvent> events = RecordedSessionEvents(dir + "/rec.mcap");
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().kind(), v1::SessionEvent::KIND_ENDED);
+}
+
+TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {
+  const std::string dir = TempDir("agent-library");
+  const std::string cache = dir + "/cache";
+  {
+    ServerProcess server(dir + "/data");
+    ASSERT_TRUE(server.ready()) << server.Log();
+    for (int run = 0; run < 2; ++run) {
+      ChildProcess agent(IDMS_AGENT_BIN,
+                         {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home",
+                          "--cache-dir", cache, "--device", "scripted:palpate", "--duration", "0.2", "--no-realtime"},
+                         dir + "/agent.log");
+      ASSERT_EQ(agent.Wait(seconds(30)), 0) << agent.Log();
+    }
+    // Metadata twice, the two files once: the second run found them in its cache by hash.
+    const std::string observer = server.Token("observer");
+    EXPECT_EQ(MetricValue(server.port(), observer,
+                          R"(idms_http_requests_total{method="GET",route="/api/models/{name}",status="200"})"),
+              2);
+    EXPECT_EQ(MetricValue(server.port(), observer,
+                          R"(idms_http_requests_total{method="GET",route="/api/models/{name}/{file}",status="200"})"),
+              2);
+    const json meta = json::parse(Get(server.port(), "/api/models/hex_4x5_home", observer).body);
+    const std::string fem_sha = meta["versions"].back()["fem_sha256"];
+    EXPECT_TRUE(std::filesystem::exists(cache + "/blobs/" + fem_sha)) << meta.dump();
+  }
+  // Server gone: the model comes from the cache, the loop runs anyway, the agent gives up
+  // delivering after its flush timeout and exits normally.
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", "ws://127.0.0.1:1", "--token", "agent-secret", "--model", "hex_4x5_home",
+                      "--cache-dir", cache, "--device", "scripted:palpate", "--duration", "0.5", "--no-realtime",
+                      "--flush-timeout", "0.5", "--summary-json", dir + "/summary.json"},
+                     dir + "/offline.log");
+  ASSERT_EQ(agent.Wait(seconds(30)), 0) << agent.Log();
+  EXPECT_NE(agent.Log().find("using the cached"), std::string::npos) << agent.Log();
+  EXPECT_EQ(ReadJson(dir + "/summary.json")["ticks"], 500);
+}
+
+TEST(AgentAndServer, AnUnknownModelIsAClearError) {
+  const std::string dir = TempDir("agent-unknown-model");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "liver@1", "--cache-dir",
+                      dir + "/cache", "--device", "scripted:palpate", "--duration", "0.2"},
+                     dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(30)), 1) << agent.Log();
+  EXPECT_NE(agent.Log().find("model 'liver@1': GET /api/models/liver?version=1"), std::string::npos) << agent.Log();
+  EXPECT_NE(agent.Log().find("HTTP 404"), std::string::npos) << agent.Log();
+}
+
+}  // namespace
+}  // namespace idms::test

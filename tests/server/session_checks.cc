@@ -1,0 +1,177 @@
+// Reading back what a real idms-server recorded, for the session integration tests.
+#include "session_checks.h"
+
+#include <gtest/gtest.h>
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
+#include <fstream>
+
+#include "child_process.h"
+#include "idms/protocol/envelope.h"
+#include "idms/protocol/recording.h"
+#include "server_process.h"
+
+namespace idms::test {
+
+nlohmann::json Sessions(uint16_t port, const std::string& token) {
+  const HttpReply r = Get(port, "/api/sessions", token);
+  return r.status == 200 ? nlohmann::json::parse(r.body)["sessions"] : nlohmann::json::array();
+}
+
+bool DownloadRecording(uint16_t port, const std::string& id, const std::string& token, const std::string& path) {
+  const HttpReply r = Get(port, "/api/sessions/" + id + "/recording.mcap", token);
+  EXPECT_EQ(r.status, 200) << r.body;
+  if (r.status != 200) return false;
+  std::ofstream(path, std::ios::binary) << r.body;
+  return true;
+}
+
+namespace {
+
+// Every message of the selected topics, in log-time order.
+template <class F>
+void ForEachRecorded(const std::string& path, RecordingReaderOptions options, F&& f) {
+  RecordingReader reader;
+  std::string error;
+  ASSERT_TRUE(reader.Open(path, options, &error)) << error;
+  RecordedMessage m;
+  while (reader.Next(&m, &error)) f(m.envelope);
+  EXPECT_EQ(error, "");
+}
+
+}  // namespace
+
+std::vector<uint64_t> RecordedTicks(const std::string& path) {
+  RecordingReaderOptions options;
+  options.mesh = options.events = options.annotations = false;
+  std::vector<uint64_t> ticks;
+  ForEachRecorded(path, options, [&](const v1::Envelope& e) {
+    for (const v1::DeviceSample& s : e.device_samples().samples()) ticks.push_back(s.tick());
+  });
+  return ticks;
+}
+
+std::vector<v1::SessionEvent> RecordedSessionEvents(const std::string& path) {
+  RecordingReaderOptions options;
+  options.mesh = options.device = options.annotations = false;
+  std::vector<v1::SessionEvent> events;
+  ForEachRecorded(path, options, [&](const v1::Envelope& e) {
+    if (e.has_session_event()) events.push_back(e.session_event());
+  });
+  return events;
+}
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace websocket = beast::websocket;
+
+TestViewer::TestViewer(uint16_t port, const std::string& session, const std::string& token, TestViewerOptions options) {
+  ws_.set_option(websocket::stream_base::decorator(
+      [token](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
+  asio::ip::tcp::socket& socket = beast::get_lowest_layer(ws_).socket();
+  socket.open(asio::ip::tcp::v4());
+  // Before connect, so that the window the server sees is the small one.
+  if (options.receive_buffer_bytes > 0) {
+    socket.set_option(asio::socket_base::receive_buffer_size(options.receive_buffer_bytes));
+  }
+  socket.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  ws_.handshake("127.0.0.1", "/ws/session/" + session);
+  thread_ = std::thread([this] { Read(); });
+}
+
+TestViewer::~TestViewer() {
+  {
+    std::lock_guard lock(mu_);
+    stopping_ = true;
+  }
+  resumed_.notify_all();
+  beast::error_code ec;
+  beast::get_lowest_layer(ws_).socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  thread_.join();
+}
+
+void TestViewer::Send(const v1::Envelope& e) {
+  std::string bytes;
+  SerializeEnvelope(e, &bytes);
+  std::lock_guard lock(write_mu_);
+  ws_.binary(true);
+  beast::error_code ec;
+  ws_.write(asio::buffer(bytes), ec);
+}
+
+void TestViewer::Pause() {
+  std::lock_guard lock(mu_);
+  paused_ = true;
+}
+
+void TestViewer::Resume() {
+  {
+    std::lock_guard lock(mu_);
+    paused_ = false;
+  }
+  resumed_.notify_all();
+}
+
+bool TestViewer::WaitClosed(std::chrono::milliseconds timeout) {
+  return Eventually([&] { return closed_.load(); }, timeout);
+}
+
+std::vector<v1::Envelope> TestViewer::Frames() {
+  std::lock_guard lock(mu_);
+  return frames_;
+}
+
+int TestViewer::Keyframes() {
+  std::lock_guard lock(mu_);
+  int n = 0;
+  for (const v1::Envelope& e : frames_) n += e.has_mesh_keyframe() ? 1 : 0;
+  return n;
+}
+
+std::vector<float> TestViewer::Positions() {
+  std::lock_guard lock(mu_);
+  auto p = mirror_.positions();
+  return std::vector<float>(p.begin(), p.end());
+}
+
+double TestViewer::quant_step() {
+  std::lock_guard lock(mu_);
+  return mirror_.quant_step();
+}
+
+void TestViewer::Read() {
+  beast::flat_buffer buffer;
+  while (true) {
+    {
+      std::unique_lock lock(mu_);
+      resumed_.wait(lock, [&] { return !paused_ || stopping_; });
+      if (stopping_) break;
+    }
+    beast::error_code ec;
+    ws_.read(buffer, ec);
+    if (ec) break;
+    v1::Envelope e;
+    std::string error;
+    const auto data = buffer.data();
+    if (ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error)) {
+      std::lock_guard lock(mu_);
+      if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+        if (mirror_.Apply(e, &error) != MirrorStatus::kOk) ++gaps_;
+      }
+      frames_.push_back(std::move(e));
+    }
+    buffer.consume(buffer.size());
+  }
+  closed_ = true;
+}
+
+void IndependentReaderAccepts(const std::string& path, size_t ticks) {
+  std::vector<std::string> args = {std::string(IDMS_SOURCE_DIR) + "/tests/mcap-js/check_recording.mjs", path};
+  if (ticks > 0) args.insert(args.end(), {"--expect-ticks", std::to_string(ticks)});
+  ChildProcess node(IDMS_NODE_BIN, args, path + ".check.log");
+  EXPECT_EQ(node.Wait(std::chrono::seconds(60)), 0) << node.Log();
+}
+
+}  // namespace idms::test

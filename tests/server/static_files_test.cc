@@ -1,0 +1,97 @@
+// The web viewer's static files without sockets: page URLs get index.html, assets their type and
+// ETag (304 on a match), nothing outside the build directory, API routes first.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "child_process.h"
+#include "idms/server/api.h"
+
+namespace idms::server {
+namespace {
+
+class StaticFilesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = test::TempDir("static-files");
+    std::filesystem::create_directories(root_ + "/assets");
+    Write("index.html", "<!doctype html><title>idms</title>");
+    Write("assets/app.js", "console.log(1);");
+    Write("assets/app.css", "body{}");
+    Write("secret", "not served");
+    options_.web_root = root_;
+    ctx_.options = &options_;
+    ctx_.logins = &logins_;
+    ctx_.tokens = [] { return std::make_shared<const TokenTable>(); };
+  }
+
+  void Write(const std::string& name, const std::string& text) { std::ofstream(root_ + "/" + name) << text; }
+
+  ApiResponse Get(const std::string& target, const std::string& if_none_match = "") {
+    ApiRequest req;
+    req.message = http::request<http::string_body>(http::verb::get, target, 11);
+    req.message.set(http::field::host, "idms.local:8740");
+    if (!if_none_match.empty()) req.message.set(http::field::if_none_match, if_none_match);
+    Admission a = Admit(ctx_, routes_, req);
+    if (a.error) return *a.error;
+    return a.route->handler(ctx_, req);
+  }
+
+  std::string root_;
+  ServerOptions options_;
+  LoginSessions logins_{std::chrono::seconds(3600)};
+  ApiContext ctx_;
+  std::vector<Route> routes_ = MakeRoutes();
+};
+
+TEST_F(StaticFilesTest, PageUrlsServeIndexWithoutAToken) {
+  for (const char* path : {"/", "/login", "/sessions", "/session/abc", "/replay/abc?t=1.5", "/models", "/models/hex"}) {
+    const ApiResponse r = Get(path);
+    EXPECT_EQ(r.result_int(), 200) << path;
+    EXPECT_EQ(r[http::field::content_type], "text/html; charset=utf-8") << path;
+    EXPECT_EQ(r.body(), "<!doctype html><title>idms</title>") << path;
+  }
+  // API routes keep precedence and their auth; unknown paths stay 404.
+  EXPECT_EQ(Get("/api/models").result_int(), 401);
+  EXPECT_EQ(Get("/session").result_int(), 404);
+  EXPECT_EQ(Get("/models/a/b").result_int(), 404);
+}
+
+TEST_F(StaticFilesTest, AssetsHaveTypesAndRevalidate) {
+  ApiResponse js = Get("/assets/app.js");
+  ASSERT_EQ(js.result_int(), 200);
+  EXPECT_EQ(js[http::field::content_type], "text/javascript; charset=utf-8");
+  EXPECT_EQ(js[http::field::cache_control], "no-cache");
+  EXPECT_EQ(js.body(), "console.log(1);");
+  const std::string etag(js[http::field::etag]);
+  ASSERT_FALSE(etag.empty());
+  const ApiResponse again = Get("/assets/app.js", etag);
+  EXPECT_EQ(again.result_int(), 304);
+  EXPECT_TRUE(again.body().empty());
+  EXPECT_EQ(Get("/assets/app.js", "\"other\"").result_int(), 200);
+  EXPECT_EQ(Get("/assets/app.css")[http::field::content_type], "text/css; charset=utf-8");
+  // A changed file gets a new ETag.
+  Write("assets/app.js", "console.log(2); // longer");
+  EXPECT_NE(Get("/assets/app.js")[http::field::etag], etag);
+}
+
+TEST_F(StaticFilesTest, NothingOutsideTheBuild) {
+  EXPECT_EQ(Get("/assets/missing.js").result_int(), 404);
+  EXPECT_EQ(Get("/assets/.hidden").result_int(), 404);
+  EXPECT_NE(Get("/assets/%2e%2e%2fsecret").result_int(), 200);
+  EXPECT_NE(Get("/assets/..%2fsecret").result_int(), 200);
+  EXPECT_EQ(Get("/secret").result_int(), 404);
+}
+
+TEST_F(StaticFilesTest, AMissingBuildSaysWhatToDo) {
+  options_.web_root = root_ + "/nowhere";
+  const ApiResponse r = Get("/sessions");
+  EXPECT_EQ(r.result_int(), 503);
+  EXPECT_NE(r.body().find("scripts/build.sh"), std::string::npos) << r.body();
+  options_.web_root.clear();
+  EXPECT_EQ(Get("/").result_int(), 503);
+}
+
+}  // namespace
+}  // namespace idms::server

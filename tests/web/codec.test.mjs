@@ -1,0 +1,102 @@
+// The browser's mesh codec against frames protocol/'s C++ encoder wrote (idms-web-mesh-frames):
+// every frame applied in order must leave MeshState exactly where the C++ MeshMirror was, with the
+// same status and message, so the two decoders cannot drift apart.
+//   IDMS_WEB_MESH_FRAMES_BIN=build/bin/idms-web-mesh-frames node --test tests/web/codec.test.mjs
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { execFileSync } from 'node:child_process';
+import { mkdtempSync, readFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { idms } from '../../viewer-web/src/codec/proto.js';
+import { MeshState } from '../../viewer-web/src/codec/mesh.js';
+import { inspectZstdFrame } from '../../viewer-web/src/codec/zstd_frame.js';
+
+const bin = process.env.IDMS_WEB_MESH_FRAMES_BIN;
+const Envelope = idms.v1.Envelope;
+
+/** The C++ tool's lines: frame bytes, status, message and the mirror's state after each. */
+function cppFrames() {
+  assert.ok(bin, 'IDMS_WEB_MESH_FRAMES_BIN names build/bin/idms-web-mesh-frames');
+  const file = join(mkdtempSync(join(tmpdir(), 'idms-web-codec-')), 'frames.jsonl');
+  execFileSync(bin, [file]);
+  return readFileSync(file, 'utf8').trim().split('\n').map((l) => JSON.parse(l));
+}
+
+// zstd's and fzstd's own messages for a corrupt frame differ; everything else is our text.
+const sameMessage = (/** @type {string} */ js, /** @type {string} */ cpp) =>
+  cpp.includes('zstd: ') || cpp.includes('corrupt zstd frame') ? js.split(': ')[0] === cpp.split(': ')[0] : js === cpp;
+
+test('every C++-encoded frame, valid or damaged, decodes to the C++ mirror state', () => {
+  const lines = cppFrames();
+  assert.ok(lines.length > 90, `${lines.length} frames`);
+  /** @type {Map<string, MeshState>} */
+  const states = new Map();
+  let keyframes = 0, deltas = 0, empty = 0, zstd = 0, raw = 0, refused = 0;
+  for (const line of lines) {
+    // One MeshState per scenario, as the tool keeps one mirror per scenario.
+    const scenario = line.name.replace(/ frame \d+$/, '').replace(/^damaged( keyframe)?: .*/, 'damaged');
+    if (!states.has(scenario)) states.set(scenario, new MeshState());
+    const state = /** @type {MeshState} */ (states.get(scenario));
+    const env = Envelope.decode(Buffer.from(line.frame, 'hex'));
+    const frame = env.meshKeyframe ?? env.meshDelta;
+    assert.ok(frame, line.name);
+    const status = state.apply(env);
+    assert.equal(status, line.status, `${line.name}: ${state.error}`);
+    assert.ok(sameMessage(state.error, line.error), `${line.name}: JS "${state.error}" vs C++ "${line.error}"`);
+    // The state after, exactly: sequence, quantized positions, float positions, triangles.
+    assert.equal(state.sequence, line.sequence, line.name);
+    assert.deepEqual(Array.from(state.q.subarray(0, 3 * state.numVertices)), line.q, line.name);
+    assert.deepEqual(Array.from(state.triangles.subarray(0, 3 * state.numTriangles)), line.triangles, line.name);
+    for (let k = 0; k < line.q.length; k++) assert.equal(state.positions[k], Math.fround(line.q[k] * state.quantStep));
+    if (status === 'ok' && env.meshDelta) assert.equal(state.numChanged, line.num_changed, line.name);
+    // What was covered.
+    if (status !== 'ok') refused++;
+    else if (env.meshKeyframe) keyframes++;
+    else if (env.meshDelta?.numChanged === 0) empty++;
+    else deltas++;
+    if (frame.compression === 1) zstd++;
+    else raw++;
+  }
+  assert.ok(keyframes >= 6 && deltas >= 50 && empty >= 4 && refused >= 20 && zstd > 20 && raw > 10,
+    JSON.stringify({ keyframes, deltas, empty, refused, zstd, raw }));
+});
+
+test('a refused frame leaves the surface as it was, and the next valid delta applies', () => {
+  const lines = cppFrames().filter((l) => l.name.startsWith('session origin 0'));
+  const state = new MeshState();
+  assert.equal(state.apply(Envelope.decode(Buffer.from(lines[0].frame, 'hex'))), 'ok');
+  const delta = Envelope.decode(Buffer.from(lines[1].frame, 'hex'));
+  assert.ok(delta.meshDelta && delta.meshDelta.numChanged > 0);
+  const before = Array.from(state.q.subarray(0, 3 * state.numVertices));
+  // A gap (the base is not the frame held) is reported, not drawn.
+  const lost = Envelope.decode(Buffer.from(lines[2].frame, 'hex'));
+  assert.equal(state.apply(lost), 'gap');
+  assert.match(state.error, /is ahead of the mirror's frame .* \(frames lost\)/);
+  // A truncated zstd payload is refused with the frame named.
+  const cut = Envelope.decode(Buffer.from(lines[1].frame, 'hex'));
+  if (!cut.meshDelta) throw new Error('not a delta');
+  cut.meshDelta.payload = cut.meshDelta.payload.subarray(0, cut.meshDelta.payload.length - 3);
+  assert.equal(state.apply(cut), 'invalid');
+  assert.match(state.error, /^delta \d+: /);
+  assert.deepEqual(Array.from(state.q.subarray(0, 3 * state.numVertices)), before);
+  assert.equal(state.apply(delta), 'ok');
+  assert.deepEqual(Array.from(state.q.subarray(0, 3 * state.numVertices)), lines[1].q);
+});
+
+test('zstd frame inspection names what is wrong', () => {
+  assert.equal(inspectZstdFrame(new Uint8Array([1, 2, 3, 4, 5, 6])).error, 'payload is not a zstd frame');
+  // Magic, then a header without a content size (no single segment, FCS flag 0), window byte.
+  const noSize = new Uint8Array([0x28, 0xb5, 0x2f, 0xfd, 0x00, 0x58, 0x01, 0x00, 0x00]);
+  assert.equal(inspectZstdFrame(noSize).error, 'zstd frame does not declare its content size');
+});
+
+test('64-bit fields are numbers, set or not: an unset topology version compares equal across messages', () => {
+  const key = Envelope.decode(Envelope.encode({ meshKeyframe: { sequence: 1, quantStep: 1e-4 } }).finish());
+  const delta = Envelope.decode(Envelope.encode({ meshDelta: { sequence: 2, baseSequence: 1 } }).finish());
+  assert.equal(typeof key.meshKeyframe?.topologyVersion, 'number');
+  assert.equal(key.meshKeyframe?.topologyVersion, delta.meshDelta?.topologyVersion);
+  const state = new MeshState();
+  assert.equal(state.apply(key), 'ok');
+  assert.equal(state.apply(delta), 'ok', state.error);
+});

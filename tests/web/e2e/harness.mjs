@@ -1,0 +1,141 @@
+// What the end-to-end tests share: the real idms-server (a free loopback port, its own data
+// directory), the real idms-agent publishing a scripted session, Debian's chromium through
+// playwright-core with a fresh profile, the login, and screenshots kept under build/.
+import { spawn } from 'node:child_process';
+import { mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { createInterface } from 'node:readline';
+import { chromium } from 'playwright-core';
+
+const env = (/** @type {string} */ name) => {
+  const v = process.env[name];
+  if (!v) throw new Error(`${name} is not set (ctest sets it; see tests/web/CMakeLists.txt)`);
+  return v;
+};
+export const serverBin = () => env('IDMS_SERVER_BIN');
+export const agentBin = () => env('IDMS_AGENT_BIN');
+export const sourceDir = () => env('IDMS_SOURCE_DIR');
+export const artifacts = () => {
+  const dir = env('IDMS_WEB_ARTIFACTS');
+  mkdirSync(dir, { recursive: true });
+  return dir;
+};
+
+/** A temporary directory for one test. @param {string} name */
+export const tempDir = (name) => mkdtempSync(join(tmpdir(), `idms-web-${name}-`));
+
+export class Server {
+  /** @param {string} dataDir */
+  constructor(dataDir) {
+    this.dataDir = dataDir;
+    this.port = 0;
+    /** @type {import('node:child_process').ChildProcess | null} */
+    this.child = null;
+    this.log = '';
+  }
+
+  /** Starts idms-server (port 0 the first time, the same port after a restart); resolves when it listens. */
+  async start() {
+    const args = ['--data', this.dataDir, '--listen', `127.0.0.1:${this.port}`, '--web-root', env('IDMS_WEB_ROOT'), '--threads', '2'];
+    const child = spawn(serverBin(), args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    this.child = child;
+    child.stderr.on('data', (d) => { this.log += d; });
+    const lines = createInterface({ input: child.stdout });
+    const first = await new Promise((resolve, reject) => {
+      const timer = setTimeout(() => reject(new Error(`idms-server did not start:\n${this.log}`)), 60000);
+      lines.once('line', (l) => { clearTimeout(timer); resolve(l); });
+      child.once('exit', (code) => { clearTimeout(timer); reject(new Error(`idms-server exited ${code}:\n${this.log}`)); });
+    });
+    // "idms-server listening on http://127.0.0.1:PORT"
+    const m = /:(\d+)$/.exec(String(first));
+    if (!m) throw new Error(`unexpected first line: ${first}`);
+    this.port = Number(m[1]);
+    return this;
+  }
+
+  get base() { return `http://127.0.0.1:${this.port}`; }
+
+  /** @param {string} role admin | agent | observer */
+  token(role) {
+    for (const line of readFileSync(join(this.dataDir, 'tokens'), 'utf8').split('\n')) {
+      const [r, t] = line.trim().split(/\s+/);
+      if (r === role) return t;
+    }
+    throw new Error(`no ${role} token`);
+  }
+
+  /** SIGTERM, and the exit. */
+  async stop() {
+    const child = this.child;
+    if (!child || child.exitCode !== null) return;
+    const exited = new Promise((resolve) => child.once('exit', resolve));
+    child.kill('SIGTERM');
+    await exited;
+    this.child = null;
+  }
+
+  /** A REST call with a bearer token. @param {string} path @param {string} role */
+  async get(path, role = 'admin') {
+    const res = await fetch(this.base + path, { headers: { Authorization: `Bearer ${this.token(role)}` } });
+    return { status: res.status, headers: res.headers, body: await res.text() };
+  }
+
+  /** The id of the first live session, once there is one. */
+  async liveSession(timeoutMs = 60000) {
+    const deadline = Date.now() + timeoutMs;
+    while (Date.now() < deadline) {
+      const { body } = await this.get('/api/sessions');
+      const live = JSON.parse(body).sessions.find((/** @type {any} */ s) => s.state === 'live');
+      if (live) return String(live.id);
+      await new Promise((r) => setTimeout(r, 100));
+    }
+    throw new Error('no live session');
+  }
+}
+
+/**
+ * The real agent publishing a scripted palpation of the shipped hex model.
+ * @param {Server} server @param {number} durationS @param {string} [device]
+ */
+export function startAgent(server, durationS, device = 'scripted:palpate') {
+  const child = spawn(agentBin(), ['--server', `ws://127.0.0.1:${server.port}`, '--token', server.token('agent'),
+    '--model-file', join(sourceDir(), 'models', 'hex_4x5_home'), '--device', device, '--no-realtime',
+    '--duration', String(durationS)], { stdio: ['ignore', 'ignore', 'pipe'] });
+  let log = '';
+  child.stderr.on('data', (d) => { log += d; });
+  const exited = new Promise((resolve) => child.once('exit', (code) => resolve(code)));
+  return { child, exited, log: () => log, kill: () => child.exitCode === null && child.kill('SIGTERM') };
+}
+
+/** Debian's chromium, headless, with a fresh profile; WebGL through SwiftShader. */
+export async function launchBrowser() {
+  const context = await chromium.launchPersistentContext(tempDir('profile'), {
+    executablePath: '/usr/bin/chromium',
+    headless: true,
+    args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+    viewport: { width: 1280, height: 720 },
+  });
+  const page = context.pages()[0] ?? (await context.newPage());
+  /** @type {string[]} */
+  const errors = [];
+  context.on('weberror', (e) => errors.push(String(e.error())));
+  return { context, page, errors };
+}
+
+/**
+ * Logs in through /login, as a visitor would.
+ * @param {import('playwright-core').Page} page @param {Server} server @param {string} role @param {string} [next]
+ */
+export async function login(page, server, role, next = '/sessions') {
+  await page.goto(`${server.base}/login?next=${encodeURIComponent(next)}`);
+  await page.fill('#token', server.token(role));
+  await Promise.all([page.waitForURL((u) => u.pathname === next), page.click('button[type=submit]')]);
+}
+
+/** A screenshot kept under build/web-artifacts. @param {import('playwright-core').Page | import('playwright-core').Locator} target @param {string} name */
+export async function shot(target, name) {
+  const buffer = await target.screenshot();
+  writeFileSync(join(artifacts(), name), buffer);
+  return buffer;
+}

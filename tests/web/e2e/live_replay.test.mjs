@@ -1,0 +1,125 @@
+// A real agent publishes a palpation to a real server; the browser lists it live, draws the
+// surface moving with the tool and force, grows the force plot, serves a late joiner at once,
+// relays an admin's keyframe request, takes an annotation; then replays the recording: the URL's
+// t opens there, play advances the time and the URL, speed changes, the annotation is on the timeline.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { Server, tempDir, launchBrowser, login, shot, startAgent } from './harness.mjs';
+
+/** @type {Server} */
+let server;
+/** @type {ReturnType<typeof startAgent>} */
+let agent;
+/** @type {Awaited<ReturnType<typeof launchBrowser>>} */
+let browser;
+let sessionId = '';
+const note = 'too much force here';
+
+before(async () => {
+  server = await new Server(tempDir('live')).start();
+  browser = await launchBrowser();
+});
+after(async () => {
+  agent?.kill();
+  await browser?.context.close();
+  await server?.stop();
+});
+
+/** @param {import('playwright-core').Page} page */
+const state = (page) => page.evaluate(() => /** @type {any} */ (window).__idms);
+
+test('live: list, surface that moves, tool and force, plots, late join, command, annotation', async () => {
+  const { page, context, errors } = browser;
+  agent = startAgent(server, 12);
+  sessionId = await server.liveSession();
+  await login(page, server, 'admin', '/sessions');
+  // The list shows the live session by itself (it refreshes), with its model.
+  const row = page.locator(`#sessions tr[data-id="${sessionId}"][data-state="live"]`);
+  await row.waitFor();
+  assert.match(await row.innerText(), /hex_4x5_home/);
+  await shot(page, 'sessions-live.png');
+  await Promise.all([page.waitForURL(`**/session/${sessionId}`), row.locator('a').first().click()]);
+
+  // The surface arrives and moves; the plots fill at 1 kHz.
+  await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s.keyframes >= 1 && s.renders >= 1 && s.samples >= 300; });
+  const view = page.locator('#view3d');
+  const first = await shot(view, 'live-1.png');
+  const before1 = await state(page);
+  await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.timeS > t + 1.5 && s.movedVertices > 0 && s.contactSamples > 0; }, before1.timeS, { timeout: 60000 });
+  const second = await shot(view, 'live-2.png');
+  const after1 = await state(page);
+  assert.notDeepEqual(first, second, 'the view changed as the tool pressed');
+  assert.ok(after1.deltas > before1.deltas, 'deltas applied');
+  assert.ok(after1.movedVertices > 0, 'surface vertices moved');
+  assert.ok(after1.peakForce > 0, 'a force was felt');
+  assert.ok(after1.forcePoints > before1.forcePoints && after1.forcePoints >= 1500, `force plot grew to ${after1.forcePoints}`);
+  assert.equal(after1.gaps + after1.invalid, 0, after1.lastError);
+  const health = await page.locator('#health').innerText();
+  assert.match(health, /Tick compute p99\s+\d+ µs/);
+  assert.match(health, /Overruns\s+\d+ of [1-9]\d* ticks/);
+
+  // A late joiner draws at once: its first mesh frame is a keyframe from the server's mirror.
+  const late = await context.newPage();
+  const t0 = Date.now();
+  await late.goto(`${server.base}/session/${sessionId}`);
+  await late.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s && s.keyframes >= 1 && s.renders >= 1; });
+  const lateMs = Date.now() - t0;
+  const lateState = await state(late);
+  assert.equal(lateState.gaps, 0);
+  assert.ok(lateMs < 5000, `late join drew after ${lateMs} ms`);
+  await shot(late.locator('#view3d'), 'live-late-join.png');
+
+  // An admin's keyframe request reaches the agent: a new keyframe comes to every viewer.
+  const k = (await state(page)).keyframes;
+  await page.click('#commands button:has-text("Request keyframe")');
+  await page.waitForFunction((n) => /** @type {any} */ (window).__idms.keyframes > n, k);
+
+  // An annotation lands for every viewer.
+  await page.fill('#note', note);
+  await page.click('#annotate button[type=submit]');
+  await page.waitForSelector(`#annotations li:has-text("${note}")`);
+  await late.waitForSelector(`#annotations li:has-text("${note}")`);
+  await shot(page, 'live-page.png');
+  await late.close();
+
+  // The agent finishes: the page says so.
+  assert.equal(await agent.exited, 0, agent.log());
+  await page.waitForSelector('#meta a[href^="/replay/"]', { timeout: 30000 });
+  assert.deepEqual(errors, []);
+});
+
+test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, the annotation on the timeline', async () => {
+  const { page, errors } = browser;
+  assert.ok(sessionId, 'the live test ran');
+  await page.goto(`${server.base}/replay/${sessionId}?t=4.5`);
+  // The seek to 4.5 s is confirmed; the surface there is drawn.
+  await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s && s.keyframes >= 1 && s.renders >= 1; });
+  await page.waitForFunction(() => Math.abs(Number(/** @type {HTMLInputElement} */ (document.getElementById('seek')).value) - 4.5) < 0.05);
+  assert.equal(new URL(page.url()).searchParams.get('t'), '4.50');
+  // The live annotation is marked on the timeline.
+  const mark = page.locator('#marks .mark.annotation');
+  await mark.waitFor();
+  assert.match(await mark.getAttribute('aria-label') ?? '', new RegExp(note));
+  await shot(page, 'replay-paused.png');
+
+  // Play: time and URL advance.
+  await page.click('#play');
+  await page.waitForFunction(() => Number(new URL(location.href).searchParams.get('t')) > 5.0, undefined, { timeout: 15000 });
+  // 4x: the session time runs at least twice as fast as the wall clock.
+  await page.selectOption('#speed', '4');
+  await page.waitForFunction(() => /** @type {HTMLSelectElement} */ (document.getElementById('speed')).value === '4');
+  const ta = (await state(page)).timeS;
+  const wa = Date.now();
+  await page.waitForFunction((t) => /** @type {any} */ (window).__idms.timeS > t + 2, ta, { timeout: 15000 });
+  const rate = ((await state(page)).timeS - ta) / ((Date.now() - wa) / 1000);
+  assert.ok(rate > 1.8, `replay ran at ${rate.toFixed(2)}x`);
+  await page.click('#play');  // pause
+  await page.waitForSelector('#play[aria-pressed="false"]');
+
+  // A click on the annotation's mark seeks there.
+  const noteTime = Number(await page.locator('#annotations li').first().getAttribute('data-time'));
+  await mark.click();
+  await page.waitForFunction((t) => Math.abs(Number(new URL(location.href).searchParams.get('t')) - t) < 0.02, noteTime);
+  await shot(page, 'replay-seek.png');
+  assert.deepEqual(errors, []);
+});

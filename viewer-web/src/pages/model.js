@@ -1,0 +1,63 @@
+// /models/{name}: the model's versions with their hashes, a 3D preview of a version at rest (its
+// .obj surface), and delete for admins.
+import { api } from '../net/api.js';
+import { parseObj } from '../codec/obj.js';
+import { SurfaceView } from '../view/surface.js';
+import { h, page, formatDate } from './dom.js';
+
+/** @param {string} name @param {string} role */
+export function modelPage(name, role) {
+  const viewHost = h('div', { class: 'view3d preview', id: 'preview' });
+  const info = h('p', { class: 'meta', id: 'preview-info', role: 'status', text: 'Loading…' });
+  const body = h('tbody');
+  page(`Model ${name}`, [
+    h('h1', {}, ['Model ', h('code', { text: name })]),
+    info,
+    h('div', { class: 'model-grid' }, [
+      h('section', { 'aria-label': 'Preview at rest' }, [viewHost]),
+      h('section', { 'aria-labelledby': 'versions-title' }, [h('h2', { id: 'versions-title', text: 'Versions' }),
+        h('div', { class: 'scroll' }, [h('table', { class: 'list', id: 'versions' }, [
+          h('thead', {}, [h('tr', {}, ['Version', 'Atoms', 'Elements', 'Triangles', 'Description', 'Added', 'fem SHA-256', '']
+            .map((t) => h('th', { scope: 'col', text: t })))]), body])])]),
+    ]),
+  ]);
+  const view = new SurfaceView(viewHost);
+
+  /** @param {number} version */
+  async function preview(version) {
+    const res = await fetch(`/api/models/${encodeURIComponent(name)}/obj?version=${version}`, { credentials: 'same-origin' });
+    if (!res.ok) throw new Error(`obj: HTTP ${res.status}`);
+    const surface = parseObj(await res.text());
+    view.fitted = false;
+    view.setSurface(surface);
+    info.textContent = `Version ${version} at rest: ${surface.numVertices} surface vertices, ${surface.numTriangles} triangles`;
+    /** @type {any} */ (window).__idmsPreview = { version, vertices: surface.numVertices, triangles: surface.numTriangles };
+  }
+
+  async function load() {
+    const m = await api(`/api/models/${encodeURIComponent(name)}`);
+    const versions = [...(m.versions || [])].sort((/** @type {any} */ a, /** @type {any} */ b) => b.version - a.version);
+    body.replaceChildren(...versions.map((/** @type {any} */ v) => h('tr', { 'data-version': v.version }, [
+      h('td', { class: 'num', text: String(v.version) }),
+      h('td', { class: 'num', text: String(v.atoms) }),
+      h('td', { class: 'num', text: String(v.elements) }),
+      h('td', { class: 'num', text: String(v.triangles) }),
+      h('td', { text: v.description }),
+      h('td', { text: formatDate(v.created) }),
+      h('td', {}, [h('code', { text: String(v.fem_sha256).slice(0, 12) + '…', title: v.fem_sha256 })]),
+      h('td', {}, [
+        h('button', { type: 'button', class: 'small', text: 'Preview', 'aria-label': `Preview version ${v.version}`, onclick: () => preview(v.version) }),
+        role === 'admin' ? h('button', { type: 'button', class: 'small danger', text: 'Delete', 'aria-label': `Delete version ${v.version}`,
+          onclick: async () => {
+            if (!confirm(`Delete ${name} version ${v.version}?`)) return;
+            await api(`/api/models/${encodeURIComponent(name)}?version=${v.version}`, { method: 'DELETE' });
+            if (versions.length === 1) location.assign('/models');
+            else load();
+          } }) : null,
+      ]),
+    ])));
+    if (versions.length) await preview(versions[0].version);
+  }
+  load().catch((e) => { info.textContent = `Cannot load ${name}: ${e instanceof Error ? e.message : String(e)}`; });
+  return () => view.dispose();
+}

@@ -1,0 +1,130 @@
+// The replay's timeline: a slider to seek by click, drag or keys, play/pause, speed 0.1x-10x,
+// events and annotations marked on it, and the URL's ?t= following the time so that a link opens
+// at the moment it names.
+import { idms } from '../codec/proto.js';
+import { h, formatTime } from './dom.js';
+
+const Action = idms.v1.PlaybackControl.Action;
+const kSpeeds = [0.1, 0.25, 0.5, 1, 2, 4, 10];
+
+export class Timeline {
+  /**
+   * @param {HTMLElement} host
+   * @param {(control: idms.v1.IPlaybackControl) => void} send
+   */
+  constructor(host, send) {
+    this.send = send;
+    this.duration = 0;
+    this.time = 0;
+    this.playing = false;
+    this.speed = 1;
+    this.dragging = false;
+    this.opened = false;
+    /** A seek sent and not yet confirmed by a PlaybackState at its time; NaN = none. */
+    this.seekTarget = NaN;
+    /** @type {{t: number, kind: string, title: string}[]} */
+    this.marks = [];
+    const t = Number(new URLSearchParams(location.search).get('t'));
+    this.urlTime = Number.isFinite(t) && t > 0 ? t : 0;
+    this.slider = h('input', { type: 'range', id: 'seek', min: 0, max: 1, step: 0.001, value: 0, 'aria-label': 'Session time (seek)' });
+    this.timeText = h('output', { id: 'replay-time', for: 'seek', text: formatTime(0) });
+    this.playButton = h('button', { type: 'button', id: 'play', text: 'Play', 'aria-pressed': 'false' });
+    this.speedSelect = h('select', { id: 'speed' }, kSpeeds.map((s) => h('option', { value: s, text: `${s}×`, selected: s === 1 })));
+    this.markLayer = h('div', { class: 'marks', id: 'marks' });
+    host.append(
+      h('div', { class: 'timeline' }, [h('div', { class: 'track' }, [this.slider, this.markLayer])]),
+      h('div', { class: 'transport' }, [this.playButton, this.timeText,
+        h('label', { for: 'speed', text: 'Speed' }), this.speedSelect]));
+    this.slider.addEventListener('input', () => {
+      this.dragging = true;
+      this.timeText.textContent = formatTime(Number(this.slider.value));
+    });
+    this.slider.addEventListener('change', () => {
+      this.dragging = false;
+      this.seek(Number(this.slider.value));
+    });
+    this.playButton.addEventListener('click', () => this.send({ action: this.playing ? Action.ACTION_PAUSE : Action.ACTION_PLAY }));
+    this.speedSelect.addEventListener('change', () => this.send({ action: Action.ACTION_SET_SPEED, speed: Number(this.speedSelect.value) }));
+  }
+
+  /** @param {number} t session time, s */
+  seek(t) {
+    this.seekTarget = t;
+    this.time = t;
+    this.send({ action: Action.ACTION_SEEK, seekTimeS: t });
+    this.showTime();
+  }
+
+  /** Every (re)connection starts paused at 0: go back to where the view was (or the URL's t). */
+  reconnected() {
+    const target = this.opened ? this.time : this.urlTime;
+    const wasPlaying = this.opened && this.playing;
+    this.opened = true;
+    if (target > 0) this.seek(target);
+    if (this.speed !== 1) this.send({ action: Action.ACTION_SET_SPEED, speed: this.speed });
+    if (wasPlaying) this.send({ action: Action.ACTION_PLAY });
+  }
+
+  /** @param {number} d */
+  setDuration(d) {
+    if (!(d > 0)) return;
+    this.duration = d;
+    this.slider.max = String(d);
+    this.layoutMarks();
+  }
+
+  /** The time of the samples being shown. @param {number} t */
+  setTime(t) {
+    if (!Number.isNaN(this.seekTarget)) return;
+    this.time = t;
+    this.showTime();
+  }
+
+  /**
+   * A PlaybackState from the server; true when it confirms a seek (the plots restart).
+   * @param {idms.v1.IPlaybackState} ps
+   */
+  onState(ps) {
+    this.setDuration(ps.durationS || 0);
+    this.playing = !!ps.playing;
+    this.speed = ps.speed || 1;
+    this.playButton.textContent = this.playing ? 'Pause' : 'Play';
+    this.playButton.setAttribute('aria-pressed', String(this.playing));
+    this.speedSelect.value = String(this.speed);
+    const t = ps.timeS || 0;
+    let seeked = false;
+    if (!Number.isNaN(this.seekTarget)) {
+      // States sent before the seek was handled still name the old time: wait for the new one.
+      const want = this.duration > 0 ? Math.min(this.seekTarget, this.duration) : this.seekTarget;
+      if (Math.abs(t - want) > 0.05) return false;
+      this.seekTarget = NaN;
+      seeked = true;
+    }
+    this.time = t;
+    this.showTime();
+    history.replaceState(null, '', `${location.pathname}?t=${t.toFixed(2)}`);
+    return seeked;
+  }
+
+  /** @param {number} t @param {string} kind @param {string} title */
+  addMark(t, kind, title) {
+    this.marks.push({ t, kind, title });
+    this.layoutMarks();
+  }
+
+  layoutMarks() {
+    if (!(this.duration > 0)) return;
+    this.markLayer.replaceChildren(...this.marks.map((m) => h('button', {
+      type: 'button', class: `mark ${m.kind}`, title: `${formatTime(m.t)} ${m.title}`,
+      'aria-label': `${m.kind} at ${formatTime(m.t)}: ${m.title}`,
+      style: `left: ${(100 * Math.min(1, m.t / this.duration)).toFixed(3)}%`,
+      onclick: () => this.seek(m.t),
+    })));
+  }
+
+  showTime() {
+    if (this.dragging) return;
+    this.slider.value = String(this.time);
+    this.timeText.textContent = `${formatTime(this.time)} / ${formatTime(this.duration)}`;
+  }
+}

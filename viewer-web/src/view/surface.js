@@ -1,0 +1,309 @@
+// The tissue in 3D: the surface as one three.js BufferGeometry updated in place (only moved
+// vertices' positions and the normals around them, uploaded as update ranges), the tool as a
+// sphere of its radius (thesis 6.1), the force as an arrow scaled to its magnitude. Renders only
+// when something changed; nothing is allocated per frame once the first keyframe is drawn.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+const kToolFree = 0x4f7cac;
+const kToolContact = 0xe08a1e;
+const kToolGrasp = 0xc0392b;
+
+export class SurfaceView {
+  /** @param {HTMLElement} host */
+  constructor(host) {
+    this.host = host;
+    this.renderer = new THREE.WebGLRenderer({ antialias: true });
+    this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
+    this.renderer.domElement.setAttribute('aria-label', 'Tissue surface, tool and force (drag to orbit, wheel to zoom)');
+    this.renderer.domElement.setAttribute('role', 'img');
+    host.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0xf4f5f7);
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.addEventListener('change', () => this.invalidate());
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8090a0, 1.6));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.8);
+    sun.position.set(3, 5, 8);
+    this.scene.add(sun);
+    // The surface: buffers sized at a keyframe, reused while the surface does not grow.
+    this.geometry = new THREE.BufferGeometry();
+    this.material = new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide });
+    this.mesh = new THREE.Mesh(this.geometry, this.material);
+    this.mesh.frustumCulled = false;
+    this.mesh.visible = false;
+    this.scene.add(this.mesh);
+    this.capacityV = 0;
+    this.capacityT = 0;
+    this.numVertices = 0;
+    this.numTriangles = 0;
+    /** @type {THREE.BufferAttribute | null} */ this.posAttr = null;
+    /** @type {THREE.BufferAttribute | null} */ this.normAttr = null;
+    // Vertex -> triangles (CSR), face normals, and stamps that collect the triangles and
+    // vertices around the moved ones without clearing anything.
+    this.adjStart = new Int32Array(1);
+    this.adjTris = new Int32Array(0);
+    this.faceNormals = new Float32Array(0);
+    this.triStamp = new Uint32Array(0);
+    this.vertStamp = new Uint32Array(0);
+    this.touchedTris = new Int32Array(0);
+    this.touchedVerts = new Int32Array(0);
+    this.stamp = 0;
+    // The tool and the force.
+    this.toolMaterial = new THREE.MeshStandardMaterial({ color: kToolFree, transparent: true, opacity: 0.5, depthWrite: false });
+    this.tool = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), this.toolMaterial);
+    this.tool.visible = false;
+    this.scene.add(this.tool);
+    this.arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 1, 0x1d5fa8);
+    this.arrow.visible = false;
+    // Drawn over everything, so that the force shows through the tool and the tissue.
+    for (const m of [this.arrow.line.material, this.arrow.cone.material]) /** @type {THREE.Material} */ (m).depthTest = false;
+    this.arrow.renderOrder = 10;
+    this.scene.add(this.arrow);
+    this.forceDir = new THREE.Vector3();
+    this.toolRadius = 1.5;
+    this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
+    this.fitted = false;
+    this.dirty = true;
+    this.frameRequested = false;
+    /** Called after each render (the page counts frames). @type {(() => void) | null} */
+    this.onRender = null;
+    this.resizeObserver = new ResizeObserver(() => this.resize());
+    this.resizeObserver.observe(host);
+    this.resize();
+  }
+
+  resize() {
+    const w = Math.max(1, this.host.clientWidth);
+    const h = Math.max(1, this.host.clientHeight);
+    this.renderer.setSize(w, h, false);
+    this.renderer.domElement.style.width = '100%';
+    this.renderer.domElement.style.height = '100%';
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.invalidate();
+  }
+
+  /** Schedules one render on the next animation frame (at most one pending). */
+  invalidate() {
+    this.dirty = true;
+    if (this.frameRequested) return;
+    this.frameRequested = true;
+    requestAnimationFrame(() => {
+      this.frameRequested = false;
+      if (!this.dirty) return;
+      this.dirty = false;
+      this.renderer.render(this.scene, this.camera);
+      this.onRender?.();
+    });
+  }
+
+  /** @param {boolean} on */
+  setWireframe(on) {
+    this.material.wireframe = on;
+    this.invalidate();
+  }
+
+  /**
+   * A whole surface (a keyframe): positions, triangles, adjacency, every normal.
+   * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
+   */
+  setSurface(s) {
+    const nv = s.numVertices;
+    const nt = s.numTriangles;
+    if (nv > this.capacityV || nt > this.capacityT) this.allocate(Math.max(nv, this.capacityV), Math.max(nt, this.capacityT));
+    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
+    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
+    /** @type {Float32Array} */ (pos.array).set(s.positions.subarray(0, 3 * nv));
+    const index = /** @type {THREE.BufferAttribute} */ (this.geometry.index);
+    /** @type {Uint32Array} */ (index.array).set(s.triangles.subarray(0, 3 * nt));
+    this.numVertices = nv;
+    this.numTriangles = nt;
+    this.buildAdjacency(s.triangles, nv, nt);
+    // Every face normal, then every vertex normal.
+    for (let t = 0; t < nt; t++) this.faceNormal(t);
+    for (let v = 0; v < nv; v++) this.vertexNormal(v);
+    this.geometry.setDrawRange(0, 3 * nt);
+    for (const a of [pos, norm, index]) {
+      a.clearUpdateRanges();
+      a.needsUpdate = true;
+    }
+    this.mesh.visible = nt > 0;
+    if (!this.fitted && nv > 0) this.fit();
+    this.invalidate();
+  }
+
+  /**
+   * The vertices a delta moved: their positions, the normals of the vertices around them.
+   * @param {{positions: Float32Array, changed: Int32Array, numChanged: number}} s
+   */
+  applyMoved(s) {
+    const n = s.numChanged;
+    if (n === 0 || !this.posAttr || !this.normAttr) return;
+    const p = /** @type {Float32Array} */ (this.posAttr.array);
+    const stamp = ++this.stamp;
+    let numTris = 0;
+    let numVerts = 0;
+    // Positions of the moved vertices, and the triangles around them.
+    for (let k = 0; k < n; k++) {
+      const v = s.changed[k];
+      p[3 * v] = s.positions[3 * v];
+      p[3 * v + 1] = s.positions[3 * v + 1];
+      p[3 * v + 2] = s.positions[3 * v + 2];
+      for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
+        const t = this.adjTris[a];
+        if (this.triStamp[t] !== stamp) {
+          this.triStamp[t] = stamp;
+          this.touchedTris[numTris++] = t;
+        }
+      }
+    }
+    // Those triangles' normals, and the vertices whose normals they feed.
+    const index = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    for (let k = 0; k < numTris; k++) {
+      const t = this.touchedTris[k];
+      this.faceNormal(t);
+      for (let c = 0; c < 3; c++) {
+        const v = index[3 * t + c];
+        if (this.vertStamp[v] !== stamp) {
+          this.vertStamp[v] = stamp;
+          this.touchedVerts[numVerts++] = v;
+        }
+      }
+    }
+    let lo = this.numVertices;
+    let hi = -1;
+    for (let k = 0; k < numVerts; k++) {
+      const v = this.touchedVerts[k];
+      this.vertexNormal(v);
+      if (v < lo) lo = v;
+      if (v > hi) hi = v;
+    }
+    // Upload only the spans that changed (changed ids are increasing).
+    const first = s.changed[0];
+    const last = s.changed[n - 1];
+    this.posAttr.clearUpdateRanges();
+    this.posAttr.addUpdateRange(3 * first, 3 * (last - first + 1));
+    this.posAttr.needsUpdate = true;
+    this.normAttr.clearUpdateRanges();
+    this.normAttr.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
+    this.normAttr.needsUpdate = true;
+    this.invalidate();
+  }
+
+  /**
+   * The tool's sphere and the force arrow.
+   * @param {number} x @param {number} y @param {number} z tool centre, model units
+   * @param {number} fx @param {number} fy @param {number} fz force on the device
+   * @param {boolean} contact @param {boolean} grasp
+   */
+  setTool(x, y, z, fx, fy, fz, contact, grasp) {
+    this.tool.visible = true;
+    this.tool.position.set(x, y, z);
+    this.tool.scale.setScalar(this.toolRadius);
+    this.toolMaterial.color.setHex(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
+    const f = Math.hypot(fx, fy, fz);
+    this.arrow.visible = f > 1e-9;
+    if (this.arrow.visible) {
+      this.forceDir.set(fx / f, fy / f, fz / f);
+      this.arrow.position.set(x, y, z);
+      this.arrow.setDirection(this.forceDir);
+      const length = this.toolRadius + f * this.forceScale;
+      this.arrow.setLength(length, Math.min(0.4 * length, this.toolRadius * 0.6), this.toolRadius * 0.35);
+    }
+    this.invalidate();
+  }
+
+  /** @param {number} radius model units */
+  setToolRadius(radius) {
+    this.toolRadius = radius > 0 ? radius : 1.5;
+    this.invalidate();
+  }
+
+  /** Points the camera at the surface from above and in front. */
+  fit() {
+    this.geometry.computeBoundingSphere();
+    const sphere = this.geometry.boundingSphere;
+    if (!sphere || !Number.isFinite(sphere.radius) || sphere.radius === 0) return;
+    const r = sphere.radius;
+    this.forceScale = r / 4;
+    const c = sphere.center;
+    this.controls.target.copy(c);
+    this.camera.position.set(c.x + 0.2 * r, c.y - 2.2 * r, c.z + 1.6 * r);
+    this.camera.up.set(0, 0, 1);
+    this.camera.near = r / 100;
+    this.camera.far = r * 100;
+    this.camera.updateProjectionMatrix();
+    this.controls.update();
+    this.fitted = true;
+  }
+
+  /** @param {number} nv @param {number} nt */
+  allocate(nv, nt) {
+    this.capacityV = nv;
+    this.capacityT = nt;
+    this.geometry.dispose();
+    this.geometry = new THREE.BufferGeometry();
+    this.posAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    this.normAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    this.geometry.setAttribute('position', this.posAttr);
+    this.geometry.setAttribute('normal', this.normAttr);
+    this.geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(3 * nt), 1));
+    this.mesh.geometry = this.geometry;
+    this.faceNormals = new Float32Array(3 * nt);
+    this.triStamp = new Uint32Array(nt);
+    this.vertStamp = new Uint32Array(nv);
+    this.touchedTris = new Int32Array(nt);
+    this.touchedVerts = new Int32Array(nv);
+    this.adjStart = new Int32Array(nv + 1);
+    this.adjTris = new Int32Array(3 * nt);
+  }
+
+  /** @param {Uint32Array} tris @param {number} nv @param {number} nt */
+  buildAdjacency(tris, nv, nt) {
+    const start = this.adjStart;
+    start.fill(0, 0, nv + 1);
+    for (let j = 0; j < 3 * nt; j++) start[tris[j] + 1]++;
+    for (let v = 0; v < nv; v++) start[v + 1] += start[v];
+    const fill = this.touchedVerts;  // per-vertex cursor, scratch here
+    fill.set(start.subarray(0, nv));
+    for (let j = 0; j < 3 * nt; j++) this.adjTris[fill[tris[j]]++] = Math.floor(j / 3);
+  }
+
+  /** The area-weighted normal of triangle t into faceNormals. @param {number} t */
+  faceNormal(t) {
+    const p = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    const idx = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    const a = 3 * idx[3 * t], b = 3 * idx[3 * t + 1], c = 3 * idx[3 * t + 2];
+    const ux = p[b] - p[a], uy = p[b + 1] - p[a + 1], uz = p[b + 2] - p[a + 2];
+    const vx = p[c] - p[a], vy = p[c + 1] - p[a + 1], vz = p[c + 2] - p[a + 2];
+    this.faceNormals[3 * t] = uy * vz - uz * vy;
+    this.faceNormals[3 * t + 1] = uz * vx - ux * vz;
+    this.faceNormals[3 * t + 2] = ux * vy - uy * vx;
+  }
+
+  /** Vertex v's normal: the normalised sum of its triangles' normals. @param {number} v */
+  vertexNormal(v) {
+    let x = 0, y = 0, z = 0;
+    for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
+      const t = 3 * this.adjTris[a];
+      x += this.faceNormals[t];
+      y += this.faceNormals[t + 1];
+      z += this.faceNormals[t + 2];
+    }
+    const len = Math.hypot(x, y, z) || 1;
+    const n = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.normAttr).array);
+    n[3 * v] = x / len;
+    n[3 * v + 1] = y / len;
+    n[3 * v + 2] = z / len;
+  }
+
+  dispose() {
+    this.resizeObserver.disconnect();
+    this.controls.dispose();
+    this.geometry.dispose();
+    this.renderer.dispose();
+    this.renderer.domElement.remove();
+  }
+}
