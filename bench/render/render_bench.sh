@@ -54,16 +54,17 @@ shot() {
   echo "$(awk -v s="$seconds" 'BEGIN{printf "%.2f", s * 1000}') $timing"
 }
 median() { sort -g | awk '{v[NR]=$1} END{print v[int((NR+1)/2)]}'; }
-: > "$tmp/cold"; : > "$tmp/render"; : > "$tmp/png"; : > "$tmp/load"; : > "$tmp/hit"
+: > "$tmp/cold"; : > "$tmp/render"; : > "$tmp/png"; : > "$tmp/load"; : > "$tmp/total"; : > "$tmp/hit"
 for i in $(seq "$reps"); do
   line=$(shot "t=$(awk -v i="$i" -v n="$reps" 'BEGIN{printf "%.4f", 1.9 * i / n}')&size=1280x720")
   echo "$line" | awk '{print $1}' >> "$tmp/cold"
   echo "$line" | sed -n 's/.*render;dur=\([0-9.]*\).*/\1/p' >> "$tmp/render"
   echo "$line" | sed -n 's/.*png;dur=\([0-9.]*\).*/\1/p' >> "$tmp/png"
   echo "$line" | sed -n 's/.*load;dur=\([0-9.]*\).*/\1/p' >> "$tmp/load"
+  echo "$line" | sed -n 's/.*total;dur=\([0-9.]*\).*/\1/p' >> "$tmp/total"
   shot "t=$(awk -v i="$i" -v n="$reps" 'BEGIN{printf "%.4f", 1.9 * i / n}')&size=1280x720" | awk '{print $1}' >> "$tmp/hit"
 done
 where="$(nproc) cores"; [ -n "${ONE_CPU:-}" ] && where="CPU $ONE_CPU only, LP_NUM_THREADS=0"
 echo "screenshot endpoint, 1280x720, $triangles triangles, server on $where (shared with other work), medians of $reps:"
-echo "  end to end (curl, cold render): $(median < "$tmp/cold") ms   [server: recording read $(median < "$tmp/load") ms, render $(median < "$tmp/render") ms, png $(median < "$tmp/png") ms]"
+echo "  end to end (curl, cold render): $(median < "$tmp/cold") ms   [handler $(median < "$tmp/total") ms: recording read $(median < "$tmp/load"), render $(median < "$tmp/render"), png $(median < "$tmp/png")]"
 echo "  end to end (cache hit):         $(median < "$tmp/hit") ms"

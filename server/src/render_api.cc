@@ -254,6 +254,7 @@ std::optional<ApiResponse> RenderAndStore(RenderService& service, const ApiReque
 }
 
 ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req) {
+  const auto t_start = Clock::now();
   constexpr const char* kCacheControl = "private, no-cache";
   const std::optional<SessionRow> row = hub.Get(req.params[0]);
   if (!row) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
@@ -289,8 +290,8 @@ ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req)
   std::string timing;
   const double load_ms = Ms(t_load, Clock::now());
   if (auto failed = RenderAndStore(service, req, player.state(), q.options, key, &png, &timing)) return *failed;
-  char load[48];
-  std::snprintf(load, sizeof load, ", load;dur=%.2f", load_ms);
+  char load[80];
+  std::snprintf(load, sizeof load, ", load;dur=%.2f, total;dur=%.2f", load_ms, Ms(t_start, Clock::now()));
   return Png(req, png, etag, kCacheControl, timing + load);
 }
 
