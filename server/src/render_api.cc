@@ -30,9 +30,9 @@ using render::RenderOptions;
 using render::ViewerState;
 using Clock = std::chrono::steady_clock;
 
-constexpr int kMaxRenders = 3;                          // one drawing, two reading or waiting
-constexpr size_t kCacheBytes = size_t{64} << 20;        // PNGs kept
-constexpr const char* kScreenshotSize = "1280x720";     // defaults
+constexpr int kMaxRenders = 3;                       // one drawing, two reading or waiting
+constexpr size_t kCacheBytes = size_t{64} << 20;     // PNGs kept
+constexpr const char* kScreenshotSize = "1280x720";  // defaults
 constexpr const char* kThumbnailSize = "320x240";
 
 double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
@@ -67,12 +67,15 @@ class RenderService {
       return std::string("# HELP ") + name + " " + help + "\n# TYPE " + name + " counter\n" + name + " " + v + "\n";
     };
     return counter("idms_render_images_total", "Screenshots and thumbnails rendered.", std::to_string(renders_)) +
-           counter("idms_render_cache_hits_total", "Screenshots and thumbnails served from the cache.", std::to_string(hits_)) +
-           counter("idms_render_busy_total", "Render requests refused with 503 (every slot taken).", std::to_string(busy_)) +
+           counter("idms_render_cache_hits_total", "Screenshots and thumbnails served from the cache.",
+                   std::to_string(hits_)) +
+           counter("idms_render_busy_total", "Render requests refused with 503 (every slot taken).",
+                   std::to_string(busy_)) +
            counter("idms_render_seconds_total", "Time spent drawing (the render thread), s.",
                    std::to_string(render_s_)) +
            "# HELP idms_render_cache_bytes PNG bytes in the render cache.\n# TYPE idms_render_cache_bytes gauge\n"
-           "idms_render_cache_bytes " + std::to_string(cache_bytes_) + "\n";
+           "idms_render_cache_bytes " +
+           std::to_string(cache_bytes_) + "\n";
   }
 
   void Store(const std::string& key, std::shared_ptr<const std::string> png) {
@@ -184,8 +187,9 @@ bool ParseQuery(const ApiRequest& req, bool with_time, const char* default_size,
       ok = render::ParseSeconds(value, &q->t_s, error);
       if (!ok) *error = "t: " + *error;
     } else if (key == "wireframe" || key == "tool" || key == "force") {
-      bool* flag = key == "wireframe" ? &q->options.wireframe : key == "tool" ? &q->options.show_tool
-                                                                               : &q->options.show_force;
+      bool* flag = key == "wireframe" ? &q->options.wireframe
+                   : key == "tool"    ? &q->options.show_tool
+                                      : &q->options.show_force;
       ok = Flag(value, flag);
       if (!ok) *error = key + ": expected 0 or 1, got '" + value.substr(0, 32) + "'";
     } else if (key != "version" || with_time) {

@@ -84,21 +84,24 @@ int RunLive(Output& o, const LiveOptions& live, double every_s, const std::strin
   double next_s = -1;
   int index = 0;
   bool wrote = false, failed = false;
-  const bool ok = WatchLive(live, &state, [&](const ViewerState& s) {
-    if (!s.has_sample) return true;
-    const double t = s.mirror.time_s();
-    if (every_s == 0) {
-      failed = !o.Write(s, out, t, &error);
-      wrote = true;
-      return false;
-    }
-    if (next_s < 0) next_s = t;
-    if (t + 1e-9 < next_s) return true;
-    next_s += every_s;
-    failed = !o.Write(s, FramePath(out, index++), t, &error);
-    wrote = true;
-    return !failed;
-  }, &error);
+  const bool ok = WatchLive(
+      live, &state,
+      [&](const ViewerState& s) {
+        if (!s.has_sample) return true;
+        const double t = s.mirror.time_s();
+        if (every_s == 0) {
+          failed = !o.Write(s, out, t, &error);
+          wrote = true;
+          return false;
+        }
+        if (next_s < 0) next_s = t;
+        if (t + 1e-9 < next_s) return true;
+        next_s += every_s;
+        failed = !o.Write(s, FramePath(out, index++), t, &error);
+        wrote = true;
+        return !failed;
+      },
+      &error);
   if (!ok || failed) return Fail(error);
   if (!wrote) return Fail("the session ended before its surface arrived");
   return 0;

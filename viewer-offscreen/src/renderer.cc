@@ -230,8 +230,8 @@ struct Renderer::Impl {
     const double length = ArrowLength(r, magnitude);
     const Vec3 base = {scene.tool_pos[0] + z[0] * r, scene.tool_pos[1] + z[1] * r, scene.tool_pos[2] + z[2] * r};
     // The arrow's frame: x and y scaled with the radius (its thickness), z with its length.
-    const double m[16] = {x[0] * r, x[1] * r, x[2] * r, 0, y[0] * r, y[1] * r, y[2] * r, 0,
-                          z[0] * length, z[1] * length, z[2] * length, 0, base[0], base[1], base[2], 1};
+    const double m[16] = {x[0] * r,      x[1] * r,      x[2] * r,      0, y[0] * r, y[1] * r, y[2] * r, 0,
+                          z[0] * length, z[1] * length, z[2] * length, 0, base[0],  base[1],  base[2],  1};
     glPushMatrix();
     glMultMatrixd(m);
     SetMaterial(GL_FRONT_AND_BACK, kForceColour, 0.3f);
