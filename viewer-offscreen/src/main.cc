@@ -145,6 +145,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "idms-render: give one of --model PREFIX, --recording FILE, --server URL --session ID\n");
     return 1;
   }
+  if (!at_text.empty() && recording.empty()) {
+    std::fprintf(stderr, "idms-render: --at applies to --recording only\n");
+    return 1;
+  }
   if (!every_text.empty() && (every_s <= 0 || !model.empty())) {
     std::fprintf(stderr, "idms-render: --every needs a positive period and a recording or a live session\n");
     return 1;
