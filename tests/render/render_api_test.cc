@@ -209,7 +209,7 @@ TEST_F(RenderApiTest, TheCommandLineRendersRecordingsAndALiveSession) {
                         "--token", "wrong-token-xxxxxxxxxxxx", "--out", dir + "/refused.png"},
                        dir + "/refused.log");
   EXPECT_EQ(refused.Wait(std::chrono::seconds(30)), 2);
-  EXPECT_NE(refused.Log().find("refused"), std::string::npos) << refused.Log();
+  EXPECT_NE(refused.Log().find("HTTP 401"), std::string::npos) << refused.Log();
   EXPECT_EQ(agent.Wait(std::chrono::seconds(60)), 0) << agent.Log();
 }
 
