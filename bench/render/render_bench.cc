@@ -68,7 +68,8 @@ int main(int argc, char** argv) {
   std::string error, png;
   for (int triangles : {10000, 20000, 100000}) {
     render::ViewerState state;
-    if (!render::LoadRestState(BumpySlab(triangles), &state, &error)) return std::fprintf(stderr, "%s\n", error.c_str()), 2;
+    if (!render::LoadRestState(BumpySlab(triangles), &state, &error))
+      return std::fprintf(stderr, "%s\n", error.c_str()), 2;
     for (auto [w, h] : {std::pair{1280, 720}, std::pair{1920, 1080}}) {
       render::RenderOptions o;
       o.width = w, o.height = h;

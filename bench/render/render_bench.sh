@@ -3,6 +3,8 @@
 # endpoint end to end (curl's time_total, loopback) for a 1280x720 image of a recorded session on
 # a ~2x10^4-triangle slab: cold renders (each a new t, so never cached) and cache hits. Medians.
 # Prints figures; fails only when a request fails. Usage: bench/render/render_bench.sh [BUILD_DIR] [--quick]
+# One core: ONE_CPU=0 pins the bench and the server to CPU 0 (taskset) with LP_NUM_THREADS=0
+# (llvmpipe rasterises on the calling thread).
 set -euo pipefail
 build=${1:-build}
 quick=${2:-}
@@ -13,10 +15,12 @@ tmp=$(mktemp -d)
 server_pid=
 trap '[ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null; wait 2>/dev/null || true; rm -rf "$tmp"' EXIT
 
-"$bin/idms-render-bench" --reps "$reps"
+pin=()
+if [ -n "${ONE_CPU:-}" ]; then pin=(taskset -c "$ONE_CPU"); export LP_NUM_THREADS=0; fi
+"${pin[@]}" "$bin/idms-render-bench" --reps "$reps"
 
 # The server on a free port; a 100x100 slab (about 2x10^4 surface triangles) palpated for 2 s.
-"$bin/idms-server" --listen 127.0.0.1:0 --data "$tmp/data" > "$tmp/stdout" 2> "$tmp/server.log" &
+"${pin[@]}" "$bin/idms-server" --listen 127.0.0.1:0 --data "$tmp/data" > "$tmp/stdout" 2> "$tmp/server.log" &
 server_pid=$!
 for _ in $(seq 100); do grep -q listening "$tmp/stdout" 2>/dev/null && break; sleep 0.1; done
 port=$(sed -n 's/.*:\([0-9]*\)$/\1/p' "$tmp/stdout" | head -1)
@@ -50,14 +54,17 @@ shot() {
   echo "$(awk -v s="$seconds" 'BEGIN{printf "%.2f", s * 1000}') $timing"
 }
 median() { sort -g | awk '{v[NR]=$1} END{print v[int((NR+1)/2)]}'; }
-: > "$tmp/cold"; : > "$tmp/render"; : > "$tmp/png"; : > "$tmp/hit"
+: > "$tmp/cold"; : > "$tmp/render"; : > "$tmp/png"; : > "$tmp/load"; : > "$tmp/total"; : > "$tmp/hit"
 for i in $(seq "$reps"); do
   line=$(shot "t=$(awk -v i="$i" -v n="$reps" 'BEGIN{printf "%.4f", 1.9 * i / n}')&size=1280x720")
   echo "$line" | awk '{print $1}' >> "$tmp/cold"
   echo "$line" | sed -n 's/.*render;dur=\([0-9.]*\).*/\1/p' >> "$tmp/render"
   echo "$line" | sed -n 's/.*png;dur=\([0-9.]*\).*/\1/p' >> "$tmp/png"
+  echo "$line" | sed -n 's/.*load;dur=\([0-9.]*\).*/\1/p' >> "$tmp/load"
+  echo "$line" | sed -n 's/.*total;dur=\([0-9.]*\).*/\1/p' >> "$tmp/total"
   shot "t=$(awk -v i="$i" -v n="$reps" 'BEGIN{printf "%.4f", 1.9 * i / n}')&size=1280x720" | awk '{print $1}' >> "$tmp/hit"
 done
-echo "screenshot endpoint, 1280x720, $triangles triangles, $(nproc) cores (shared), medians of $reps:"
-echo "  end to end (curl, cold render): $(median < "$tmp/cold") ms   [server: render $(median < "$tmp/render") ms, png $(median < "$tmp/png") ms]"
+where="$(nproc) cores"; [ -n "${ONE_CPU:-}" ] && where="CPU $ONE_CPU only, LP_NUM_THREADS=0"
+echo "screenshot endpoint, 1280x720, $triangles triangles, server on $where (shared with other work), medians of $reps:"
+echo "  end to end (curl, cold render): $(median < "$tmp/cold") ms   [handler $(median < "$tmp/total") ms: recording read $(median < "$tmp/load"), render $(median < "$tmp/render"), png $(median < "$tmp/png")]"
 echo "  end to end (cache hit):         $(median < "$tmp/hit") ms"

@@ -30,9 +30,10 @@ using render::RenderOptions;
 using render::ViewerState;
 using Clock = std::chrono::steady_clock;
 
-constexpr int kMaxRenders = 3;                          // one drawing, two reading or waiting
-constexpr size_t kCacheBytes = size_t{64} << 20;        // PNGs kept
-constexpr const char* kScreenshotSize = "1280x720";     // defaults
+constexpr int kMaxRenders = 3;                               // one drawing, two reading or waiting
+constexpr size_t kCacheBytes = size_t{64} << 20;             // PNGs kept
+constexpr size_t kKeepImageBytes = size_t{1920} * 1080 * 4;  // image buffers kept between requests
+constexpr const char* kScreenshotSize = "1280x720";          // defaults
 constexpr const char* kThumbnailSize = "320x240";
 
 double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
@@ -55,8 +56,27 @@ class RenderService {
     std::lock_guard lock(mu_);
     const auto it = cache_.find(key);
     if (it == cache_.end()) return nullptr;
+    ++hits_;
     lru_.splice(lru_.begin(), lru_, it->second.lru);
     return it->second.png;
+  }
+
+  // Prometheus lines for /metrics.
+  std::string MetricsText() {
+    std::lock_guard lock(mu_);
+    auto counter = [](const char* name, const char* help, const std::string& v) {
+      return std::string("# HELP ") + name + " " + help + "\n# TYPE " + name + " counter\n" + name + " " + v + "\n";
+    };
+    return counter("idms_render_images_total", "Screenshots and thumbnails rendered.", std::to_string(renders_)) +
+           counter("idms_render_cache_hits_total", "Screenshots and thumbnails served from the cache.",
+                   std::to_string(hits_)) +
+           counter("idms_render_busy_total", "Render requests refused with 503 (every slot taken).",
+                   std::to_string(busy_)) +
+           counter("idms_render_seconds_total", "Time spent drawing (the render thread), s.",
+                   std::to_string(render_s_)) +
+           "# HELP idms_render_cache_bytes PNG bytes in the render cache.\n# TYPE idms_render_cache_bytes gauge\n"
+           "idms_render_cache_bytes " +
+           std::to_string(cache_bytes_) + "\n";
   }
 
   void Store(const std::string& key, std::shared_ptr<const std::string> png) {
@@ -73,21 +93,35 @@ class RenderService {
     }
   }
 
-  // A render slot, held for the whole request; false when all are taken.
-  bool TryReserve() {
+  // A render slot, held for the whole request, with an image to draw into (reused: a fresh
+  // 1280x720 buffer costs a millisecond of page faults); null when every slot is taken.
+  std::unique_ptr<Image> TryReserve() {
     std::lock_guard lock(mu_);
-    if (reserved_ >= kMaxRenders) return false;
+    if (reserved_ >= kMaxRenders) return ++busy_, nullptr;
     ++reserved_;
-    return true;
+    if (images_.empty()) return std::make_unique<Image>();
+    std::unique_ptr<Image> image = std::move(images_.back());
+    images_.pop_back();
+    return image;
   }
-  void Release() {
+  void Release(std::unique_ptr<Image> image) {
     std::lock_guard lock(mu_);
     --reserved_;
+    // Kept for the next request unless it is larger than a 1080p image (a 4K one is 33 MB).
+    if (image->rgba.capacity() > kKeepImageBytes) image->rgba = {};
+    images_.push_back(std::move(image));
   }
 
   // Draws on the render thread; blocks the caller (a worker holding a slot) until it is done.
   bool Draw(const ViewerState& state, const RenderOptions& options, Image* image, std::string* error) {
-    std::packaged_task<bool()> task([&] { return renderer_->Render(state.View(), options, image, error); });
+    std::packaged_task<bool()> task([&] {
+      const auto t0 = Clock::now();
+      const bool ok = renderer_->Render(state.View(), options, image, error);
+      std::lock_guard lock(mu_);
+      ++renders_;
+      render_s_ += std::chrono::duration<double>(Clock::now() - t0).count();
+      return ok;
+    });
     std::future<bool> done = task.get_future();
     {
       std::lock_guard lock(mu_);
@@ -123,6 +157,9 @@ class RenderService {
   std::deque<std::packaged_task<bool()>> queue_;  // at most kMaxRenders
   bool stop_ = false;
   int reserved_ = 0;
+  std::vector<std::unique_ptr<Image>> images_;  // at most kMaxRenders
+  uint64_t renders_ = 0, hits_ = 0, busy_ = 0;
+  double render_s_ = 0;
   std::unordered_map<std::string, Entry> cache_;
   std::list<std::string> lru_;  // most recent first
   size_t cache_bytes_ = 0;
@@ -130,10 +167,11 @@ class RenderService {
   std::thread thread_;  // last: starts after the members above exist
 };
 
-// Releases a render slot at the end of the request.
+// Releases a render slot (and its image) at the end of the request.
 struct Slot {
   RenderService* service;
-  ~Slot() { service->Release(); }
+  std::unique_ptr<Image> image;
+  ~Slot() { service->Release(std::move(image)); }
 };
 
 // The query of a render: size, wireframe, tool, force and t; anything else is refused.
@@ -159,8 +197,9 @@ bool ParseQuery(const ApiRequest& req, bool with_time, const char* default_size,
       ok = render::ParseSeconds(value, &q->t_s, error);
       if (!ok) *error = "t: " + *error;
     } else if (key == "wireframe" || key == "tool" || key == "force") {
-      bool* flag = key == "wireframe" ? &q->options.wireframe : key == "tool" ? &q->options.show_tool
-                                                                               : &q->options.show_force;
+      bool* flag = key == "wireframe" ? &q->options.wireframe
+                   : key == "tool"    ? &q->options.show_tool
+                                      : &q->options.show_force;
       ok = Flag(value, flag);
       if (!ok) *error = key + ": expected 0 or 1, got '" + value.substr(0, 32) + "'";
     } else if (key != "version" || with_time) {
@@ -208,9 +247,8 @@ ApiResponse Busy(const ApiRequest& req) {
 
 // Draws the state on the render thread, encodes it here, caches it.
 std::optional<ApiResponse> RenderAndStore(RenderService& service, const ApiRequest& req, const ViewerState& state,
-                                          const RenderOptions& options, const std::string& key,
+                                          const RenderOptions& options, const std::string& key, Image& image,
                                           std::shared_ptr<const std::string>* png, std::string* timing) {
-  Image image;
   std::string error;
   const auto t0 = Clock::now();
   if (!service.Draw(state, options, &image, &error))
@@ -229,6 +267,7 @@ std::optional<ApiResponse> RenderAndStore(RenderService& service, const ApiReque
 }
 
 ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req) {
+  const auto t_start = Clock::now();
   constexpr const char* kCacheControl = "private, no-cache";
   const std::optional<SessionRow> row = hub.Get(req.params[0]);
   if (!row) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
@@ -247,9 +286,11 @@ ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req)
   const std::string etag = "\"" + Sha256Hex(key).substr(0, 32) + "\"";
   if (auto res = NotModified(req, etag, kCacheControl)) return *res;
   if (auto png = service.Cached(key)) return Png(req, png, etag, kCacheControl, "cache;desc=hit");
-  if (!service.TryReserve()) return Busy(req);
-  Slot slot{&service};
+  std::unique_ptr<Image> image = service.TryReserve();
+  if (!image) return Busy(req);
+  Slot slot{&service, std::move(image)};
   // The surface at t, as a viewer of the replay holds it.
+  const auto t_load = Clock::now();
   render::RecordingPlayer player;
   if (!player.Open(path, &error)) return JsonError(req, http::status::internal_server_error, error);
   const double t = q.t_s < 0 ? player.duration_s() : q.t_s;
@@ -261,8 +302,12 @@ ApiResponse Screenshot(RenderService& service, SessionHub& hub, ApiRequest& req)
   if (!player.MoveTo(t, &error)) return JsonError(req, http::status::bad_request, error);
   std::shared_ptr<const std::string> png;
   std::string timing;
-  if (auto failed = RenderAndStore(service, req, player.state(), q.options, key, &png, &timing)) return *failed;
-  return Png(req, png, etag, kCacheControl, timing);
+  const double load_ms = Ms(t_load, Clock::now());
+  if (auto failed = RenderAndStore(service, req, player.state(), q.options, key, *slot.image, &png, &timing))
+    return *failed;
+  char load[80];
+  std::snprintf(load, sizeof load, ", load;dur=%.2f, total;dur=%.2f", load_ms, Ms(t_start, Clock::now()));
+  return Png(req, png, etag, kCacheControl, timing + load);
 }
 
 ApiResponse Thumbnail(RenderService& service, ApiContext& ctx, ApiRequest& req) {
@@ -287,18 +332,23 @@ ApiResponse Thumbnail(RenderService& service, ApiContext& ctx, ApiRequest& req) 
   const std::string etag = "\"" + Sha256Hex(key).substr(0, 32) + "\"";
   if (auto res = NotModified(req, etag, cache_control)) return *res;
   if (auto png = service.Cached(key)) return Png(req, png, etag, cache_control, "cache;desc=hit");
-  if (!service.TryReserve()) return Busy(req);
-  Slot slot{&service};
+  std::unique_ptr<Image> image = service.TryReserve();
+  if (!image) return Busy(req);
+  Slot slot{&service, std::move(image)};
   std::string fem, plg;
   if (!ctx.library->blobs().Get(v->fem_sha256, &fem) || !ctx.library->blobs().Get(v->plg_sha256, &plg))
     return JsonError(req, http::status::internal_server_error, "the stored files of " + name + " are missing");
+  const auto t_load = Clock::now();
   ViewerState state;
   if (!render::LoadRestStateText(fem, plg, name, &state, &error))
     return JsonError(req, http::status::internal_server_error, "model " + name + ": " + error);
+  const double load_ms = Ms(t_load, Clock::now());
   std::shared_ptr<const std::string> png;
   std::string timing;
-  if (auto failed = RenderAndStore(service, req, state, q.options, key, &png, &timing)) return *failed;
-  return Png(req, png, etag, cache_control, timing);
+  if (auto failed = RenderAndStore(service, req, state, q.options, key, *slot.image, &png, &timing)) return *failed;
+  char load[48];
+  std::snprintf(load, sizeof load, ", load;dur=%.2f", load_ms);
+  return Png(req, png, etag, cache_control, timing + load);
 }
 
 }  // namespace
@@ -315,6 +365,10 @@ void AppendRenderRoutes(ServerCore& core, std::vector<Route>* routes) {
        [service](ApiContext& ctx, ApiRequest& req) { return Thumbnail(*service, ctx, req); }, true},
   };
   routes->insert(routes->begin(), ours.begin(), ours.end());
+  // Its figures after the others' on /metrics.
+  core.ctx.more_metrics = [previous = core.ctx.more_metrics, service] {
+    return (previous ? previous() : std::string()) + service->MetricsText();
+  };
 }
 
 }  // namespace idms::server

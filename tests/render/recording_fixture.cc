@@ -20,8 +20,8 @@ void Make(RecordedSession* s) {
   const std::string observer = s->server->Token("observer");
   ChildProcess agent(IDMS_AGENT_BIN,
                      {"--server", "ws://127.0.0.1:" + s->server->port_string(), "--token", s->server->Token("agent"),
-                      "--model", "hex_4x5_home", "--device", "scripted:palpate", "--duration", "3",
-                      "--no-realtime", "--cache-dir", s->dir + "/cache"},
+                      "--model", "hex_4x5_home", "--device", "scripted:palpate", "--duration", "3", "--no-realtime",
+                      "--cache-dir", s->dir + "/cache"},
                      s->dir + "/agent.log");
   if (agent.Wait(std::chrono::seconds(60)) != 0) return void(s->error = "agent: " + agent.Log());
   // The session ends; its recording downloads.

@@ -12,14 +12,14 @@ namespace idms::test {
 struct RecordedSession {
   std::unique_ptr<ServerProcess> server;
   std::string dir;
-  std::string id;              // the session
-  std::string recording;       // the downloaded .mcap
-  double duration_s = 0;       // log time of the last message - the first, s
-  double peak_force_t_s = 0;   // session time of the device batch with the largest |force|
+  std::string id;             // the session
+  std::string recording;      // the downloaded .mcap
+  double duration_s = 0;      // log time of the last message - the first, s
+  double peak_force_t_s = 0;  // session time of the device batch with the largest |force|
   double peak_force = 0;
   double peak_tool_pos[3] = {0, 0, 0};
   double tool_radius = 0;
-  std::string error;           // why the session could not be made
+  std::string error;  // why the session could not be made
 };
 
 // Made once per test program (the first call runs the server and agent: a few seconds).

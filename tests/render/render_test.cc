@@ -1,13 +1,14 @@
 // The renderer against expectations that fail if nothing or the wrong mesh were drawn: coverage
 // by the lit surface, lit and shadowed colours, front and back, the dent under the tool after a
 // real palpation, the tool marker where the device was, the force arrow, and determinism.
+#include "idms/render/render.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
 
 #include "idms/render/png.h"
-#include "idms/render/render.h"
 #include "idms/render/source.h"
 #include "recording_fixture.h"
 

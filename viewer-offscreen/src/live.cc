@@ -34,6 +34,31 @@ bool SplitUrl(const std::string& url, std::string* host, std::string* port, std:
   return true;
 }
 
+// Beast 1.74 does not fill the response of a declined upgrade: the same request as plain HTTP
+// says why ("HTTP 401: {\"error\": \"unknown token\"}").
+std::string DeclinedReason(const asio::ip::tcp::resolver::results_type& endpoints, const std::string& host,
+                           const std::string& target, const std::string& token) {
+  asio::io_context io;
+  beast::tcp_stream stream(io);
+  stream.expires_after(std::chrono::seconds(10));
+  beast::error_code ec;
+  stream.connect(endpoints, ec);
+  namespace http = beast::http;
+  http::request<http::empty_body> req{http::verb::get, target, 11};
+  req.set(http::field::host, host);
+  req.set(http::field::connection, "Upgrade");
+  req.set(http::field::upgrade, "websocket");
+  req.set(http::field::sec_websocket_version, "13");
+  req.set(http::field::sec_websocket_key, "dGhlIHNhbXBsZSBub25jZQ==");
+  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
+  http::response<http::string_body> res;
+  beast::flat_buffer buffer;
+  if (!ec) http::write(stream, req, ec);
+  if (!ec) http::read(stream, buffer, res, ec);
+  if (ec) return "";
+  return " (HTTP " + std::to_string(res.result_int()) + ": " + res.body().substr(0, 300) + ")";
+}
+
 }  // namespace
 
 bool WatchLive(const LiveOptions& o, ViewerState* state, const std::function<bool(const ViewerState&)>& on_update,
@@ -59,8 +84,7 @@ bool WatchLive(const LiveOptions& o, ViewerState* state, const std::function<boo
   ws.handshake(response, host + ":" + port, "/ws/session/" + o.session, ec);
   if (ec) {
     *error = "the server refused /ws/session/" + o.session + ": " + ec.message() +
-             (response.result_int() != 200 ? " (HTTP " + std::to_string(response.result_int()) + ") " + response.body()
-                                           : std::string());
+             DeclinedReason(endpoints, host + ":" + port, "/ws/session/" + o.session, o.token);
     return false;
   }
   beast::get_lowest_layer(ws).expires_never();

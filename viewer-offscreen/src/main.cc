@@ -51,6 +51,62 @@ int Fail(const std::string& error) {
   return 2;
 }
 
+// A model at rest.
+int RunModel(Output& o, const std::string& model, const std::string& out) {
+  ViewerState state;
+  std::string error;
+  if (!LoadRestState(model, &state, &error) || !o.Write(state, out, 0, &error)) return Fail(error);
+  return 0;
+}
+
+// A recording: one time (at_s < 0: its end), or every S seconds from the start.
+int RunRecording(Output& o, const std::string& recording, double at_s, double every_s, const std::string& out) {
+  RecordingPlayer player;
+  std::string error;
+  if (!player.Open(recording, &error)) return Fail(error);
+  if (every_s == 0) {
+    const double t = at_s < 0 ? player.duration_s() : at_s;
+    if (!player.MoveTo(t, &error) || !o.Write(player.state(), out, t, &error)) return Fail(error);
+    return 0;
+  }
+  int index = 0;
+  for (double t = 0; t <= player.duration_s() + 1e-9; t = ++index * every_s) {
+    if (!player.MoveTo(std::min(t, player.duration_s()), &error)) return Fail(error);
+    if (!o.Write(player.state(), FramePath(out, index), t, &error)) return Fail(error);
+  }
+  return 0;
+}
+
+// A live session: the first frame with the device's position, or every S seconds until it ends.
+int RunLive(Output& o, const LiveOptions& live, double every_s, const std::string& out) {
+  ViewerState state;
+  std::string error;
+  double next_s = -1;
+  int index = 0;
+  bool wrote = false, failed = false;
+  const bool ok = WatchLive(
+      live, &state,
+      [&](const ViewerState& s) {
+        if (!s.has_sample) return true;
+        const double t = s.mirror.time_s();
+        if (every_s == 0) {
+          failed = !o.Write(s, out, t, &error);
+          wrote = true;
+          return false;
+        }
+        if (next_s < 0) next_s = t;
+        if (t + 1e-9 < next_s) return true;
+        next_s += every_s;
+        failed = !o.Write(s, FramePath(out, index++), t, &error);
+        wrote = true;
+        return !failed;
+      },
+      &error);
+  if (!ok || failed) return Fail(error);
+  if (!wrote) return Fail("the session ended before its surface arrived");
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -89,6 +145,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "idms-render: give one of --model PREFIX, --recording FILE, --server URL --session ID\n");
     return 1;
   }
+  if (!at_text.empty() && recording.empty()) {
+    std::fprintf(stderr, "idms-render: --at applies to --recording only\n");
+    return 1;
+  }
   if (!every_text.empty() && (every_s <= 0 || !model.empty())) {
     std::fprintf(stderr, "idms-render: --every needs a positive period and a recording or a live session\n");
     return 1;
@@ -104,50 +164,7 @@ int main(int argc, char** argv) {
     if (ec) return Fail("cannot create " + out + ": " + ec.message());
   }
 
-  // A model at rest.
-  if (!model.empty()) {
-    ViewerState state;
-    if (!LoadRestState(model, &state, &error) || !o.Write(state, out, 0, &error)) return Fail(error);
-    return 0;
-  }
-  // A recording: one time, or every S seconds from the start.
-  if (!recording.empty()) {
-    RecordingPlayer player;
-    if (!player.Open(recording, &error)) return Fail(error);
-    if (every_s == 0) {
-      const double t = at_s < 0 ? player.duration_s() : at_s;
-      if (!player.MoveTo(t, &error) || !o.Write(player.state(), out, t, &error)) return Fail(error);
-      return 0;
-    }
-    int index = 0;
-    for (double t = 0; t <= player.duration_s() + 1e-9; t = ++index * every_s) {
-      if (!player.MoveTo(std::min(t, player.duration_s()), &error)) return Fail(error);
-      if (!o.Write(player.state(), FramePath(out, index), t, &error)) return Fail(error);
-    }
-    return 0;
-  }
-  // A live session: the first frame with the device's position, or every S seconds until it ends.
-  LiveOptions live{server, session, token};
-  ViewerState state;
-  double next_s = -1;
-  int index = 0;
-  bool wrote = false, failed = false;
-  const bool ok = WatchLive(live, &state, [&](const ViewerState& s) {
-    if (!s.has_sample) return true;
-    const double t = s.mirror.time_s();
-    if (every_s == 0) {
-      failed = !o.Write(s, out, t, &error);
-      wrote = true;
-      return false;
-    }
-    if (next_s < 0) next_s = t;
-    if (t + 1e-9 < next_s) return true;
-    next_s += every_s;
-    failed = !o.Write(s, FramePath(out, index++), t, &error);
-    wrote = true;
-    return !failed;
-  }, &error);
-  if (!ok || failed) return Fail(error);
-  if (!wrote) return Fail("the session ended before its surface arrived");
-  return 0;
+  if (!model.empty()) return RunModel(o, model, out);
+  if (!recording.empty()) return RunRecording(o, recording, at_s, every_s, out);
+  return RunLive(o, LiveOptions{server, session, token}, every_s, out);
 }

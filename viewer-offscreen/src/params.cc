@@ -20,8 +20,7 @@ bool Triple(std::string_view text, std::array<double, 3>* out) {
   std::array<double, 3> v{};
   for (int i = 0; i < 3; ++i) {
     const size_t comma = i < 2 ? text.find(',') : text.size();
-    if (comma == std::string_view::npos || !Number(text.substr(0, comma), &v[i]) || !std::isfinite(v[i]))
-      return false;
+    if (comma == std::string_view::npos || !Number(text.substr(0, comma), &v[i]) || !std::isfinite(v[i])) return false;
     text = i < 2 ? text.substr(comma + 1) : std::string_view();
   }
   *out = v;
@@ -37,11 +36,10 @@ bool ParseSize(std::string_view text, int* width, int* height, std::string* erro
     *error = "size '" + std::string(text.substr(0, 64)) + "': expected WIDTHxHEIGHT in pixels, e.g. 1280x720";
     return false;
   }
-  if (w < kMinSize || h < kMinSize || w > kMaxSize || h > kMaxSize ||
-      static_cast<int64_t>(w) * h > kMaxPixels) {
+  if (w < kMinSize || h < kMinSize || w > kMaxSize || h > kMaxSize || static_cast<int64_t>(w) * h > kMaxPixels) {
     *error = "size " + std::to_string(w) + "x" + std::to_string(h) + " is out of range: each side within " +
-             std::to_string(kMinSize) + ".." + std::to_string(kMaxSize) + " and at most " +
-             std::to_string(kMaxPixels) + " pixels (3840x2160)";
+             std::to_string(kMinSize) + ".." + std::to_string(kMaxSize) + " and at most " + std::to_string(kMaxPixels) +
+             " pixels (3840x2160)";
     return false;
   }
   *width = w;

@@ -46,8 +46,7 @@ bool EncodePng(const Image& image, std::string* out, std::string* error) {
   png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_UP);
   png_write_info(png, info);
   png_set_filler(png, 0, PNG_FILLER_AFTER);  // the input rows are RGBA; the file is RGB
-  for (int y = 0; y < image.height; ++y)
-    rows[static_cast<size_t>(y)] = const_cast<png_bytep>(image.Pixel(0, y));
+  for (int y = 0; y < image.height; ++y) rows[static_cast<size_t>(y)] = const_cast<png_bytep>(image.Pixel(0, y));
   png_write_image(png, rows.data());
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);

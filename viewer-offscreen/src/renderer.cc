@@ -105,6 +105,11 @@ Shape MakeArrow(int slices) {
   return s;
 }
 
+// The force arrow's length beyond the tool's surface, model units.
+double ArrowLength(double tool_radius, double force) {
+  return tool_radius * std::min(kArrowRadiiPerForce * force, kMaxArrowRadii);
+}
+
 void SetMaterial(GLenum face, const std::array<float, 3>& rgb, float specular) {
   const float diffuse[4] = {rgb[0], rgb[1], rgb[2], 1};
   const float spec[4] = {specular, specular, specular, 1};
@@ -222,11 +227,11 @@ struct Renderer::Impl {
     const Vec3 z = Scale(f, 1 / magnitude);
     const Vec3 x = Normalized(Cross(std::abs(z[2]) < 0.9 ? Vec3{0, 0, 1} : Vec3{1, 0, 0}, z));
     const Vec3 y = Cross(z, x);
-    const double length = r * std::min(kArrowRadiiPerForce * magnitude, kMaxArrowRadii);
+    const double length = ArrowLength(r, magnitude);
     const Vec3 base = {scene.tool_pos[0] + z[0] * r, scene.tool_pos[1] + z[1] * r, scene.tool_pos[2] + z[2] * r};
     // The arrow's frame: x and y scaled with the radius (its thickness), z with its length.
-    const double m[16] = {x[0] * r, x[1] * r, x[2] * r, 0, y[0] * r, y[1] * r, y[2] * r, 0,
-                          z[0] * length, z[1] * length, z[2] * length, 0, base[0], base[1], base[2], 1};
+    const double m[16] = {x[0] * r,      x[1] * r,      x[2] * r,      0, y[0] * r, y[1] * r, y[2] * r, 0,
+                          z[0] * length, z[1] * length, z[2] * length, 0, base[0],  base[1],  base[2],  1};
     glPushMatrix();
     glMultMatrixd(m);
     SetMaterial(GL_FRONT_AND_BACK, kForceColour, 0.3f);
@@ -306,9 +311,17 @@ bool Renderer::Render(const SceneView& scene, const RenderOptions& o, Image* out
 
 Camera CameraFor(const SceneView& scene, const RenderOptions& o) {
   if (!o.camera.automatic) return o.camera;
-  const bool tool = scene.has_tool && o.show_tool && scene.tool_radius > 0;
-  return AutoCamera(scene.positions, static_cast<double>(o.width) / o.height, scene.tool_pos,
-                    tool ? scene.tool_radius : 0);
+  const double aspect = static_cast<double>(o.width) / o.height;
+  const double r = scene.tool_radius;
+  if (!scene.has_tool || !(r > 0) || !(o.show_tool || o.show_force)) return AutoCamera(scene.positions, aspect);
+  // The tool, and the arrow's tip (its head is 0.2 radii wide).
+  const Vec3 f{scene.force[0], scene.force[1], scene.force[2]};
+  const double magnitude = Norm(f);
+  const double reach = o.show_force && magnitude > 1e-9 ? (r + ArrowLength(r, magnitude)) / magnitude : 0;
+  const std::array<double, 4> spheres[2] = {
+      {scene.tool_pos[0], scene.tool_pos[1], scene.tool_pos[2], r},
+      {scene.tool_pos[0] + f[0] * reach, scene.tool_pos[1] + f[1] * reach, scene.tool_pos[2] + f[2] * reach, 0.2 * r}};
+  return AutoCamera(scene.positions, aspect, spheres);
 }
 
 bool Renderer::Project(const std::array<double, 3>& p, double* x, double* y) const {
@@ -319,8 +332,7 @@ bool Renderer::Project(const std::array<double, 3>& p, double* x, double* y) con
   return true;
 }
 
-Camera AutoCamera(std::span<const float> positions, double aspect, const std::array<double, 3>& tool_pos,
-                  double tool_radius) {
+Camera AutoCamera(std::span<const float> positions, double aspect, std::span<const std::array<double, 4>> spheres) {
   Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   for (size_t i = 0; i + 2 < positions.size(); i += 3) {
     for (int k = 0; k < 3; ++k) {
@@ -329,16 +341,27 @@ Camera AutoCamera(std::span<const float> positions, double aspect, const std::ar
     }
   }
   if (positions.size() < 3) lo = hi = {0, 0, 0};
-  for (int k = 0; k < 3 && tool_radius > 0; ++k) {
-    lo[k] = std::min(lo[k], tool_pos[k] - tool_radius);
-    hi[k] = std::max(hi[k], tool_pos[k] + tool_radius);
+  for (const std::array<double, 4>& b : spheres) {
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], b[k] - b[3]);
+      hi[k] = std::max(hi[k], b[k] + b[3]);
+    }
   }
   const Vec3 centre = Scale({lo[0] + hi[0], lo[1] + hi[1], lo[2] + hi[2]}, 0.5);
   const double radius = std::max(0.5 * Norm(Sub(hi, lo)), 1e-3);
-  // Fit the bounding sphere into the narrower field of view, from above, in front, a little right.
-  const double half_y = kFovYDeg * kPi / 360, half_x = std::atan(std::tan(half_y) * aspect);
-  const double distance = 1.02 * radius / std::sin(std::min(half_x, half_y));
+  // From above, in front, a little right; back off until every corner of the box is in view:
+  // a corner q (from the centre) needs |q.s| <= tan(half_x) (d + q.f), and the same for q.u.
   const Vec3 dir = Normalized({0.25, -0.75, 1.0});
+  const Vec3 f = Scale(dir, -1);
+  const Vec3 s = Normalized(Cross(f, {0, 0, 1}));
+  const Vec3 u = Cross(s, f);
+  const double tan_y = std::tan(kFovYDeg * kPi / 360), tan_x = tan_y * aspect;
+  double distance = radius * 0.5;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vec3 q = Sub({corner & 1 ? hi[0] : lo[0], corner & 2 ? hi[1] : lo[1], corner & 4 ? hi[2] : lo[2]}, centre);
+    distance = std::max({distance, std::abs(Dot(q, s)) / tan_x - Dot(q, f), std::abs(Dot(q, u)) / tan_y - Dot(q, f)});
+  }
+  distance *= 1.08;  // a margin
   Camera c;
   c.automatic = false;
   c.target = centre;

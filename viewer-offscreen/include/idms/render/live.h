@@ -10,9 +10,9 @@
 namespace idms::render {
 
 struct LiveOptions {
-  std::string url;      // http://HOST:PORT or ws://HOST:PORT (no TLS)
-  std::string session;  // the session id
-  std::string token;    // a bearer token (observer or above)
+  std::string url;        // http://HOST:PORT or ws://HOST:PORT (no TLS)
+  std::string session;    // the session id
+  std::string token;      // a bearer token (observer or above)
   double timeout_s = 15;  // for the connection and for each frame
 };
 

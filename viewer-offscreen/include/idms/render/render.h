@@ -31,11 +31,11 @@ struct RenderOptions {
 
 // What to draw: a view of the mirror's arrays (not copied) and the device's last sample.
 struct SceneView {
-  std::span<const float> positions;   // (num_vertices x 3), model units
+  std::span<const float> positions;    // (num_vertices x 3), model units
   std::span<const int32_t> triangles;  // (num_triangles x 3), vertex ids, counter-clockwise from outside
   bool has_tool = false;
   std::array<double, 3> tool_pos{0, 0, 0};  // model frame, model units
-  double tool_radius = 0;                    // model units; 0 = unknown (drawn as 5 % of the view)
+  double tool_radius = 0;                   // model units; 0 = unknown (drawn as 5 % of the view)
   std::array<double, 3> force{0, 0, 0};     // force on the device, model frame, force units
 };
 
@@ -78,10 +78,9 @@ class Renderer {
   std::string error_;
 };
 
-// The automatic camera for a surface (its bounding sphere seen from above and in front); with
-// tool_radius > 0, the tool sphere at tool_pos is framed too.
-Camera AutoCamera(std::span<const float> positions, double aspect, const std::array<double, 3>& tool_pos = {},
-                  double tool_radius = 0);
+// The automatic camera for a surface: from above and in front (z up), far enough back that its
+// bounding box is in view, and the boxes of `spheres` (x, y, z, radius: the tool, the arrow's tip).
+Camera AutoCamera(std::span<const float> positions, double aspect, std::span<const std::array<double, 4>> spheres = {});
 // The camera Render uses for `scene` with `options` (the automatic one, or the options').
 Camera CameraFor(const SceneView& scene, const RenderOptions& options);
 
