@@ -132,6 +132,8 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
                   const UplinkStats& up) {
   const LoopCounters& c = loop.counters();
   const RealtimeReport rt = loop.realtime_report();
+  nlohmann::json warnings_by_kind = nlohmann::json::object();
+  for (const WarningKind& k : WarningKinds(loop.state().warnings)) warnings_by_kind[k.name] = k.count;
   const nlohmann::json j = {
       {"ticks", c.ticks.load()},
       {"overruns", c.overruns.load()},
@@ -159,6 +161,7 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
       {"pose_faults", c.pose_faults.load()},
       {"commands", up.commands},
       {"warnings", TotalWarnings(loop.state().warnings)},
+      {"warnings_by_kind", warnings_by_kind},
       {"device", device.name()},
       {"device_stats",
        {{"received", device.stats().received},

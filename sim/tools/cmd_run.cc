@@ -192,6 +192,8 @@ void Run(const RunArgs& a) {
     if (fit.points < 2) Fail("run", "--fit-plot: the tool never pressed into the surface");
     PlotFit(a, loading, fit);
   }
+  nlohmann::json warnings_by_kind = nlohmann::json::object();
+  for (const WarningKind& k : WarningKinds(state.warnings)) warnings_by_kind[k.name] = k.count;
   const nlohmann::json summary = {
       {"stiffness_fit", {{"k", -fit.slope}, {"intercept", fit.intercept}, {"r2", fit.r2}, {"points", fit.points}}},
       {"ticks", ticks},
@@ -199,6 +201,7 @@ void Run(const RunArgs& a) {
       {"max_fz", max_fz},
       {"onset_z", std::isnan(onset_z) ? nlohmann::json(nullptr) : nlohmann::json(onset_z)},
       {"warnings", TotalWarnings(state.warnings)},
+      {"warnings_by_kind", warnings_by_kind},
       {"fallbacks", fallbacks},
       {"compute_us", {{"p50", Percentile(compute_us, 0.5)}, {"p99", Percentile(compute_us, 0.99)},
                       {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};

@@ -109,6 +109,14 @@ State MakeState(const Model& model);
 // setting positions by hand (initial conditions, draping), so the first step sees no jump.
 void SyncFilterToPositions(const Model& model, State& state);
 
+// Each warning counter with its name (as in WarningCounters), for reports by kind.
+struct WarningKind {
+  const char* name;
+  int64_t count;
+};
+inline constexpr int kNumWarningKinds = 12;
+std::array<WarningKind, kNumWarningKinds> WarningKinds(const WarningCounters& warnings);
+
 // The sum of all warning counters (0 in a clean run).
 int64_t TotalWarnings(const WarningCounters& warnings);
 
