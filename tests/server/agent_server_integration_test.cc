@@ -98,6 +98,12 @@ TEST(AgentAndServer, CommandsFromAnAdminReachTheLoopAndSigtermEndsWithEveryTickR
   EXPECT_EQ(summary["commands"], 2);
   EXPECT_EQ(summary["samples_dropped"], 0);
   EXPECT_EQ(summary["ended_cleanly"], true);
+  // Warnings by kind, adding up to the total.
+  ASSERT_TRUE(summary["warnings_by_kind"].is_object());
+  EXPECT_TRUE(summary["warnings_by_kind"].contains("rollback"));
+  int64_t by_kind = 0;
+  for (const auto& [kind, n] : summary["warnings_by_kind"].items()) by_kind += n.get<int64_t>();
+  EXPECT_EQ(by_kind, summary["warnings"].get<int64_t>());
   // Everything the loop ran was delivered before the close, and the session ended (not interrupted).
   ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
   ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
