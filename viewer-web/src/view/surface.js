@@ -230,7 +230,7 @@ export class SurfaceView {
     this.forceScale = r / 4;
     const c = sphere.center;
     this.controls.target.copy(c);
-    this.camera.position.set(c.x + 0.2 * r, c.y - 2.2 * r, c.z + 1.6 * r);
+    this.camera.position.set(c.x + 0.3 * r, c.y - 2.6 * r, c.z + 1.0 * r);
     this.camera.up.set(0, 0, 1);
     this.camera.near = r / 100;
     this.camera.far = r * 100;
