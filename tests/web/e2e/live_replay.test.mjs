@@ -54,6 +54,8 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   assert.ok(after1.peakForce > 0, 'a force was felt');
   assert.ok(after1.forcePoints > before1.forcePoints && after1.forcePoints >= 1500, `force plot grew to ${after1.forcePoints}`);
   assert.equal(after1.gaps + after1.invalid, 0, after1.lastError);
+  assert.ok(after1.depthSamples > 10, `force-depth plot of the press: ${after1.depthSamples} samples`);
+  assert.match(await page.locator('#tool-state').innerText(), /^tool: (free|in contact|grasping)$/);
   await page.evaluate(() => scrollTo(0, 0));
   await shot(page, 'live-view.png');
   const health = await page.locator('#health').innerText();

@@ -22,6 +22,9 @@ export class SurfaceView {
     this.scene.background = new THREE.Color(0xf4f5f7);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    // Keyboard too: focus the view (Tab) and pan with the arrow keys.
+    this.renderer.domElement.tabIndex = 0;
+    this.controls.listenToKeyEvents(this.renderer.domElement);
     this.controls.addEventListener('change', () => this.invalidate());
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8090a0, 1.6));
     const sun = new THREE.DirectionalLight(0xffffff, 1.8);
