@@ -72,6 +72,14 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   assert.equal(lateState.gaps, 0);
   assert.ok(lateMs < 5000, `late join drew after ${lateMs} ms`);
   await shot(late.locator('#view3d'), 'live-late-join.png');
+  // Phone-sized: one column, nothing wider than the screen.
+  await late.setViewportSize({ width: 390, height: 844 });
+  await late.waitForFunction(() => document.documentElement.scrollWidth <= innerWidth, undefined, { timeout: 10000 }).catch(() => {});
+  const wide = await late.evaluate(() => [...document.querySelectorAll('body *')]
+    .filter((el) => el.getBoundingClientRect().right > innerWidth + 1)
+    .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`));
+  assert.deepEqual(wide, [], 'wider than a 390 px screen');
+  await shot(late, 'live-phone.png');
 
   // An admin's keyframe request reaches the agent: a new keyframe comes to every viewer.
   const k = (await state(page)).keyframes;
@@ -89,6 +97,10 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   // The agent finishes: the page says so.
   assert.equal(await agent.exited, 0, agent.log());
   await page.waitForSelector('#meta a[href^="/replay/"]', { timeout: 30000 });
+  // Nothing changes any more, so nothing is drawn (an absence: watched for a fixed second).
+  const idle = (await state(page)).renders;
+  await page.waitForTimeout(1000);
+  assert.equal((await state(page)).renders, idle, 'no renders without changes');
   assert.deepEqual(errors, []);
 });
 
