@@ -74,11 +74,13 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await shot(late.locator('#view3d'), 'live-late-join.png');
   // Phone-sized: one column, nothing wider than the screen.
   await late.setViewportSize({ width: 390, height: 844 });
-  await late.waitForFunction(() => document.documentElement.scrollWidth <= innerWidth, undefined, { timeout: 10000 }).catch(() => {});
-  const wide = await late.evaluate(() => [...document.querySelectorAll('body *')]
+  // (Plots follow their box a frame later: wait for the layout to settle, then name what is wide.)
+  const tooWide = () => [...document.querySelectorAll('body *')]
     .filter((el) => el.getBoundingClientRect().right > innerWidth + 1)
-    .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`));
-  assert.deepEqual(wide, [], 'wider than a 390 px screen');
+    .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`);
+  await late.waitForFunction(`(${tooWide})().length === 0 && document.documentElement.scrollWidth <= innerWidth`,
+    undefined, { timeout: 10000 }).catch(() => {});
+  assert.deepEqual(await late.evaluate(tooWide), [], 'wider than a 390 px screen');
   await shot(late, 'live-phone.png');
 
   // An admin's keyframe request reaches the agent: a new keyframe comes to every viewer.

@@ -268,5 +268,6 @@ export function sessionPage(id, role, mode) {
     view.dispose();
     forcePlot.dispose();
     posPlot.dispose();
+    depthPlot.dispose();
   };
 }

@@ -9,7 +9,12 @@ export class DepthPlot {
     this.canvas.setAttribute('role', 'img');
     this.canvas.setAttribute('aria-label', 'Force magnitude against pressing depth for the current press');
     this.canvas.height = 160;
+    this.canvas.style.width = '100%';
+    this.canvas.style.height = '160px';
     host.append(this.canvas);
+    // Redrawn at its box's width whenever that changes.
+    this.resizeObserver = new ResizeObserver(() => this.draw());
+    this.resizeObserver.observe(host);
     this.ctx = /** @type {CanvasRenderingContext2D} */ (this.canvas.getContext('2d'));
     this.depth = new Float32Array(capacity);
     this.force = new Float32Array(capacity);
@@ -59,10 +64,14 @@ export class DepthPlot {
     this.draw();
   }
 
+  dispose() {
+    this.resizeObserver.disconnect();
+  }
+
   draw() {
     this.frameRequested = false;
     const c = this.ctx;
-    const w = (this.canvas.width = Math.max(200, this.canvas.parentElement?.clientWidth ?? 300));
+    const w = (this.canvas.width = Math.max(100, this.canvas.clientWidth));
     const h = this.canvas.height;
     c.clearRect(0, 0, w, h);
     c.fillStyle = '#5b6673';
