@@ -30,10 +30,12 @@ const state = (page) => page.evaluate(() => /** @type {any} */ (window).__idms);
 
 test('live: list, surface that moves, tool and force, plots, late join, command, annotation', async () => {
   const { page, context, errors } = browser;
+  await login(page, server, 'admin', '/sessions');
+  await page.waitForSelector('p[role=status]:has-text("No sessions yet")');
+  assert.equal(await page.locator('#sessions tbody tr').count(), 0);
   agent = startAgent(server, 12);
   sessionId = await server.liveSession();
-  await login(page, server, 'admin', '/sessions');
-  // The list shows the live session by itself (it refreshes), with its model.
+  // The open list shows the new live session by itself (it refreshes), with its model.
   const row = page.locator(`#sessions tr[data-id="${sessionId}"][data-state="live"]`);
   await row.waitFor();
   assert.match(await row.innerText(), /hex_4x5_home/);
