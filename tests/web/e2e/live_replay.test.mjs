@@ -132,7 +132,7 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   const wa = Date.now();
   await page.waitForFunction((t) => /** @type {any} */ (window).__idms.timeS > t + 2, ta, { timeout: 15000 });
   const rate = ((await state(page)).timeS - ta) / ((Date.now() - wa) / 1000);
-  assert.ok(rate > 1.8, `replay ran at ${rate.toFixed(2)}x`);
+  assert.ok(rate > 1.5, `replay ran at ${rate.toFixed(2)}x`);  // 1x would be 1; 4x on a loaded machine still well above
   await page.click('#play');  // pause
   await page.waitForSelector('#play[aria-pressed="false"]');
 
