@@ -33,7 +33,7 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await login(page, server, 'admin', '/sessions');
   await page.waitForSelector('p[role=status]:has-text("No sessions yet")');
   assert.equal(await page.locator('#sessions tbody tr').count(), 0);
-  agent = startAgent(server, 12);
+  agent = startAgent(server, 20);
   sessionId = await server.liveSession();
   // The open list shows the new live session by itself (it refreshes), with its model.
   const row = page.locator(`#sessions tr[data-id="${sessionId}"][data-state="live"]`);

@@ -238,13 +238,16 @@ export function sessionPage(id, role, mode) {
 
   function annotationForm() {
     const input = h('input', { id: 'note', type: 'text', maxlength: 1000, required: true, placeholder: 'e.g. too much force here' });
+    const said = h('span', { class: 'error', role: 'alert' });
     const form = h('form', { class: 'inline', id: 'annotate' }, [
-      h('label', { for: 'note', text: 'Note at the current time' }), input, h('button', { type: 'submit', text: 'Add note' })]);
+      h('label', { for: 'note', text: 'Note at the current time' }), input, h('button', { type: 'submit', text: 'Add note' }), said]);
     form.addEventListener('submit', (ev) => {
       ev.preventDefault();
       const text = input.value.trim();
       if (!text) return;
-      if (socket.send({ annotation: { text } })) input.value = '';
+      const sent = socket.send({ annotation: { text } });
+      if (sent) input.value = '';
+      said.textContent = sent ? '' : st.ended ? 'The session has ended: notes go on live sessions.' : 'Not connected: the note was not sent.';
     });
     return form;
   }
