@@ -133,7 +133,9 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await page.waitForFunction((t) => /** @type {any} */ (window).__idms.timeS > t + 2, ta, { timeout: 15000 });
   const rate = ((await state(page)).timeS - ta) / ((Date.now() - wa) / 1000);
   assert.ok(rate > 1.5, `replay ran at ${rate.toFixed(2)}x`);  // 1x would be 1; 4x on a loaded machine still well above
-  await page.click('#play');  // pause
+  // Pause from the keyboard.
+  await page.focus('#play');
+  await page.keyboard.press('Space');
   await page.waitForSelector('#play[aria-pressed="false"]');
 
   // A click on the annotation's mark seeks there.
@@ -141,5 +143,9 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await mark.click();
   await page.waitForFunction((t) => Math.abs(Number(new URL(location.href).searchParams.get('t')) - t) < 0.02, noteTime);
   await shot(page, 'replay-seek.png');
+  // The slider from the keyboard: Home goes back to the start.
+  await page.focus('#seek');
+  await page.keyboard.press('Home');
+  await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '0.00');
   assert.deepEqual(errors, []);
 });
