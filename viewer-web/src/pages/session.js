@@ -10,6 +10,7 @@ import { EnvelopeSocket } from '../net/socket.js';
 import { api } from '../net/api.js';
 import { h, page, fixed, formatTime } from './dom.js';
 import { Timeline } from './timeline.js';
+import { annotationForm, commandPanel, renderHealth } from './session_panels.js';
 
 const v1 = idms.v1;
 const kWindowS = 5;
@@ -65,10 +66,10 @@ export function sessionPage(id, role, mode) {
     h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), health]),
     h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }), forceHost, posHost, depthHost]),
     h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
-      mode === 'live' ? annotationForm() : null, notes].filter((x) => x !== null)),
+      mode === 'live' ? annotationForm((env) => socket.send(env), st) : null, notes].filter((x) => x !== null)),
     h('section', { 'aria-labelledby': 'events-title' }, [h('h2', { id: 'events-title', text: 'Events' }), events]),
   );
-  if (mode === 'live' && role === 'admin') side.prepend(commandPanel());
+  if (mode === 'live' && role === 'admin') side.prepend(commandPanel((env) => socket.send(env)));
 
   const mirror = new MeshState();
   const view = new SurfaceView(viewHost);
@@ -93,19 +94,7 @@ export function sessionPage(id, role, mode) {
   const healthTimer = window.setInterval(() => {
     if (!healthDirty) return;
     healthDirty = false;
-    const s = stats || {};
-    const rows = [
-      ['Session time', formatTime(st.timeS)],
-      ['Tick compute p99', `${s.computeP99Us ?? 0} µs`],
-      ['Period p99', `${s.periodP99Us ?? 0} µs`],
-      ['Overruns', `${s.overruns ?? 0} of ${s.ticks ?? 0} ticks`],
-      ['Real-time', s.realtime ? 'yes' : 'no'],
-      ['Warnings', String(st.warnings)],
-      ['Stability fallbacks', String(st.fallbacks)],
-      ['Samples dropped', String(dropped)],
-      ['Mesh frames', `${st.frames} (${st.keyframes} keyframes, ${st.gaps} gaps)`],
-    ];
-    health.replaceChildren(...rows.flatMap(([k, v]) => [h('dt', { text: k }), h('dd', { text: v })]));
+    renderHealth(health, st, stats, dropped);
   }, 250);
 
   let shownToolState = '';
@@ -235,35 +224,6 @@ export function sessionPage(id, role, mode) {
     }
     if (timeline) timeline.setDuration(s.duration_s);
   }).catch((e) => { meta.textContent = `Cannot load the session: ${e instanceof Error ? e.message : String(e)}`; });
-
-  function annotationForm() {
-    const input = h('input', { id: 'note', type: 'text', maxlength: 1000, required: true, placeholder: 'e.g. too much force here' });
-    const said = h('span', { class: 'error', role: 'alert' });
-    const form = h('form', { class: 'inline', id: 'annotate' }, [
-      h('label', { for: 'note', text: 'Note at the current time' }), input, h('button', { type: 'submit', text: 'Add note' }), said]);
-    form.addEventListener('submit', (ev) => {
-      ev.preventDefault();
-      const text = input.value.trim();
-      if (!text) return;
-      const sent = socket.send({ annotation: { text } });
-      if (sent) input.value = '';
-      said.textContent = sent ? '' : st.ended ? 'The session has ended: notes go on live sessions.' : 'Not connected: the note was not sent.';
-    });
-    return form;
-  }
-
-  function commandPanel() {
-    let next = 1;
-    /** @param {string} label @param {number} kind */
-    const button = (label, kind) => h('button', { type: 'button', text: label,
-      onclick: () => socket.send({ command: { kind, tool: 0, id: next++ } }) });
-    const K = v1.Command.Kind;
-    return h('section', { 'aria-labelledby': 'commands-title', id: 'commands' }, [
-      h('h2', { id: 'commands-title', text: 'Commands (admin)' }),
-      h('div', { class: 'buttons' }, [button('Close tweezers', K.KIND_TWEEZERS_CLOSE), button('Open tweezers', K.KIND_TWEEZERS_OPEN),
-        button('Reset model', K.KIND_RESET), button('Request keyframe', K.KIND_KEYFRAME_REQUEST)]),
-    ]);
-  }
 
   return () => {
     socket.close();
