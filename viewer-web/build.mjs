@@ -3,7 +3,7 @@
 // idms-server serves (--web-root; CMake writes build/web).
 //   node build.mjs OUT_DIR [--dev]
 import { execFileSync } from 'node:child_process';
-import { copyFileSync, mkdirSync, statSync, existsSync } from 'node:fs';
+import { copyFileSync, mkdirSync, statSync, existsSync, utimesSync } from 'node:fs';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
@@ -31,6 +31,9 @@ if (newer(proto, js) || newer(proto, join(gen, 'idms_pb.d.ts'))) {
     '--no-convert', '--no-delimited', '--no-service', '-o', js, proto], { stdio: 'inherit' });
   execFileSync(bin('pbts'), ['-o', join(gen, 'idms_pb.d.ts'), js], { stdio: 'inherit' });
 }
+// They are outputs of this step for CMake: newer than its inputs, or it would run every time.
+const now = new Date();
+for (const f of ['idms_pb.js', 'idms_pb.d.ts']) utimesSync(join(gen, f), now, now);
 
 // 2. The bundle: ES2020 for current browsers, minified, with a source map.
 mkdirSync(join(outDir, 'assets'), { recursive: true });

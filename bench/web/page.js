@@ -5,7 +5,7 @@
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
-import { SurfaceView } from '../../viewer-web/src/view/surface.js';
+import { SurfaceView, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { RollingPlot } from '../../viewer-web/src/plots/rolling.js';
 
 const Envelope = idms.v1.Envelope;
@@ -55,7 +55,7 @@ async function viewer(withPlots) {
       if (mirror.applyKeyframe(/** @type {any} */ (env.meshKeyframe)) === 'ok') view.setSurface(mirror);
     } else if (env.meshDelta && mirror.applyDelta(/** @type {any} */ (env.meshDelta)) === 'ok') {
       stats.changed += mirror.numChanged;
-      if (location.hash === '#noupload') view.invalidate();
+      if (location.hash.includes('noupload')) view.invalidate();
       else view.applyMoved(mirror);
     }
   };
@@ -99,10 +99,8 @@ async function bare() {
   geometry.computeBoundingSphere();
   scene.add(new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide })));
   const s = /** @type {THREE.Sphere} */ (geometry.boundingSphere);
-  const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight, s.radius / 100, s.radius * 100);
-  camera.up.set(0, 0, 1);
-  camera.position.set(s.center.x, s.center.y - 2.2 * s.radius, s.center.z + 1.6 * s.radius);
-  camera.lookAt(s.center);
+  const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
+  placeCamera(camera, s);
   const stats = { renders: 0, startedAt: performance.now() };
   w.__bench = stats;
   const loop = () => {
@@ -113,4 +111,4 @@ async function bare() {
   loop();
 }
 
-(location.hash === '#bare' ? bare() : viewer(location.hash !== '#noplots')).catch((e) => { w.__benchError = String(e); });
+(location.hash === '#bare' ? bare() : viewer(!location.hash.includes('noplots'))).catch((e) => { w.__benchError = String(e); });

@@ -5,10 +5,12 @@ import { idms } from '../codec/proto.js';
 import { MeshState } from '../codec/mesh.js';
 import { SurfaceView } from '../view/surface.js';
 import { RollingPlot } from '../plots/rolling.js';
+import { DepthPlot } from '../plots/depth.js';
 import { EnvelopeSocket } from '../net/socket.js';
 import { api } from '../net/api.js';
 import { h, page, fixed, formatTime } from './dom.js';
 import { Timeline } from './timeline.js';
+import { annotationForm, commandPanel, renderHealth } from './session_panels.js';
 
 const v1 = idms.v1;
 const kWindowS = 5;
@@ -19,7 +21,7 @@ const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n])
  * @typedef {{mode: string, frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string, lastInvalid: string,
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
- *   contactSamples: number, forcePoints: number}} PageState
+ *   contactSamples: number, forcePoints: number, depthSamples: number}} PageState
  */
 
 /**
@@ -31,7 +33,7 @@ export function sessionPage(id, role, mode) {
   /** @type {PageState} */
   const st = { mode, frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0,
     warnings: 0, fallbacks: 0, lastError: '', lastInvalid: '', annotations: 0, connection: 'connecting', ended: false,
-    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0 };
+    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, depthSamples: 0 };
   /** @type {any} */ (window).__idms = st;
 
   // Layout.
@@ -42,6 +44,8 @@ export function sessionPage(id, role, mode) {
   const health = h('dl', { class: 'health', id: 'health' });
   const forceHost = h('div', { class: 'plot', id: 'force-plot' });
   const posHost = h('div', { class: 'plot', id: 'position-plot' });
+  const depthHost = h('div', { class: 'plot', id: 'depth-plot' });
+  const toolState = h('span', { id: 'tool-state', class: 'tool-state', role: 'status', text: 'tool: –' });
   const events = h('ol', { class: 'events', id: 'events', 'aria-live': 'polite' });
   const notes = h('ol', { class: 'notes', id: 'annotations' });
   const side = h('aside', { class: 'side' });
@@ -53,19 +57,19 @@ export function sessionPage(id, role, mode) {
     h('div', { class: 'session-grid' }, [
       h('section', { class: 'view-section', 'aria-label': '3D view' }, [
         viewHost,
-        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), gapNote]),
+        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), toolState, gapNote]),
       ]),
       side,
     ]),
   ].filter((x) => x !== null));
   side.append(
     h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), health]),
-    h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }), forceHost, posHost]),
+    h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }), forceHost, posHost, depthHost]),
     h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
-      mode === 'live' ? annotationForm() : null, notes].filter((x) => x !== null)),
+      mode === 'live' ? annotationForm((env) => socket.send(env), st) : null, notes].filter((x) => x !== null)),
     h('section', { 'aria-labelledby': 'events-title' }, [h('h2', { id: 'events-title', text: 'Events' }), events]),
   );
-  if (mode === 'live' && role === 'admin') side.prepend(commandPanel());
+  if (mode === 'live' && role === 'admin') side.prepend(commandPanel((env) => socket.send(env)));
 
   const mirror = new MeshState();
   const view = new SurfaceView(viewHost);
@@ -77,6 +81,8 @@ export function sessionPage(id, role, mode) {
   Object.defineProperty(st, 'forcePoints', { get: () => forcePlot.length + forcePlot.numPending, enumerable: true });
   const posPlot = new RollingPlot(posHost, { title: 'Tool position', unit: 'model units', capacity, series: [
     { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] });
+  const depthPlot = new DepthPlot(depthHost, capacity);
+  Object.defineProperty(st, 'depthSamples', { get: () => depthPlot.count, enumerable: true });
   /** @type {Timeline | null} */
   const timeline = mode === 'replay' ? new Timeline(timelineHost, (msg) => socket.send({ playbackControl: msg })) : null;
 
@@ -88,21 +94,10 @@ export function sessionPage(id, role, mode) {
   const healthTimer = window.setInterval(() => {
     if (!healthDirty) return;
     healthDirty = false;
-    const s = stats || {};
-    const rows = [
-      ['Session time', formatTime(st.timeS)],
-      ['Tick compute p99', `${s.computeP99Us ?? 0} µs`],
-      ['Period p99', `${s.periodP99Us ?? 0} µs`],
-      ['Overruns', `${s.overruns ?? 0} of ${s.ticks ?? 0} ticks`],
-      ['Real-time', s.realtime ? 'yes' : 'no'],
-      ['Warnings', String(st.warnings)],
-      ['Stability fallbacks', String(st.fallbacks)],
-      ['Samples dropped', String(dropped)],
-      ['Mesh frames', `${st.frames} (${st.keyframes} keyframes, ${st.gaps} gaps)`],
-    ];
-    health.replaceChildren(...rows.flatMap(([k, v]) => [h('dt', { text: k }), h('dd', { text: v })]));
+    renderHealth(health, st, stats, dropped);
   }, 250);
 
+  let shownToolState = '';
   /** @param {idms.v1.IDeviceSamples} batch */
   function onSamples(batch) {
     const samples = batch.samples || [];
@@ -115,6 +110,7 @@ export function sessionPage(id, role, mode) {
       if (f2 > st.peakForce) st.peakForce = f2;
       if (s.contact) st.contactSamples++;
       posPlot.push(t, p.x || 0, p.y || 0, p.z || 0);
+      depthPlot.push(p.x || 0, p.y || 0, p.z || 0, fx, fy, fz, !!s.contact);
       st.warnings += s.warnings || 0;
     }
     st.samples += samples.length;
@@ -122,6 +118,9 @@ export function sessionPage(id, role, mode) {
     if (last) {
       const f = last.force || {}, p = last.toolPos || {};
       view.setTool(p.x || 0, p.y || 0, p.z || 0, f.x || 0, f.y || 0, f.z || 0, !!last.contact, !!last.grasp);
+      // The tool's state in words (colour alone is not enough), written only when it changes.
+      const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';
+      if (words !== shownToolState) toolState.textContent = shownToolState = words;
       st.timeS = last.timeS || 0;
       timeline?.setTime(st.timeS);
     }
@@ -207,6 +206,7 @@ export function sessionPage(id, role, mode) {
           // A seek: the plots restart at the new time.
           forcePlot.clear();
           posPlot.clear();
+          depthPlot.clear();
         }
       } else if (env.welcome) {
         const tools = env.welcome.scene?.tools || [];
@@ -225,37 +225,12 @@ export function sessionPage(id, role, mode) {
     if (timeline) timeline.setDuration(s.duration_s);
   }).catch((e) => { meta.textContent = `Cannot load the session: ${e instanceof Error ? e.message : String(e)}`; });
 
-  function annotationForm() {
-    const input = h('input', { id: 'note', type: 'text', maxlength: 1000, required: true, placeholder: 'e.g. too much force here' });
-    const form = h('form', { class: 'inline', id: 'annotate' }, [
-      h('label', { for: 'note', text: 'Note at the current time' }), input, h('button', { type: 'submit', text: 'Add note' })]);
-    form.addEventListener('submit', (ev) => {
-      ev.preventDefault();
-      const text = input.value.trim();
-      if (!text) return;
-      if (socket.send({ annotation: { text } })) input.value = '';
-    });
-    return form;
-  }
-
-  function commandPanel() {
-    let next = 1;
-    /** @param {string} label @param {number} kind */
-    const button = (label, kind) => h('button', { type: 'button', text: label,
-      onclick: () => socket.send({ command: { kind, tool: 0, id: next++ } }) });
-    const K = v1.Command.Kind;
-    return h('section', { 'aria-labelledby': 'commands-title', id: 'commands' }, [
-      h('h2', { id: 'commands-title', text: 'Commands (admin)' }),
-      h('div', { class: 'buttons' }, [button('Close tweezers', K.KIND_TWEEZERS_CLOSE), button('Open tweezers', K.KIND_TWEEZERS_OPEN),
-        button('Reset model', K.KIND_RESET), button('Request keyframe', K.KIND_KEYFRAME_REQUEST)]),
-    ]);
-  }
-
   return () => {
     socket.close();
     clearInterval(healthTimer);
     view.dispose();
     forcePlot.dispose();
     posPlot.dispose();
+    depthPlot.dispose();
   };
 }

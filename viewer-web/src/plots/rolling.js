@@ -1,8 +1,11 @@
 // Time plots of the last seconds at the full 1 kHz (thesis figures 6-2 to 6-8): uPlot over
 // preallocated Float64Arrays that slide in place. Samples are pushed as they arrive; the plot is
-// redrawn at most once per animation frame and only when samples came.
+// redrawn in an animation frame, at most kRedrawHz times a second, and only when samples came.
 import uPlot from 'uplot';
 import 'uplot/dist/uPlot.min.css';
+
+// Plots redraw at most this often; samples still arrive and are kept at 1 kHz.
+const kRedrawHz = 20;
 
 export class RollingPlot {
   /**
@@ -21,6 +24,8 @@ export class RollingPlot {
     this.length = 0;
     this.total = 0;
     this.frameRequested = false;
+    this.lastDraw = 0;
+    this.drawCallback = () => this.draw();
     /** @type {any[]} */
     this.fullData = this.columns;
     const width = Math.max(200, host.clientWidth || 400);
@@ -55,7 +60,10 @@ export class RollingPlot {
     this.total++;
     if (!this.frameRequested) {
       this.frameRequested = true;
-      requestAnimationFrame(() => this.draw());
+      // At most kRedrawHz: a software-rastered page spends its CPU on the 3D view instead.
+      const wait = Math.max(0, this.lastDraw + 1000 / kRedrawHz - performance.now());
+      if (wait > 0) setTimeout(() => requestAnimationFrame(this.drawCallback), wait);
+      else requestAnimationFrame(this.drawCallback);
     }
   }
 
@@ -83,6 +91,7 @@ export class RollingPlot {
 
   draw() {
     this.frameRequested = false;
+    this.lastDraw = performance.now();
     this.flush();
     // Views while the window fills (the first seconds only), then the full columns themselves.
     const data = this.length === this.capacity ? this.fullData : this.columns.map((col) => col.subarray(0, this.length));

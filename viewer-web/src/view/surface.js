@@ -9,6 +9,23 @@ const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
 const kToolGrasp = 0xc0392b;
 
+/**
+ * Looks at a bounding sphere from the front, a little above and to the side, z up (the bench's
+ * bare page uses it too, so that both draw the same pixels).
+ * @param {THREE.PerspectiveCamera} camera
+ * @param {THREE.Sphere} sphere
+ */
+export function placeCamera(camera, sphere) {
+  const r = sphere.radius;
+  const c = sphere.center;
+  camera.position.set(c.x + 0.3 * r, c.y - 2.6 * r, c.z + 1.0 * r);
+  camera.up.set(0, 0, 1);
+  camera.near = r / 100;
+  camera.far = r * 100;
+  camera.lookAt(c);
+  camera.updateProjectionMatrix();
+}
+
 export class SurfaceView {
   /** @param {HTMLElement} host */
   constructor(host) {
@@ -22,6 +39,9 @@ export class SurfaceView {
     this.scene.background = new THREE.Color(0xf4f5f7);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    // Keyboard too: focus the view (Tab) and pan with the arrow keys.
+    this.renderer.domElement.tabIndex = 0;
+    this.controls.listenToKeyEvents(this.renderer.domElement);
     this.controls.addEventListener('change', () => this.invalidate());
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8090a0, 1.6));
     const sun = new THREE.DirectionalLight(0xffffff, 1.8);
@@ -226,15 +246,9 @@ export class SurfaceView {
     this.geometry.computeBoundingSphere();
     const sphere = this.geometry.boundingSphere;
     if (!sphere || !Number.isFinite(sphere.radius) || sphere.radius === 0) return;
-    const r = sphere.radius;
-    this.forceScale = r / 4;
-    const c = sphere.center;
-    this.controls.target.copy(c);
-    this.camera.position.set(c.x + 0.2 * r, c.y - 2.2 * r, c.z + 1.6 * r);
-    this.camera.up.set(0, 0, 1);
-    this.camera.near = r / 100;
-    this.camera.far = r * 100;
-    this.camera.updateProjectionMatrix();
+    this.forceScale = sphere.radius / 4;
+    this.controls.target.copy(sphere.center);
+    placeCamera(this.camera, sphere);
     this.controls.update();
     this.fitted = true;
   }
