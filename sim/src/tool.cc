@@ -198,8 +198,15 @@ void UpdateGrasps(const Model& m, State& s, Workspace& ws, StepReport* report) {
         if (d2 < best_d2) best_d2 = d2, best = a;
       }
       if (best >= 0) {
+        // The hand-over is continuous (thesis 6.1.3: once the atom is held, the MIO force is the
+        // connecting element's): the element starts pushing the atom out with the contact force
+        // it had, k (l_eq - l) = |f_contact|, and turns to pulling as the tweezers lift.
+        const Real* p = &s.atom_pos[3 * best];
+        const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
+        const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+        const double push = std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]);
         ts.grasp_atom = at.grasp_atom = best;
-        ts.grasp_leq = at.grasp_leq = std::sqrt(best_d2);
+        ts.grasp_leq = at.grasp_leq = std::sqrt(best_d2) + push / at.k;
         ts.grasp_k = at.grasp_k = at.k;
       }
     }
