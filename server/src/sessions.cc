@@ -570,7 +570,7 @@ void LiveSession::ViewerCommand(const v1::Command& command, const std::string& p
   auto e = std::make_shared<v1::Envelope>();
   *e->mutable_command() = command;
   agent_->Send(Serialized(*e), true);
-  RecordEvent(v1::SessionEvent::KIND_UNSPECIFIED,
+  RecordEvent(v1::SessionEvent::KIND_COMMAND,
               "command " + v1::Command::Kind_Name(command.kind()) + " relayed to the agent", peer);
 }
 

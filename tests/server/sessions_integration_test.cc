@@ -136,9 +136,15 @@ TEST(Sessions, ViewersSeeTheAgentsSurfaceLateJoinersGetAKeyframeCommandsByRole) 
   EXPECT_EQ(part.status, 206);
   EXPECT_EQ(part.body, rec.body.substr(100, 100));
   const json detail = json::parse(Get(port, "/api/sessions/" + id, observer).body);
-  bool saw_joined = false;
-  for (const json& e : detail["events"]) saw_joined |= e["kind"] == "KIND_VIEWER_JOINED";
+  bool saw_joined = false, saw_command = false;
+  for (const json& e : detail["events"]) {
+    saw_joined |= e["kind"] == "KIND_VIEWER_JOINED";
+    // The admin's keyframe request, relayed and recorded with who sent it.
+    saw_command |= e["kind"] == "KIND_COMMAND" &&
+                   e["message"].get<std::string>().find("KIND_KEYFRAME_REQUEST") != std::string::npos;
+  }
   EXPECT_TRUE(saw_joined);
+  EXPECT_TRUE(saw_command) << detail["events"].dump();
   ASSERT_EQ(detail["annotations"].size(), 1u);
   EXPECT_EQ(detail["annotations"][0]["text"], "too much force here");
   EXPECT_NEAR(detail["annotations"][0]["time_s"].get<double>(), noted.time_s(), 1e-9);

@@ -111,6 +111,13 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
 test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, the annotation on the timeline', async () => {
   const { page, errors } = browser;
   assert.ok(sessionId, 'the live test ran');
+  // The recorded session's thumbnail in the list: a 160x90 image the server rendered.
+  await page.goto(`${server.base}/sessions`);
+  await page.waitForFunction((id) => {
+    const img = /** @type {HTMLImageElement | null} */ (document.querySelector(`#sessions tr[data-id="${id}"] img.thumb`));
+    return img !== null && img.complete && img.naturalWidth === 160 && img.naturalHeight === 90;
+  }, sessionId, { timeout: 30000 });
+  await shot(page, 'sessions-thumbnails.png');
   await page.goto(`${server.base}/replay/${sessionId}?t=4.5`);
   // The seek to 4.5 s is confirmed; the surface there is drawn.
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s && s.keyframes >= 1 && s.renders >= 1; });

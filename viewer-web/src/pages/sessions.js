@@ -9,7 +9,7 @@ export function sessionsPage(role) {
   const status = h('p', { class: 'muted', role: 'status' });
   const table = h('table', { class: 'list', id: 'sessions' }, [
     h('caption', { text: 'Live sessions first; a live session opens its live view, an ended one its replay.' }),
-    h('thead', {}, [h('tr', {}, ['Session', 'State', 'Model', 'Device', 'Identity', 'Started', 'Duration', 'Peak force',
+    h('thead', {}, [h('tr', {}, ['Preview', 'Session', 'State', 'Model', 'Device', 'Identity', 'Started', 'Duration', 'Peak force',
       'Contact', 'Path', 'Tick p99', 'Warnings', ''].map((t) => h('th', { scope: 'col', text: t })))]),
     body,
   ]);
@@ -26,7 +26,15 @@ export function sessionsPage(role) {
         await api(`/api/sessions/${encodeURIComponent(s.id)}`, { method: 'DELETE' });
         refresh();
       } }) : null;
+    // A recorded session's thumbnail: the server renders its surface halfway through (idms-render,
+    // cached by content), so the list shows what each session looked like.
+    const mid = fixed(s.duration_s / 2, 2);
+    const thumb = !live && s.duration_s > 0
+      ? h('img', { class: 'thumb', width: 160, height: 90, loading: 'lazy', alt: `The surface at ${mid} s`,
+        src: `/api/sessions/${encodeURIComponent(s.id)}/screenshot.png?t=${mid}&size=160x90` })
+      : null;
     return h('tr', { 'data-id': s.id, 'data-state': s.state }, [
+      h('td', {}, [thumb]),
       h('td', {}, [h('a', { href, text: s.id })]),
       h('td', {}, [h('span', { class: `badge ${s.state}`, text: s.state + (live ? ` · ${s.viewers} watching` : '') })]),
       h('td', { text: s.model }),
