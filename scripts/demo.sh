@@ -75,10 +75,12 @@ curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F pl
 
 # One recorded session per interaction of thesis chapter 6, the model fetched by name.
 ws="ws://${url#http://}"
-for script in palpate stroke-slow pluck; do
-  echo "== idms-agent: $script on hex_4x5_home, 3 s at 1 kHz, published and recorded"
+# Each for its script's length (thesis figures 6-2, 6-5 and 6-8).
+for run in palpate:5.5 stroke-slow:9.5 pluck:5; do
+  script=${run%%:*} seconds=${run#*:}
+  echo "== idms-agent: $script on hex_4x5_home, $seconds s at 1 kHz, published and recorded"
   "$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device "scripted:$script" \
-    --duration 3 --no-realtime --cache-dir "$out/agent-cache" --summary-json "$out/$script.json" \
+    --duration "$seconds" --no-realtime --cache-dir "$out/agent-cache" --summary-json "$out/$script.json" \
     > "$out/agent-$script.log" 2>&1
   id=$(sed -n 's/.*"session_id": *"\([^"]*\)".*/\1/p' "$out/$script.json")
   curl -sf -H "Authorization: Bearer $observer" -o "$out/$script.mcap" "$url/api/sessions/$id/recording.mcap"
@@ -87,11 +89,11 @@ for script in palpate stroke-slow pluck; do
   eval "id_${script//-/_}=$id"
 done
 
-echo "== idms-render: the palpation's dent at t = 2.5 s, and the tissue at rest"
+echo "== idms-render: the palpation at t = 2.5 s, the pluck lifting the tissue at 3.5 s, the tissue at rest"
 "$bin/idms-render" --recording "$out/palpate.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
   --out "$out/palpate.png"
 "$bin/idms-render" --model models/hex_4x5_home --size 1280x720 --out "$out/rest.png"
-"$bin/idms-render" --recording "$out/pluck.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
+"$bin/idms-render" --recording "$out/pluck.mcap" --at 3.5 --size 1280x720 --camera 2,-3.2,1.6:2,1.7,0 \
   --out "$out/pluck.png"
 ls -l "$out"/*.png | awk '{print "   " $NF " (" $5 " bytes)"}'
 
