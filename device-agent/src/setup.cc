@@ -14,7 +14,6 @@ v1::Scene DefaultScene(const std::string& script) {
   tool->set_name(script == "pluck" ? "tweezers" : "finger");
   tool->set_radius(1.5);
   tool->set_stiffness(400);
-  tool->set_force_law(v1::FORCE_LAW_LINEAR);
   tool->set_local_radius(2.25);
   scene.set_integrator(v1::INTEGRATOR_EXPLICIT_EULER);
   scene.set_dt_s(0.001);
@@ -76,7 +75,7 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   }
   c.radius = t.radius();
   c.stiffness = t.stiffness();
-  c.law = ContactLaw::kLinear;  // FORCE_LAW_LINEAR (and unspecified = linear, idms.proto)
+  c.law = t.force_law() == v1::FORCE_LAW_LINEAR ? ContactLaw::kLinear : ContactLaw::kThesis;  // unspecified = thesis
   *tool = c;
 
   // Registration: p_model = scale * Rz Ry Rx * p_device + offset.

@@ -320,7 +320,7 @@ bool ValidateScene(const v1::Scene& scene, std::string* error) {
 
 void ApplySceneDefaults(v1::Scene* scene) {
   for (v1::Tool& tool : *scene->mutable_tools()) {
-    if (tool.force_law() == v1::FORCE_LAW_UNSPECIFIED) tool.set_force_law(v1::FORCE_LAW_LINEAR);
+    if (tool.force_law() == v1::FORCE_LAW_UNSPECIFIED) tool.set_force_law(v1::FORCE_LAW_THESIS);
     // The thesis's haptic window is 1.5 tool radii (2.25 for r = 1.5, section 6.2).
     if (!tool.has_local_radius()) tool.set_local_radius(1.5 * tool.radius());
   }

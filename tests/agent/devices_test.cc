@@ -77,6 +77,21 @@ TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(p_model[i], s.pos[i], 1e-12);
 }
 
+// One contact law by default, the thesis's pseudo-code's (as idms-sim run); the prose's by name.
+TEST(Devices, TheSceneChoosesTheContactLawAndTheThesisLawIsTheDefault) {
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  std::string error;
+  v1::Scene scene = agent::DefaultScene("palpate");
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.law, ContactLaw::kThesis);
+  EXPECT_EQ(ToolCommand{}.law, ContactLaw::kThesis) << "idms-sim's default";
+  scene.mutable_tools(0)->set_force_law(v1::FORCE_LAW_LINEAR);
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.law, ContactLaw::kLinear);
+}
+
 TEST(Devices, HumanHandIsStableInContact) {
   // Pressing with a soft hand: the tissue pushes it back (it lags the script), and nothing grows.
   const Model model = Hex();

@@ -53,7 +53,7 @@ TEST(Scene, DefaultsFillUnsetFields) {
   EXPECT_EQ(scene.keyframe_interval_s(), 5);
   EXPECT_EQ(scene.sample_batch(), 20u);
   EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_EXPLICIT_EULER);
-  EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_LINEAR);
+  EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_THESIS);  // the pseudo-code's law, as idms-sim run
   EXPECT_EQ(scene.tools(0).local_radius(), 2.25);
   EXPECT_EQ(scene.device().scale(), 1);
   EXPECT_EQ(scene.device().max_force(), 10);
