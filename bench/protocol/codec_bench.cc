@@ -92,22 +92,9 @@ class SimMotion : public Motion {
   }
 
   std::string warnings() const override {
-    const WarningCounters& w = state_.warnings;
-    const std::pair<const char*, int64_t> counters[] = {{"bad_tool_input", w.bad_tool_input},
-                                                        {"substep_limit", w.substep_limit},
-                                                        {"implicit_fallback", w.implicit_fallback},
-                                                        {"rollback", w.rollback},
-                                                        {"unrecovered", w.unrecovered},
-                                                        {"state_repaired", w.state_repaired},
-                                                        {"device_force_nonfinite", w.device_force_nonfinite},
-                                                        {"device_force_clamped", w.device_force_clamped},
-                                                        {"device_force_rate_limited", w.device_force_rate_limited},
-                                                        {"cg_not_converged", w.cg_not_converged},
-                                                        {"implicit_grew", w.implicit_grew},
-                                                        {"workspace_resync", w.workspace_resync}};
     std::string out;
-    for (const auto& [name, count] : counters) {
-      if (count != 0) out += std::string(out.empty() ? "" : ", ") + name + " " + std::to_string(count);
+    for (const WarningKind& k : WarningKinds(state_.warnings)) {
+      if (k.count != 0) out += std::string(out.empty() ? "" : ", ") + k.name + " " + std::to_string(k.count);
     }
     return out;
   }
