@@ -80,8 +80,11 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   const tooWide = () => [...document.querySelectorAll('body *')]
     .filter((el) => el.getBoundingClientRect().right > innerWidth + 1)
     .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`);
-  await late.waitForFunction(`(${tooWide})().length === 0 && document.documentElement.scrollWidth <= innerWidth`,
-    undefined, { timeout: 10000 }).catch(() => {});
+  // A function, not a string: a string predicate that has to be polled is evaluated in the page,
+  // which the viewer's Content-Security-Policy (no 'unsafe-eval') refuses with an EvalError.
+  await late.waitForFunction(() => [...document.querySelectorAll('body *')]
+    .every((el) => el.getBoundingClientRect().right <= innerWidth + 1) && document.documentElement.scrollWidth <= innerWidth,
+  undefined, { timeout: 10000 }).catch(() => {});
   assert.deepEqual(await late.evaluate(tooWide), [], 'wider than a 390 px screen');
   await shot(late, 'live-phone.png');
 
