@@ -23,6 +23,7 @@
 #include "idms/agent/uplink.h"
 #include "idms/protocol/scene.h"
 #include "idms/sim/model_io.h"
+#include "idms/sim/preset.h"
 #include "text_internal.h"
 
 namespace idms::agent {
@@ -32,7 +33,7 @@ constexpr int kExitConfig = 1;   // bad arguments, scene, model or device
 constexpr int kExitRefused = 2;  // the server refused the token or the session
 
 struct Args {
-  std::string server, token, model, model_file, device, scene_file, summary_json, dump_final, cache_dir;
+  std::string server, token, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
   std::string rotation, offset;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5;
   int64_t backlog = 120000;
@@ -209,8 +210,12 @@ int Main(int argc, char** argv) {
                  "scripted:palpate|stroke-slow|stroke-fast|pluck, human:SCRIPT[,mass=,k=,zeta=], "
                  "udp:PORT[,bind=,timeout_ms=], replay:FILE.mcap")
       ->required();
-  app.add_option("--scene", a.scene_file,
-                 "Scene file (idms.v1.Scene text); default: the thesis settings for the script");
+  auto* scene_opt = app.add_option("--scene", a.scene_file,
+                                   "Scene file (idms.v1.Scene text); default: the thesis's tool for the script");
+  app.add_option("--preset", a.preset,
+                 "Without --scene: default (symplectic Euler, r_l = 2 r) or thesis (explicit Euler, r_l = 1.5 r, "
+                 "thesis 6.2); a scene file names its own (preset: PRESET_THESIS)")
+      ->excludes(scene_opt);
   app.add_option("--duration", a.duration_s, "Seconds to run; 0 = until SIGINT/SIGTERM")->check(CLI::NonNegativeNumber);
   app.add_option("--rate", a.rate_hz, "Loop rate, Hz (default: the scene's device.max_rate_hz, 1000)")
       ->check(CLI::Range(1.0, 10000.0));
@@ -259,7 +264,11 @@ int Main(int argc, char** argv) {
   } else {
     std::string script = "palpate";
     DeviceScriptName(a.device, &script);
-    scene = DefaultScene(script);
+    Preset preset = Preset::kDefault;
+    if (!a.preset.empty() && !ParsePresetName(a.preset, &preset)) {
+      return Fail("--preset '" + a.preset + "': expected default or thesis");
+    }
+    scene = DefaultScene(script, preset == Preset::kThesis ? v1::PRESET_THESIS : v1::PRESET_DEFAULT);
   }
   if (!a.model.empty()) scene.set_model(a.model), scene.clear_model_file();
   if (!a.model_file.empty()) scene.set_model_file(a.model_file), scene.clear_model();

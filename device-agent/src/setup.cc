@@ -7,15 +7,14 @@
 
 namespace idms::agent {
 
-v1::Scene DefaultScene(const std::string& script) {
+v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
   v1::Scene scene;
   v1::Tool* tool = scene.add_tools();
   tool->set_kind(script == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
   tool->set_name(script == "pluck" ? "tweezers" : "finger");
   tool->set_radius(1.5);
   tool->set_stiffness(400);
-  tool->set_local_radius(2.25);
-  scene.set_integrator(v1::INTEGRATOR_EXPLICIT_EULER);
+  scene.set_preset(preset);
   scene.set_dt_s(0.001);
   scene.mutable_device()->set_max_force(8);
   ApplySceneDefaults(&scene);

@@ -15,6 +15,8 @@
 #include <utility>
 #include <vector>
 
+#include "idms/sim/preset.h"
+
 namespace idms {
 namespace {
 
@@ -172,6 +174,9 @@ Checker CheckScene(const v1::Scene& scene) {
     CheckTool(scene.tools(i), i, scene.full_simulation(), &c);
   }
   // Integration and environment.
+  if (!v1::Preset_IsValid(scene.preset())) {
+    c.Fail(Path{{"preset", -1}}, "unknown preset");
+  }
   if (!v1::Integrator_IsValid(scene.integrator())) {
     c.Fail(Path{{"integrator", -1}}, "unknown integrator");
   }
@@ -319,13 +324,15 @@ bool ValidateScene(const v1::Scene& scene, std::string* error) {
 }
 
 void ApplySceneDefaults(v1::Scene* scene) {
+  if (scene->preset() == v1::PRESET_UNSPECIFIED) scene->set_preset(v1::PRESET_DEFAULT);
+  const PresetSettings preset = SettingsOf(scene->preset() == v1::PRESET_THESIS ? Preset::kThesis : Preset::kDefault);
   for (v1::Tool& tool : *scene->mutable_tools()) {
     if (tool.force_law() == v1::FORCE_LAW_UNSPECIFIED) tool.set_force_law(v1::FORCE_LAW_THESIS);
-    // The thesis's haptic window is 1.5 tool radii (2.25 for r = 1.5, section 6.2).
-    if (!tool.has_local_radius()) tool.set_local_radius(1.5 * tool.radius());
+    if (!tool.has_local_radius()) tool.set_local_radius(preset.local_radius_per_tool_radius * tool.radius());
   }
   if (scene->integrator() == v1::INTEGRATOR_UNSPECIFIED) {
-    scene->set_integrator(v1::INTEGRATOR_EXPLICIT_EULER);
+    scene->set_integrator(preset.integrator == Integrator::kExplicitEuler ? v1::INTEGRATOR_EXPLICIT_EULER
+                                                                           : v1::INTEGRATOR_SYMPLECTIC_EULER);
   }
   if (!scene->has_dt_s()) scene->set_dt_s(0.001);
   if (!scene->has_air_resistance()) scene->set_air_resistance(0);

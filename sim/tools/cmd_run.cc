@@ -12,6 +12,7 @@
 #include "idms/sim/edit.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
+#include "idms/sim/preset.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
 #include "plot.h"
@@ -20,8 +21,8 @@ namespace idms::tool {
 namespace {
 
 struct RunArgs {
-  std::string model, script = "palpate", integrator = "euler", tool, csv, plot, fit_plot;
-  double dt = 1e-3, local_radius = 2.25, lambda = 1.0;
+  std::string model, script = "palpate", preset = "default", integrator, tool, csv, plot, fit_plot;
+  double dt = 1e-3, local_radius = 0, lambda = 1.0;  // integrator, local_radius: the preset's unless given
   bool full = false, json = false;
 };
 
@@ -135,12 +136,22 @@ void Run(const RunArgs& a) {
   tool.kind = script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   std::string error;
   if (!a.tool.empty() && !ParseTool(a.tool, &tool, &error)) Fail("run", error);
+  Preset preset{};
+  if (!ParsePresetName(a.preset, &preset)) Fail("run", "--preset '" + a.preset + "': expected default or thesis");
+  const PresetSettings settings = SettingsOf(preset);
   StepOptions options;
-  if (!ParseIntegratorName(a.integrator, &options.integrator)) Fail("run", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
+  options.integrator = settings.integrator;
+  if (!a.integrator.empty() && !ParseIntegratorName(a.integrator, &options.integrator)) {
+    Fail("run", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
+  }
   if (!(a.dt > 0 && a.dt <= 0.1)) Fail("run", "--dt: expected 0 < dt <= 0.1 s");
+  if (a.local_radius < 0 || (a.local_radius > 0 && a.local_radius < tool.radius)) {
+    Fail("run", "--local-radius " + std::to_string(a.local_radius) + ": expected at least the tool's radius " +
+                    std::to_string(tool.radius) + " (so that every contact atom is simulated)");
+  }
   options.dt_s = a.dt;
   options.full = a.full;
-  options.local_radius = a.local_radius;
+  options.local_radius = a.local_radius > 0 ? a.local_radius : settings.local_radius_per_tool_radius * tool.radius;
   options.lambda = a.lambda;
 
   // Step through the script, a CSV row per tick.
@@ -183,7 +194,7 @@ void Run(const RunArgs& a) {
   if (csv) std::fclose(csv);
   if (!a.plot.empty()) {
     if (a.csv.empty()) Fail("run", "--plot needs --csv (the plot is drawn from it)");
-    Plot(a, model.name + ": " + a.script + " (" + a.integrator + ", dt " + std::to_string(a.dt) + " s)");
+    Plot(a, model.name + ": " + a.script + " (" + IntegratorName(options.integrator) + ", dt " + std::to_string(a.dt) + " s)");
   }
 
   // Summary.
@@ -197,6 +208,9 @@ void Run(const RunArgs& a) {
   const nlohmann::json summary = {
       {"stiffness_fit", {{"k", -fit.slope}, {"intercept", fit.intercept}, {"r2", fit.r2}, {"points", fit.points}}},
       {"ticks", ticks},
+      {"preset", PresetName(preset)},
+      {"integrator", IntegratorName(options.integrator)},
+      {"local_radius", options.full ? nlohmann::json(nullptr) : nlohmann::json(options.local_radius)},
       {"max_force", max_force},
       {"max_fz", max_fz},
       {"onset_z", std::isnan(onset_z) ? nlohmann::json(nullptr) : nlohmann::json(onset_z)},
@@ -208,9 +222,10 @@ void Run(const RunArgs& a) {
   if (a.json) {
     PrintJson(summary);
   } else {
-    std::printf("%s on %s: %lld ticks, max |f| %.4g N, max f_z %.4g N, onset z %.4g, %lld warnings, %lld fallbacks, "
-                "compute p50 %.2f us p99 %.2f us\n",
-                a.script.c_str(), model.name.c_str(), static_cast<long long>(ticks), max_force, max_fz, onset_z,
+    std::printf("%s on %s (%s, r_l %.4g): %lld ticks, max |f| %.4g N, max f_z %.4g N, onset z %.4g, %lld warnings, "
+                "%lld fallbacks, compute p50 %.2f us p99 %.2f us\n",
+                a.script.c_str(), model.name.c_str(), IntegratorName(options.integrator),
+                options.full ? NAN : options.local_radius, static_cast<long long>(ticks), max_force, max_fz, onset_z,
                 static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
                 summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
   }
@@ -221,9 +236,13 @@ void Setup(CLI::App& app) {
   static RunArgs a;
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
   cmd->add_option("--script", a.script, "palpate | stroke-slow | stroke-fast | pluck")->capture_default_str();
-  cmd->add_option("--integrator", a.integrator, "euler | symplectic | rk4 | implicit")->capture_default_str();
+  cmd->add_option("--preset", a.preset,
+                  "default (symplectic Euler, r_l = 2 r: the error-against-run-time choice) | thesis (explicit "
+                  "Euler, r_l = 1.5 r: thesis 6.2, what docs/figures use)")
+      ->capture_default_str();
+  cmd->add_option("--integrator", a.integrator, "euler | symplectic | rk4 | implicit (default: the preset's)");
   cmd->add_option("--dt", a.dt, "Time step T, s")->capture_default_str();
-  auto* radius = cmd->add_option("--local-radius", a.local_radius, "Haptic window radius r_l")->capture_default_str();
+  auto* radius = cmd->add_option("--local-radius", a.local_radius, "Haptic window radius r_l (default: the preset's)");
   cmd->add_flag("--full", a.full, "Simulate every atom (local simulation off)")->excludes(radius);
   cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
   cmd->add_option("--tool", a.tool, "sphere:r=1.5,k=400[,law=thesis|linear] or tweezers:... (pluck)");

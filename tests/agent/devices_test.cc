@@ -92,6 +92,24 @@ TEST(Devices, TheSceneChoosesTheContactLawAndTheThesisLawIsTheDefault) {
   EXPECT_EQ(tool.law, ContactLaw::kLinear);
 }
 
+// The built-in scene steps as every entry point does (symplectic Euler, r_l = 2 r); the thesis's
+// step (explicit Euler, r_l = 1.5 r) by name, as idms-agent --preset thesis asks for it.
+TEST(Devices, TheBuiltInSceneTakesTheDefaultStepAndTheThesisStepByName) {
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  std::string error;
+  ASSERT_TRUE(agent::SceneToLoop(agent::DefaultScene("palpate"), &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(step.integrator, Integrator::kSymplecticEuler);
+  EXPECT_EQ(step.local_radius, 3.0);
+  EXPECT_EQ(step.integrator, StepOptions{}.integrator) << "the sim's own default";
+  ASSERT_TRUE(agent::SceneToLoop(agent::DefaultScene("pluck", v1::PRESET_THESIS), &step, &tool, &reg, &error))
+      << error;
+  EXPECT_EQ(step.integrator, Integrator::kExplicitEuler);
+  EXPECT_EQ(step.local_radius, 2.25);
+  EXPECT_EQ(tool.kind, ToolKind::kTweezers);
+}
+
 TEST(Devices, HumanHandIsStableInContact) {
   // Pressing with a soft hand: the tissue pushes it back (it lags the script), and nothing grows.
   const Model model = Hex();

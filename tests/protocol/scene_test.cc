@@ -37,7 +37,9 @@ TEST(Scene, ShippedScenesLoad) {
     ASSERT_EQ(scene.tools_size(), 1);
     EXPECT_EQ(scene.tools(0).radius(), 1.5);
     EXPECT_EQ(scene.tools(0).stiffness(), 400);
-    EXPECT_EQ(scene.tools(0).local_radius(), 2.25);
+    // The default step (symplectic Euler, r_l = 2 r), as every entry point.
+    EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_SYMPLECTIC_EULER) << name;
+    EXPECT_EQ(scene.tools(0).local_radius(), 3.0) << name;
     EXPECT_EQ(scene.dt_s(), 0.001);
     EXPECT_EQ(scene.tools(0).kind(), std::string(name) == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
   }
@@ -52,13 +54,30 @@ TEST(Scene, DefaultsFillUnsetFields) {
   EXPECT_EQ(scene.quant_step(), 1e-4);
   EXPECT_EQ(scene.keyframe_interval_s(), 5);
   EXPECT_EQ(scene.sample_batch(), 20u);
-  EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_EXPLICIT_EULER);
+  EXPECT_EQ(scene.preset(), v1::PRESET_DEFAULT);
+  EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_SYMPLECTIC_EULER);  // the default step, as idms-sim run
   EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_THESIS);  // the pseudo-code's law, as idms-sim run
-  EXPECT_EQ(scene.tools(0).local_radius(), 2.25);
+  EXPECT_EQ(scene.tools(0).local_radius(), 2 * scene.tools(0).radius());
   EXPECT_EQ(scene.device().scale(), 1);
   EXPECT_EQ(scene.device().max_force(), 10);
   EXPECT_EQ(scene.device().max_rate_hz(), 1000);
   EXPECT_FALSE(scene.recording());
+}
+
+// The thesis's configuration by name: explicit Euler and a window of 1.5 radii, where the scene
+// leaves them unset; what it sets stays.
+TEST(Scene, ThesisPresetFillsTheThesisStep) {
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(std::string(kMinimal) + "preset: PRESET_THESIS\n", "thesis.scene", &scene, &error))
+      << error;
+  EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_EXPLICIT_EULER);
+  EXPECT_EQ(scene.tools(0).local_radius(), 1.5 * scene.tools(0).radius());
+  ASSERT_TRUE(LoadSceneText(std::string(kMinimal) + "preset: PRESET_THESIS\nintegrator: INTEGRATOR_RK4\n",
+                            "thesis.scene", &scene, &error))
+      << error;
+  EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_RK4);
+  EXPECT_EQ(LoadError("model: \"x\"\ntools {\n  kind: KIND_SPHERE\n}\npreset: PRESET_FAST\n").rfind("test.scene:5:9: ", 0), 0u);
 }
 
 TEST(Scene, SyntaxErrorsHaveLineAndColumn) {

@@ -11,10 +11,11 @@
 
 namespace idms::agent {
 
-// The scene used when --scene is not given: the thesis's settings for the named script
-// (sphere MIO r 1.5, k 400, linear law, r_l 2.25, explicit Euler at 1 ms; tweezers for pluck),
-// with defaults applied.
-v1::Scene DefaultScene(const std::string& script);
+// The scene used when --scene is not given: the thesis's tool for the named script (sphere MIO
+// r 1.5, k 400, the thesis's contact law at 1 ms; tweezers for pluck) stepped with `preset`'s
+// integrator and haptic window (default: symplectic Euler, r_l = 3; thesis: explicit Euler,
+// r_l = 2.25), with defaults applied.
+v1::Scene DefaultScene(const std::string& script, v1::Preset preset = v1::PRESET_DEFAULT);
 
 // Maps a validated scene with defaults applied. Tool 0 is the one the device drives; a scene
 // with more tools is refused (one device per agent). False with a message naming the field.
