@@ -75,8 +75,8 @@ curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F pl
 
 # One recorded session per interaction of thesis chapter 6, the model fetched by name.
 ws="ws://${url#http://}"
-# Each for its script's length (thesis figures 6-2, 6-5 and 6-8).
-for run in palpate:5.5 stroke-slow:9.5 pluck:5; do
+# Each for its script's length (thesis figures 6-2, 6-6 and 6-8; the fast stroke at the thesis's speed).
+for run in palpate:5.5 stroke-fast:5.8 pluck:5; do
   script=${run%%:*} seconds=${run#*:}
   echo "== idms-agent: $script on hex_4x5_home, $seconds s at 1 kHz, published and recorded"
   "$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device "scripted:$script" \
@@ -102,8 +102,8 @@ if $headless; then
   exit 0
 fi
 
-echo "== a live session to watch: a simulated hand stroking the fragment"
-"$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device human:stroke-slow \
+echo "== a live session to watch: a simulated hand stroking the fragment gently (one crossing in 4 s)"
+"$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device human:stroke-gentle \
   --duration "${duration:-0}" --no-realtime --cache-dir "$out/agent-cache" > "$out/agent-live.log" 2>&1 &
 pids+=("$!")
 live=""

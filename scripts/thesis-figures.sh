@@ -13,3 +13,8 @@ for script in palpate stroke-slow stroke-fast pluck; do
   "$sim" run --preset thesis --model models/hex_4x5_home --script "$script" --csv "$out/$script.csv" --plot "$out/$script.png" \
     "${extra[@]}" --json | tee "$out/$script.json"
 done
+# The strokes' crossings up close (t = 2.9 to 3.5 s), where the three fast crossings take 0.3 s.
+for script in stroke-slow stroke-fast; do
+  "$sim" run --preset thesis --model models/hex_4x5_home --script "$script" --csv "$out/$script.csv" \
+    --plot "$out/$script-crossing.png" --plot-window 2.9,3.5 >/dev/null
+done

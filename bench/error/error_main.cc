@@ -1,4 +1,4 @@
-// Error against run time (issue 3, DESIGN.md "Integrators"): palpation and slow stroking on the
+// Error against run time (issue 3, DESIGN.md "Integrators"): palpation and gentle stroking on the
 // thesis's hex fragment and on a draped ~10^5-atom cap, for every integrator, tick and haptic
 // window radius, against an RK4 dt = 1e-5 full-model reference. Writes a CSV, plots and a
 // markdown table with the default configuration marked; never fails on time.
@@ -259,7 +259,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     // The thesis's fragment: whole scripts (the quick run keeps the press of the palpation).
-    for (Script script : {Script::kPalpate, Script::kStrokeSlow}) {
+    for (Script script : {Script::kPalpate, Script::kStrokeGentle}) {
       Case c{.model_name = "hex_4x5_home",
              .script_name = ScriptName(script),
              .model = &hex,
@@ -267,7 +267,7 @@ int main(int argc, char** argv) {
              .geometry = MakeScriptGeometry(hex, kMioRadius),
              .t0_s = 0,
              .t1_s = ScriptDuration(script)};
-      if (a.quick && script == Script::kStrokeSlow) continue;
+      if (a.quick && script == Script::kStrokeGentle) continue;
       if (a.quick) c.t0_s = 2.0, c.t1_s = 2.6;
       results.push_back(RunSweep(c, configs, a.repeats));
     }
@@ -275,13 +275,13 @@ int main(int argc, char** argv) {
   if (a.curved) {
     CurvedModel(a, &curved, &report.curved_note);
     const std::string name = curved.name;
-    for (Script script : {Script::kPalpate, Script::kStrokeSlow}) {
+    for (Script script : {Script::kPalpate, Script::kStrokeGentle}) {
       Case c{.model_name = name,
              .script_name = ScriptName(script),
              .model = &curved,
              .script = script,
              .geometry = MakeScriptGeometry(curved, kMioRadius)};
-      if (script == Script::kStrokeSlow) {
+      if (script == Script::kStrokeGentle) {
         // The default stroke line (60% of the width at one height) would leave a curved surface
         // at once: stroke 6 units across the crown instead, at the palpation point.
         c.geometry.x_min = c.geometry.center[0] - 3;

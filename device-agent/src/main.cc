@@ -207,7 +207,7 @@ int Main(int argc, char** argv) {
   auto* file_opt = app.add_option("--model-file", a.model_file, "Local model: PREFIX of PREFIX.fem + PREFIX.plg");
   model_opt->excludes(file_opt);
   app.add_option("--device", a.device,
-                 "scripted:palpate|stroke-slow|stroke-fast|pluck, human:SCRIPT[,mass=,k=,zeta=], "
+                 "scripted:palpate|stroke-slow|stroke-fast|pluck|stroke-gentle, human:SCRIPT[,mass=,k=,zeta=], "
                  "udp:PORT[,bind=,timeout_ms=], replay:FILE.mcap")
       ->required();
   auto* scene_opt = app.add_option("--scene", a.scene_file,

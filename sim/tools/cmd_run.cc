@@ -23,7 +23,41 @@ namespace {
 struct RunArgs {
   std::string model, script = "palpate", preset = "default", integrator, tool, csv, plot, fit_plot;
   double dt = 1e-3, local_radius = 0, lambda = 1.0;  // integrator, local_radius: the preset's unless given
+  std::vector<double> plot_window;  // --plot-window T0,T1: the plot's time axis
   bool full = false, json = false;
+};
+
+// Figures of merit of one crossing of a stroke (thesis 6.1.2): the forces while the MIO moves
+// across the surface pressed in, the first half accelerating and the second decelerating.
+struct Crossing {
+  double t0 = 0, t1 = 0;
+  double max_abs_fx = 0, max_abs_fy = 0, min_fz = INFINITY, max_fz = -INFINITY;
+  double sum_fz = 0, sum_fz2 = 0, sum_fx_accel = 0, sum_fx_decel = 0;
+  int64_t n = 0, n_accel = 0, n_decel = 0;
+
+  void Add(double t, const double* f) {
+    max_abs_fx = std::max(max_abs_fx, std::abs(f[0]));
+    max_abs_fy = std::max(max_abs_fy, std::abs(f[1]));
+    min_fz = std::min(min_fz, f[2]), max_fz = std::max(max_fz, f[2]);
+    sum_fz += f[2], sum_fz2 += f[2] * f[2], ++n;
+    if (t < 0.5 * (t0 + t1)) {
+      sum_fx_accel += f[0], ++n_accel;
+    } else {
+      sum_fx_decel += f[0], ++n_decel;
+    }
+  }
+  nlohmann::json Json() const {
+    const double mean = n ? sum_fz / static_cast<double>(n) : 0;
+    const double var = n ? std::max(0.0, sum_fz2 / static_cast<double>(n) - mean * mean) : 0;
+    return {{"t", {t0, t1}},
+            {"max_abs_fx", max_abs_fx},
+            {"max_abs_fy", max_abs_fy},
+            {"mean_fz", mean},
+            {"sd_fz", std::sqrt(var)},
+            {"fz_range", {n ? min_fz + 0.0 : 0, n ? max_fz : 0}},  // + 0.0: no "-0"
+            {"mean_fx_accelerating", n_accel ? sum_fx_accel / static_cast<double>(n_accel) : 0},
+            {"mean_fx_decelerating", n_decel ? sum_fx_decel / static_cast<double>(n_decel) : 0}};
+  }
 };
 
 // "sphere:r=1.5,k=400,law=thesis" or "tweezers:..." -> ToolCommand.
@@ -75,6 +109,7 @@ void Plot(const RunArgs& a, const std::string& title) {
   spec.y_label = "MIO position (model units) / force (N)";
   spec.width_px = 1000, spec.height_px = 700;
   spec.key = "outside right";
+  if (a.plot_window.size() == 2) spec.x_range = std::array<double, 2>{a.plot_window[0], a.plot_window[1]};
   const char* columns[][2] = {{"x", "x"}, {"y", "y"}, {"z", "z"}, {"fx", "f_x"}, {"fy", "f_y"}, {"fz", "f_z"}};
   for (const auto& c : columns) {
     spec.series.push_back({.title = c[1], .csv_path = a.csv, .x_column = "t", .y_column = c[0],
@@ -131,7 +166,7 @@ void Run(const RunArgs& a) {
   ModelPaths(a.model, &fem, &plg);
   if (!LoadModel(fem, plg, {}, &model, &load_error)) Fail("run", load_error.ToString());
   Script script;
-  if (!ParseScriptName(a.script, &script)) Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast or pluck");
+  if (!ParseScriptName(a.script, &script)) Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle");
   ToolCommand tool;
   tool.kind = script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   std::string error;
@@ -169,6 +204,8 @@ void Run(const RunArgs& a) {
   double max_force = 0, max_fz = 0, onset_z = NAN, last_z = INFINITY;
   std::vector<std::array<double, 2>> loading;  // (z, f_z) while pressing in, in contact
   int64_t fallbacks = 0;
+  std::vector<Crossing> crossings;
+  for (const auto& [t0, t1] : StrokeCrossings(script)) crossings.push_back({.t0 = t0, .t1 = t1});
   for (int64_t n = 0; n < ticks; ++n) {
     const ScriptSample sample = SampleScript(script, geometry, (n + 1) * a.dt);
     tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
@@ -186,6 +223,9 @@ void Run(const RunArgs& a) {
     if (f[2] > 1e-3 && tool.pos[2] < last_z - 1e-12) loading.push_back({tool.pos[2], f[2]});
     last_z = tool.pos[2];
     fallbacks += report.fallback;
+    for (Crossing& c : crossings) {
+      if (state.time_s > c.t0 && state.time_s <= c.t1 + 1e-9) c.Add(state.time_s, f);
+    }
     if (csv) {
       std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f\n", state.time_s, tool.pos[0], tool.pos[1],
                    tool.pos[2], f[0], f[1], f[2], report.active_atoms, report.substeps, us);
@@ -203,11 +243,14 @@ void Run(const RunArgs& a) {
     if (fit.points < 2) Fail("run", "--fit-plot: the tool never pressed into the surface");
     PlotFit(a, loading, fit);
   }
+  nlohmann::json crossings_json = nlohmann::json::array();
+  for (const Crossing& c : crossings) crossings_json.push_back(c.Json());
   nlohmann::json warnings_by_kind = nlohmann::json::object();
   for (const WarningKind& k : WarningKinds(state.warnings)) warnings_by_kind[k.name] = k.count;
   const nlohmann::json summary = {
       {"stiffness_fit", {{"k", -fit.slope}, {"intercept", fit.intercept}, {"r2", fit.r2}, {"points", fit.points}}},
       {"ticks", ticks},
+      {"crossings", crossings_json},
       {"preset", PresetName(preset)},
       {"integrator", IntegratorName(options.integrator)},
       {"local_radius", options.full ? nlohmann::json(nullptr) : nlohmann::json(options.local_radius)},
@@ -228,6 +271,14 @@ void Run(const RunArgs& a) {
                 options.full ? NAN : options.local_radius, static_cast<long long>(ticks), max_force, max_fz, onset_z,
                 static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
                 summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
+    for (const nlohmann::json& c : crossings_json) {
+      std::printf("  crossing %.2f-%.2f s: max |f_x| %.3g N, max |f_y| %.3g N, f_z %.3g +- %.2g N (%.3g to %.3g), "
+                  "mean f_x accelerating %.3g N, decelerating %.3g N\n",
+                  c["t"][0].get<double>(), c["t"][1].get<double>(), c["max_abs_fx"].get<double>(),
+                  c["max_abs_fy"].get<double>(), c["mean_fz"].get<double>(), c["sd_fz"].get<double>(),
+                  c["fz_range"][0].get<double>(), c["fz_range"][1].get<double>(),
+                  c["mean_fx_accelerating"].get<double>(), c["mean_fx_decelerating"].get<double>());
+    }
   }
 }
 
@@ -235,7 +286,7 @@ void Setup(CLI::App& app) {
   auto* cmd = app.add_subcommand("run", "Run a scripted thesis interaction offline (thesis ch. 6)");
   static RunArgs a;
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
-  cmd->add_option("--script", a.script, "palpate | stroke-slow | stroke-fast | pluck")->capture_default_str();
+  cmd->add_option("--script", a.script, "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a slow stroke to watch)")->capture_default_str();
   cmd->add_option("--preset", a.preset,
                   "default (symplectic Euler, r_l = 2 r: the error-against-run-time choice) | thesis (explicit "
                   "Euler, r_l = 1.5 r: thesis 6.2, what docs/figures use)")
@@ -248,6 +299,9 @@ void Setup(CLI::App& app) {
   cmd->add_option("--tool", a.tool, "sphere:r=1.5,k=400[,law=thesis|linear] or tweezers:... (pluck)");
   cmd->add_option("--csv", a.csv, "Write t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us per tick");
   cmd->add_option("--plot", a.plot, "Write a PNG of the position and force histories (needs --csv)");
+  cmd->add_option("--plot-window", a.plot_window, "T0,T1: the plot's time axis, s (default: the whole run)")
+      ->delimiter(',')
+      ->expected(2);
   cmd->add_option("--fit-plot", a.fit_plot, "Write a PNG of f_z against z while pressing, with its fit (fig. 6-3)");
   cmd->add_flag("--json", a.json, "Print the summary as one JSON object");
   cmd->callback([] { Run(a); });

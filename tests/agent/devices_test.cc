@@ -29,7 +29,7 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast or pluck"), std::string::npos) << error;
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos) << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
   EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
   EXPECT_FALSE(agent::MakeDevice("udp:99999", context, &error));

@@ -89,6 +89,31 @@ TEST(RunCli, TheThesisPresetReproducesDocsFigures) {
   }
 }
 
+// The strokes at the thesis's speeds (6.1.2): the fast one crosses three times and each crossing
+// reaches the text's "almost 2 N" of |f_x| with f_y up "dramatically" from the slow stroke's; the
+// slow one's f_x opposes the motion while accelerating; the mean f_z stays "similar".
+TEST(RunCli, TheStrokesAtTheThesisSpeedsGiveItsLateralForces) {
+  const auto run = [](const char* script) {
+    const Output out = RunSim(std::string("run --preset thesis --model ") + kHex + " --script " + script + " --json");
+    EXPECT_EQ(out.status, 0) << out.text;
+    return nlohmann::json::parse(out.text);
+  };
+  const auto slow = run("stroke-slow"), fast = run("stroke-fast"), gentle = run("stroke-gentle");
+  ASSERT_EQ(slow["crossings"].size(), 1u);
+  ASSERT_EQ(fast["crossings"].size(), 3u);
+  ASSERT_EQ(gentle["crossings"].size(), 1u);
+  EXPECT_LT(slow["crossings"][0]["mean_fx_accelerating"].get<double>(), 0);
+  for (const auto& c : fast["crossings"]) {
+    EXPECT_GT(c["max_abs_fx"].get<double>(), 1.6);
+    EXPECT_LT(c["max_abs_fx"].get<double>(), 2.1);
+    EXPECT_GT(c["max_abs_fy"].get<double>(), 2 * slow["crossings"][0]["max_abs_fy"].get<double>());
+    EXPECT_NEAR(c["mean_fz"].get<double>(), slow["crossings"][0]["mean_fz"].get<double>(), 0.35);
+  }
+  // Thirteen times slower, the gentle stroke's lateral force is the discrete surface's alone.
+  EXPECT_LT(gentle["crossings"][0]["max_abs_fx"].get<double>(), 0.4);
+  for (const auto* j : {&slow, &fast, &gentle}) EXPECT_EQ((*j)["warnings"].get<int64_t>(), 0);
+}
+
 TEST(RunCli, PluckForceDropsToZeroWhenTheTweezersOpen) {
   const std::string csv = testing::TempDir() + "/pluck.csv";
   const Output out = RunSim("run --model " + kHex + " --script pluck --csv " + csv + " --json");
@@ -123,7 +148,7 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast or pluck"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos) << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
   EXPECT_NE(out.status, 0);
   EXPECT_NE(out.text.find("bad item 'r=-1'"), std::string::npos) << out.text;

@@ -59,7 +59,7 @@ struct DeviceContext {
 };
 
 // Parses a --device spec and opens the device (the UDP socket is bound here):
-//   scripted:palpate|stroke-slow|stroke-fast|pluck
+//   scripted:palpate|stroke-slow|stroke-fast|pluck|stroke-gentle
 //   human:SCRIPT[,mass=M][,k=K][,zeta=Z]   simulated hand (defaults 0.05, 60, 0.7)
 //   udp:PORT[,bind=ADDR][,timeout_ms=T]     bridge (defaults 127.0.0.1, 50)
 //   replay:FILE.mcap                        the /device channel of a session recording

@@ -1,16 +1,19 @@
 // The scripted interactions of thesis chapter 6 — palpation (6.1.1), slow and fast stroking
-// (6.1.2) and plucking (6.1.3) — as reproducible MIO trajectories over any model's surface.
+// (6.1.2) at the thesis's speeds and plucking (6.1.3) — as reproducible MIO trajectories over any
+// model's surface; and a gentle stroke slow enough to watch.
 // Used by `idms-sim run`, the benches and the agent's scripted device.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string_view>
+#include <vector>
 
 namespace idms {
 
 struct Model;
 
-enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck };
+enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle };
 
 // Where a script acts: the model's surface seen from above. For the hex fragment the top lies
 // at z = 0 and the tool comes down along z (thesis figure 6-1).
@@ -34,10 +37,14 @@ ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius);
 // The MIO pose at time t_s (clamped to [0, duration]). Smooth (C1) in position; pure function.
 ScriptSample SampleScript(Script script, const ScriptGeometry& geometry, double t_s);
 
+// The strokes' crossings of the surface while pressed in: [start, end] times in seconds, in order
+// (one for stroke-slow and stroke-gentle, three for stroke-fast); empty for the other scripts.
+std::vector<std::array<double, 2>> StrokeCrossings(Script script);
+
 // Length of the script in seconds.
 double ScriptDuration(Script script);
 
-// "palpate", "stroke-slow", "stroke-fast", "pluck".
+// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle".
 const char* ScriptName(Script script);
 bool ParseScriptName(std::string_view name, Script* script);
 
