@@ -4,7 +4,7 @@
 // (down between t = 1 and 3 s, 0.11 below contact, then across the 2.4-unit stroke line with the
 // scripts' half-cosine easing) is run with its crossing time D swept, three crossings each, and
 // the table prints, per D: the peak speed, max |f_x| and |f_y| while crossing, mean f_z, and the
-// inertial part of f_x while accelerating: f_x minus a quasi-static crossing's f_x at the same x
+// inertial part of f_x while accelerating and while decelerating (the first crossing's halves): f_x minus a quasi-static crossing's f_x at the same x
 // (D = 40 s), which takes out what the discrete surface alone gives (0.26 N with the tool still).
 // The thesis: slow stroke, f_x "increases to -0.1 N" while accelerating; fast stroke, |f_x| "almost
 // 2 N" each traversal, f_y "increases dramatically", f_z "similar". Deterministic; prints figures.
@@ -32,7 +32,7 @@ constexpr double kPressedAt = 3.0;
 constexpr int kCrossings = 3;
 
 struct Row {
-  double crossing_s = 0, peak_speed = 0, max_fx = 0, max_fy = 0, mean_fz = 0, inertial_fx_accel = 0;
+  double crossing_s = 0, peak_speed = 0, max_fx = 0, max_fy = 0, mean_fz = 0, inertial_fx_accel = 0, inertial_fx_decel = 0;
   int64_t warnings = 0;
 };
 
@@ -60,8 +60,8 @@ Row Run(const Model& model, Preset preset, double crossing_s, std::vector<std::a
   tool.kind = ToolKind::kSphere;
   const bool record = quasi->empty();
   Row row{.crossing_s = crossing_s, .peak_speed = std::numbers::pi / 2 * (g.x_max - g.x_min) / crossing_s};
-  double sum_fz = 0, sum_inertial = 0;
-  int64_t n = 0, n_accel = 0;
+  double sum_fz = 0, sum_accel = 0, sum_decel = 0;
+  int64_t n = 0, n_accel = 0, n_decel = 0;
   const double z_contact = g.top_z + g.mio_radius;
   const double end = kPressedAt + kCrossings * crossing_s;
   for (int64_t k = 1; k * o.dt_s <= end + 1e-9; ++k) {
@@ -80,13 +80,19 @@ Row Run(const Model& model, Preset preset, double crossing_s, std::vector<std::a
     if (t > kPressedAt + crossing_s) continue;  // the first crossing only, below
     if (record) {
       quasi->push_back({x, f[0]});
-    } else if (t < kPressedAt + 0.5 * crossing_s) {
+    } else {
       const auto it = std::lower_bound(quasi->begin(), quasi->end(), std::array<double, 2>{x, -INFINITY});
-      sum_inertial += f[0] - (it == quasi->end() ? quasi->back() : *it)[1], ++n_accel;
+      const double inertial = f[0] - (it == quasi->end() ? quasi->back() : *it)[1];
+      if (t < kPressedAt + 0.5 * crossing_s) {
+        sum_accel += inertial, ++n_accel;
+      } else {
+        sum_decel += inertial, ++n_decel;
+      }
     }
   }
   row.mean_fz = n ? sum_fz / static_cast<double>(n) : 0;
-  row.inertial_fx_accel = n_accel ? sum_inertial / static_cast<double>(n_accel) : 0;
+  row.inertial_fx_accel = n_accel ? sum_accel / static_cast<double>(n_accel) : 0;
+  row.inertial_fx_decel = n_decel ? sum_decel / static_cast<double>(n_decel) : 0;
   row.warnings = TotalWarnings(s.warnings);
   return row;
 }
@@ -118,14 +124,14 @@ int main(int argc, char** argv) {
     std::printf("%s preset (%s, r_l %.2f), hex fragment, stroke %.2f below contact, %d crossings:\n",
                 PresetName(preset), IntegratorName(SettingsOf(preset).integrator),
                 1.5 * SettingsOf(preset).local_radius_per_tool_radius, kDepth, kCrossings);
-    std::printf("  %10s %11s %10s %10s %10s %22s %8s\n", "crossing_s", "peak_u_per_s", "max|f_x|", "max|f_y|",
-                "mean_f_z", "inertial_f_x_accel", "warnings");
+    std::printf("  %10s %11s %10s %10s %10s %12s %12s %8s\n", "crossing_s", "peak_u_per_s", "max|f_x|", "max|f_y|",
+                "mean_f_z", "inertial_acc", "inertial_dec", "warnings");
     std::vector<std::array<double, 2>> quasi;
     Run(model, preset, 40.0, &quasi);
     for (double d : times) {
       const Row r = Run(model, preset, d, &quasi);
-      std::printf("  %10.3f %11.1f %10.3f %10.3f %10.3f %22.3f %8lld\n", r.crossing_s, r.peak_speed, r.max_fx, r.max_fy,
-                  r.mean_fz, r.inertial_fx_accel, static_cast<long long>(r.warnings));
+      std::printf("  %10.3f %11.1f %10.3f %10.3f %10.3f %12.3f %12.3f %8lld\n", r.crossing_s, r.peak_speed, r.max_fx,
+                  r.max_fy, r.mean_fz, r.inertial_fx_accel, r.inertial_fx_decel, static_cast<long long>(r.warnings));
     }
   }
   return 0;
