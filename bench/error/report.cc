@@ -383,6 +383,31 @@ std::vector<int> Dominators(const std::vector<RunResult>& runs, int i, double Ru
   return out;
 }
 
+// What a case's verdict rests on. The errors are deterministic; the run times are measured, so
+// the verdict can flip with timing noise: how far apart the default and the fastest configuration
+// at least as accurate are is how much noise it takes.
+std::string VerdictMargin(const CaseResult& c, const Config& default_config) {
+  const int d = FindConfig(c.runs, default_config);
+  if (d < 0) return CaseSlug(c) + ": no default run";
+  const RunResult& def = c.runs[d];
+  int more_accurate = 0, fastest = -1;
+  for (size_t i = 0; i < c.runs.size(); ++i) {
+    if (static_cast<int>(i) == d || c.runs[i].force_rms > def.force_rms) continue;
+    more_accurate += c.runs[i].force_rms < def.force_rms;
+    if (fastest < 0 || c.runs[i].cpu_us_per_ms < c.runs[fastest].cpu_us_per_ms) fastest = static_cast<int>(i);
+  }
+  std::string out = CaseSlug(c) + ": default force rms " + Fmt("%.4e", def.force_rms) + " max " +
+                    Fmt("%.4e", def.force_max) + ", pos max " + Fmt("%.4e", def.pos_max) + "; " +
+                    std::to_string(more_accurate) + " of " + std::to_string(c.runs.size() - 1) +
+                    " configurations more accurate";
+  if (fastest < 0) return out;
+  const double ratio = c.runs[fastest].cpu_us_per_ms / std::max(def.cpu_us_per_ms, 1e-300);
+  return out + ", the fastest of them " + ConfigLabel(c.runs[fastest].config) + " at " + Fmt("%.2f", ratio) +
+         "x the default's run time: " + (ratio > 1 ? "the default leaves the front" : "the default joins the front") +
+         " if timing noise moves that ratio " + (ratio > 1 ? "down" : "up") + " by " +
+         Fmt("%.0f", 100 * std::abs(ratio - 1) / std::max(ratio, 1.0)) + "%";
+}
+
 bool WriteReport(const std::vector<CaseResult>& cases, const ReportOptions& o, std::string* error) {
   namespace fs = std::filesystem;
   if (!WriteCsv(cases, o, (fs::path(o.out_dir) / "error-vs-runtime.csv").string(), error)) return false;
@@ -460,7 +485,16 @@ bool WriteReport(const std::vector<CaseResult>& cases, const ReportOptions& o, s
             "as the default everywhere: no single replacement is proposed.";
     }
   }
-  md << "\n\n" << WindowNote(cases, o.default_config);
+  md << "\n\nWhat the verdict rests on: the errors are deterministic, the run times are measured, so a verdict "
+        "can flip with timing noise. Per case, the default's errors and the fastest configuration at least as "
+        "accurate:\n";
+  std::printf("what the verdict rests on (errors are deterministic, run times are not):\n");
+  for (const CaseResult& c : cases) {
+    const std::string margin = VerdictMargin(c, o.default_config);
+    md << "- " << margin << ";\n";
+    std::printf("  %s\n", margin.c_str());
+  }
+  md << "\n" << WindowNote(cases, o.default_config);
   md << "\n\nAll figures: error-vs-runtime.csv (one row per case and configuration).\n";
   for (const CaseResult& c : cases) WriteCaseSection(md, c, o);
   std::printf("\ndefault %s on the force-error front in %d of %zu cases\n", ConfigLabel(o.default_config).c_str(),
