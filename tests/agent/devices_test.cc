@@ -128,7 +128,7 @@ TEST(Devices, HumanHandIsStableInContact) {
   options.realtime = false;
   agent::Loop loop(model, step, tool, reg, *device, options);
   const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
-  double max_force = 0, max_lag = 0, lag_at_press = 0;
+  double max_force = 0, max_lag = 0, lag_at_press = 0, fz_at_press = 0;
   for (int i = 0; i < 5500; ++i) {
     const int64_t now = agent::MonotonicNs();
     loop.Tick(now, now + 1000000000);
@@ -138,15 +138,18 @@ TEST(Devices, HumanHandIsStableInContact) {
       const ScriptSample target = SampleScript(Script::kPalpate, g, s.time_s);
       const double lag = s.tool_pos[2] - target.pos[2];
       max_lag = std::max(max_lag, std::abs(lag));
-      if (s.tick == 2800) lag_at_press = lag;
+      if (s.tick == 2800) lag_at_press = lag, fz_at_press = s.force[2];
     }
     int32_t index;
     while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
   }
-  EXPECT_GT(max_force, 0.1);
-  EXPECT_LT(max_force, 8.0);
-  EXPECT_GT(lag_at_press, 0.0) << "the tissue pushes the hand above its target";
-  EXPECT_LT(max_lag, 0.5);
+  // Held at depth (the script holds from 2.5 to 3 s; the hand, w = 35 rad/s, zeta = 0.7, settles
+  // in ~0.2 s), the hand's spring balances the device force: k * lag = f_z, k = 60 by default.
+  EXPECT_GT(fz_at_press, 0.5);
+  EXPECT_NEAR(lag_at_press, fz_at_press / 60, 0.01 * lag_at_press) << "the tissue pushes the hand above its target";
+  // Giving way, the hand presses less deep than the rigid script, whose peak is 1.667 N.
+  EXPECT_LT(max_force, 1.667);
+  EXPECT_LT(max_lag, 2 * lag_at_press);
   EXPECT_EQ(TotalWarnings(loop.state().warnings), 0);
 }
 
