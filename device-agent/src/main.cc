@@ -197,10 +197,8 @@ bool DumpFinal(const std::string& path, const Loop& loop) {
   return std::fclose(f) == 0;
 }
 
-int Main(int argc, char** argv) {
-  // Command line.
-  Args a;
-  CLI::App app{"idms-agent: the 1 kHz DSM loop next to a haptic device, reporting to an idms-server"};
+// The command line into `a`.
+void AddOptions(CLI::App& app, Args& a) {
   app.add_option("--server", a.server, "ws://HOST:PORT of the idms-server, or 'none' to run offline")->required();
   app.add_option("--token", a.token, "Agent token (sent as Authorization: Bearer)");
   auto* model_opt = app.add_option("--model", a.model, "Library model NAME[@VERSION], downloaded from the server");
@@ -240,49 +238,44 @@ int Main(int argc, char** argv) {
                  "Sleep until this many us before each deadline, then poll the clock (costs up to that much CPU "
                  "per tick); 0 = off")
       ->check(CLI::Range(int64_t{0}, int64_t{1000000}));
-  CLI11_PARSE(app, argc, argv);
+}
 
-  // A CPU this process may not use is an error, not a silently unpinned loop.
-  if (a.cpu >= 0) {
-    const std::vector<int> allowed = AllowedCpus();
-    if (std::find(allowed.begin(), allowed.end(), a.cpu) == allowed.end()) {
-      return Fail(Cat({"--cpu ", std::to_string(a.cpu), ": this process may run on CPUs ", CpuList(allowed),
-                       " only (sched_getaffinity); pick one of them or leave --cpu out"}));
-    }
-  }
-
-  const bool offline = a.server == "none";
-  UplinkOptions up;
-  std::string error;
-  if (!offline && !ParseServer(a.server, &up, &error)) return Fail(error);
-  if (!offline && a.token.empty()) return Fail("--token is required with a server (or use --server none)");
-
-  // Scene: the file, or the thesis defaults for the device's script; the command line wins.
-  v1::Scene scene;
+// The scene: the file, or the built-in one for the device's script (in the preset asked for);
+// the command line's model and registration win. False with a message.
+bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolCommand* tool, Registration* registration,
+                  std::string* error) {
   if (!a.scene_file.empty()) {
-    if (!LoadScene(a.scene_file, &scene, &error)) return Fail(error);
+    if (!LoadScene(a.scene_file, scene, error)) return false;
   } else {
     std::string script = "palpate";
     DeviceScriptName(a.device, &script);
     Preset preset = Preset::kDefault;
     if (!a.preset.empty() && !ParsePresetName(a.preset, &preset)) {
-      return Fail("--preset '" + a.preset + "': expected default or thesis");
+      *error = "--preset '" + a.preset + "': expected default or thesis";
+      return false;
     }
-    scene = DefaultScene(script, preset == Preset::kThesis ? v1::PRESET_THESIS : v1::PRESET_DEFAULT);
+    *scene = DefaultScene(script, preset == Preset::kThesis ? v1::PRESET_THESIS : v1::PRESET_DEFAULT);
   }
-  if (!a.model.empty()) scene.set_model(a.model), scene.clear_model_file();
-  if (!a.model_file.empty()) scene.set_model_file(a.model_file), scene.clear_model();
-  StepOptions step;
-  ToolCommand tool;
-  Registration registration;
-  if (!SceneToLoop(scene, &step, &tool, &registration, &error)) return Fail(error);
-  if (a.scale > 0) registration.scale = a.scale;
-  if (!a.rotation.empty() && !ParseRotation(a.rotation, registration.rot, &error)) return Fail("--rotation " + error);
-  if (!a.offset.empty() && !ParseVec3(a.offset, registration.offset, &error)) return Fail("--offset " + error);
-  if (a.max_force > 0) registration.max_force = a.max_force;
+  if (!a.model.empty()) scene->set_model(a.model), scene->clear_model_file();
+  if (!a.model_file.empty()) scene->set_model_file(a.model_file), scene->clear_model();
+  if (!SceneToLoop(*scene, step, tool, registration, error)) return false;
+  if (a.scale > 0) registration->scale = a.scale;
+  if (!a.rotation.empty() && !ParseRotation(a.rotation, registration->rot, error)) {
+    *error = "--rotation " + *error;
+    return false;
+  }
+  if (!a.offset.empty() && !ParseVec3(a.offset, registration->offset, error)) {
+    *error = "--offset " + *error;
+    return false;
+  }
+  if (a.max_force > 0) registration->max_force = a.max_force;
+  return true;
+}
 
-  // Model: the library (through the cache) or a local pair.
-  std::string fem_path, plg_path;
+// The scene's model: from the library through the cache, or a local pair. 0, or the exit status
+// after saying why.
+int LoadSceneModel(const Args& a, const v1::Scene& scene, const UplinkOptions& up, bool offline, Model* model) {
+  std::string fem_path, plg_path, error;
   if (!scene.model().empty()) {
     if (offline) return Fail("--model needs a server to download from; use --model-file with --server none");
     ModelFetchOptions fetch;
@@ -298,23 +291,96 @@ int Main(int argc, char** argv) {
   } else {
     return Fail("no model: give --model NAME[@VERSION] or --model-file PREFIX (or name one in the scene)");
   }
-  Model model;
   LoadError load_error;
-  if (!LoadModel(fem_path, plg_path, ReadOptions{}, &model, &load_error)) return Fail(load_error.ToString());
+  if (!LoadModel(fem_path, plg_path, ReadOptions{}, model, &load_error)) return Fail(load_error.ToString());
+  return 0;
+}
 
-  // Device.
-  LoopOptions lo;
-  lo.rate_hz = a.rate_hz > 0 ? a.rate_hz : scene.device().max_rate_hz();
-  lo.mesh_rate_hz = scene.stream_rate_hz();
-  lo.max_ticks = a.duration_s > 0 ? std::max<int64_t>(1, std::llround(a.duration_s * lo.rate_hz)) : 0;
-  lo.realtime = !a.no_realtime;
-  lo.cpu = a.cpu;
-  lo.spin_ns = a.spin_us * 1000;
-  if (static_cast<double>(lo.spin_ns) >= 1e9 / lo.rate_hz) {
-    return Fail(Cat({"--spin-us ", std::to_string(a.spin_us), ": must be shorter than the period (",
-                     std::to_string(std::llround(1e6 / lo.rate_hz)), " us at ",
-                     std::to_string(std::llround(lo.rate_hz)), " Hz)"}));
+// The loop's rate, streaming, duration and real-time options. False with a message.
+bool MakeLoopOptions(const Args& a, const v1::Scene& scene, LoopOptions* lo, std::string* error) {
+  lo->rate_hz = a.rate_hz > 0 ? a.rate_hz : scene.device().max_rate_hz();
+  lo->mesh_rate_hz = scene.stream_rate_hz();
+  lo->max_ticks = a.duration_s > 0 ? std::max<int64_t>(1, std::llround(a.duration_s * lo->rate_hz)) : 0;
+  lo->realtime = !a.no_realtime;
+  lo->cpu = a.cpu;
+  lo->spin_ns = a.spin_us * 1000;
+  if (static_cast<double>(lo->spin_ns) >= 1e9 / lo->rate_hz) {
+    *error = Cat({"--spin-us ", std::to_string(a.spin_us), ": must be shorter than the period (",
+                  std::to_string(std::llround(1e6 / lo->rate_hz)), " us at ", std::to_string(std::llround(lo->rate_hz)),
+                  " Hz)"});
+    return false;
   }
+  return true;
+}
+
+// Runs the loop on its own thread and the uplink on this one until both end; what the platform
+// did meanwhile (this thread kept off a pinned loop's CPU, steal time over the run).
+Platform RunLoopAndUplink(Loop& loop, Uplink& uplink, int cpu, bool* ok) {
+  Platform platform;
+  if (cpu >= 0) {
+    platform.io_cpus = KeepThisThreadOff(cpu);
+    if (platform.io_cpus.empty()) {
+      std::fprintf(stderr, "idms-agent: note: the I/O thread shares CPU %d with the loop (no other CPU allowed)\n",
+                   cpu);
+    } else {
+      std::fprintf(stderr, "idms-agent: I/O thread on CPUs %s\n", CpuList(platform.io_cpus).c_str());
+    }
+  }
+  // Steal before and after the run, read here: never on the loop thread. {all CPUs, the loop's
+  // CPU}, -1 where unreadable (or not pinned).
+  const std::string loop_cpu_line = Cat({"cpu", std::to_string(cpu)});
+  auto read_steal = [&] {
+    return std::array<int64_t, 2>{ReadStealMs("cpu"), cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1};
+  };
+  const std::array<int64_t, 2> steal_start = read_steal();
+
+  // The loop thread starts with SIGINT/SIGTERM blocked: they are this thread's to handle.
+  sigset_t block, old;
+  sigemptyset(&block);
+  sigaddset(&block, SIGINT);
+  sigaddset(&block, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &block, &old);
+  std::thread loop_thread([&loop] { loop.Run(); });
+  pthread_sigmask(SIG_SETMASK, &old, nullptr);
+  *ok = uplink.Run();
+  loop_thread.join();
+  const std::array<int64_t, 2> steal_end = read_steal();
+  auto delta = [](int64_t start, int64_t end) { return start >= 0 && end >= 0 ? end - start : int64_t{-1}; };
+  platform.steal_ms = delta(steal_start[0], steal_end[0]);
+  platform.steal_ms_loop_cpu = delta(steal_start[1], steal_end[1]);
+  return platform;
+}
+
+int Main(int argc, char** argv) {
+  Args a;
+  CLI::App app{"idms-agent: the 1 kHz DSM loop next to a haptic device, reporting to an idms-server"};
+  AddOptions(app, a);
+  CLI11_PARSE(app, argc, argv);
+
+  // A CPU this process may not use is an error, not a silently unpinned loop.
+  if (a.cpu >= 0) {
+    const std::vector<int> allowed = AllowedCpus();
+    if (std::find(allowed.begin(), allowed.end(), a.cpu) == allowed.end()) {
+      return Fail(Cat({"--cpu ", std::to_string(a.cpu), ": this process may run on CPUs ", CpuList(allowed),
+                       " only (sched_getaffinity); pick one of them or leave --cpu out"}));
+    }
+  }
+  const bool offline = a.server == "none";
+  UplinkOptions up;
+  std::string error;
+  if (!offline && !ParseServer(a.server, &up, &error)) return Fail(error);
+  if (!offline && a.token.empty()) return Fail("--token is required with a server (or use --server none)");
+
+  // Scene, model, device.
+  v1::Scene scene;
+  StepOptions step;
+  ToolCommand tool;
+  Registration registration;
+  if (!ResolveScene(a, &scene, &step, &tool, &registration, &error)) return Fail(error);
+  Model model;
+  if (const int status = LoadSceneModel(a, scene, up, offline, &model); status != 0) return status;
+  LoopOptions lo;
+  if (!MakeLoopOptions(a, scene, &lo, &error)) return Fail(error);
   DeviceContext dc;
   dc.model = &model;
   dc.registration = registration;
@@ -339,40 +405,8 @@ int Main(int argc, char** argv) {
   up.flush_timeout_s = a.flush_timeout_s;
   Uplink uplink(loop, up);
   std::signal(SIGPIPE, SIG_IGN);
-
-  // With the loop pinned, this thread (and any it starts) keeps off the loop's CPU if it can.
-  Platform platform;
-  if (lo.cpu >= 0) {
-    platform.io_cpus = KeepThisThreadOff(lo.cpu);
-    if (platform.io_cpus.empty()) {
-      std::fprintf(stderr, "idms-agent: note: the I/O thread shares CPU %d with the loop (no other CPU allowed)\n",
-                   lo.cpu);
-    } else {
-      std::fprintf(stderr, "idms-agent: I/O thread on CPUs %s\n", CpuList(platform.io_cpus).c_str());
-    }
-  }
-  // Steal before and after the run, read here: never on the loop thread. {all CPUs, the loop's
-  // CPU}, -1 where unreadable (or not pinned).
-  const std::string loop_cpu_line = Cat({"cpu", std::to_string(lo.cpu)});
-  auto read_steal = [&] {
-    return std::array<int64_t, 2>{ReadStealMs("cpu"), lo.cpu >= 0 ? ReadStealMs(loop_cpu_line) : -1};
-  };
-  const std::array<int64_t, 2> steal_start = read_steal();
-
-  // The loop thread starts with SIGINT/SIGTERM blocked: they are this thread's to handle.
-  sigset_t block, old;
-  sigemptyset(&block);
-  sigaddset(&block, SIGINT);
-  sigaddset(&block, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &block, &old);
-  std::thread loop_thread([&loop] { loop.Run(); });
-  pthread_sigmask(SIG_SETMASK, &old, nullptr);
-  const bool ok = uplink.Run();
-  loop_thread.join();
-  const std::array<int64_t, 2> steal_end = read_steal();
-  auto delta = [](int64_t start, int64_t end) { return start >= 0 && end >= 0 ? end - start : int64_t{-1}; };
-  platform.steal_ms = delta(steal_start[0], steal_end[0]);
-  platform.steal_ms_loop_cpu = delta(steal_start[1], steal_end[1]);
+  bool ok = false;
+  const Platform platform = RunLoopAndUplink(loop, uplink, lo.cpu, &ok);
 
   // Figures, files, exit status.
   const LatencySummary period = loop.period_histogram().Summary();
