@@ -10,8 +10,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "idms/protocol/mesh_codec.h"
 #include "idms/sim/edit.h"
+#include "idms/sim/surface.h"
 
 namespace idms::agent {
 namespace {

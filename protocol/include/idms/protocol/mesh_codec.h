@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "idms/protocol/idms.pb.h"
+#include "idms/sim/surface.h"  // SurfaceTriangles, GatherSurface: what the codec encodes
 
 namespace idms {
 
@@ -97,13 +98,6 @@ bool DecodeKeyframe(const v1::MeshKeyframe& msg, const DecodeLimits& limits, Cod
 // are the caller's (MeshMirror).
 bool ApplyDelta(const v1::MeshDelta& msg, const DecodeLimits& limits, CodecContext& ctx, std::span<int32_t> q,
                 std::vector<int32_t>* changed, std::string* error);
-
-// The model's surface triangles as vertex ids (num_tris x 3), vertex i = external atom i.
-std::vector<int32_t> SurfaceTriangles(const Model& model);
-
-// Copies the external atoms' positions out of atom positions (num_atoms x 3) into
-// out (num_external x 3). Does not allocate.
-void GatherSurface(const Model& model, std::span<const double> atom_pos, std::span<double> out);
 
 // When MeshEncoder sends a keyframe rather than a delta, and how it quantizes.
 struct EncoderOptions {
