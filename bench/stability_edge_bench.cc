@@ -23,6 +23,7 @@
 #include "idms/sim/model_io.h"
 #include "idms/sim/stability.h"
 #include "idms/sim/step.h"
+#include "idms/sim/summary.h"
 #include "idms/sim/workspace.h"
 
 #ifndef IDMS_SOURCE_DIR

@@ -1,6 +1,10 @@
 // The explicit integrators over the active free atoms (thesis 4.1 block 4): explicit Euler
 // exactly as eqs. 4.13-4.15, symplectic Euler and RK4; implicit Euler is in implicit.cc.
+#include "idms/sim/integrate.h"
+
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 #include "idms/sim/model.h"
 #include "idms/sim/workspace.h"
@@ -125,3 +129,27 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
 }
 
 }  // namespace idms::internal
+
+namespace idms {
+
+double StableDt(Integrator integrator, const AtomBound& bound, LengthRate rate, double lambda) {
+  const bool filtered = rate == LengthRate::kFiltered;
+  switch (integrator) {
+    case Integrator::kExplicitEuler: {
+      if (!filtered) return EulerStableDt(bound);
+      if (bound.c <= 0) return bound.omega2 > 0 ? 0.0 : std::numeric_limits<double>::infinity();
+      return lambda * bound.c / (bound.omega2 + bound.c * bound.c);
+    }
+    case Integrator::kSymplecticEuler:
+      return (filtered ? lambda : 1.0) * SymplecticStableDt(bound);
+    case Integrator::kRk4: {
+      const double fastest = std::max(std::sqrt(std::max(bound.omega2, 0.0)), bound.c);
+      return fastest > 0 ? 2.5 / fastest : std::numeric_limits<double>::infinity();
+    }
+    case Integrator::kImplicitEuler:
+      break;
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+}  // namespace idms

@@ -16,26 +16,6 @@
 
 namespace idms {
 
-double StableDt(Integrator integrator, const AtomBound& bound, LengthRate rate, double lambda) {
-  const bool filtered = rate == LengthRate::kFiltered;
-  switch (integrator) {
-    case Integrator::kExplicitEuler: {
-      if (!filtered) return EulerStableDt(bound);
-      if (bound.c <= 0) return bound.omega2 > 0 ? 0.0 : std::numeric_limits<double>::infinity();
-      return lambda * bound.c / (bound.omega2 + bound.c * bound.c);
-    }
-    case Integrator::kSymplecticEuler:
-      return (filtered ? lambda : 1.0) * SymplecticStableDt(bound);
-    case Integrator::kRk4: {
-      const double fastest = std::max(std::sqrt(std::max(bound.omega2, 0.0)), bound.c);
-      return fastest > 0 ? 2.5 / fastest : std::numeric_limits<double>::infinity();
-    }
-    case Integrator::kImplicitEuler:
-      break;
-  }
-  return std::numeric_limits<double>::infinity();
-}
-
 const char* IntegratorName(Integrator integrator) {
   switch (integrator) {
     case Integrator::kExplicitEuler:

@@ -11,6 +11,7 @@
 #include "idms/sim/drape.h"
 #include "idms/sim/generate.h"
 #include "idms/sim/model_io.h"
+#include "idms/sim/summary.h"
 
 namespace idms::tool {
 namespace {

@@ -3,6 +3,7 @@
 
 #include "command.h"
 #include "idms/sim/model_io.h"
+#include "idms/sim/summary.h"
 
 namespace idms::tool {
 namespace {

@@ -5,6 +5,7 @@
 #include <string_view>
 
 #include "idms/sim/model_io.h"
+#include "idms/sim/summary.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);

@@ -13,6 +13,7 @@
 #include "idms/sim/generate.h"
 #include "idms/sim/model_io.h"
 #include "idms/sim/workspace.h"
+#include "idms/sim/summary.h"
 
 namespace idms {
 namespace {

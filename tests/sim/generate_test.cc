@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "idms/sim/model_io.h"
+#include "idms/sim/summary.h"
 
 namespace idms {
 namespace {

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "idms/sim/generate.h"
+#include "idms/sim/summary.h"
 
 namespace idms {
 namespace {
