@@ -56,6 +56,7 @@ async function run(hash) {
   const b = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
   await page.close();
   const wall = (b.now - a.now) / 1000;
+  if (b.gaps) throw new Error(`${hash || 'viewer'}: ${b.gaps} mesh frames were gaps: the page drew nothing for them`);
   return { fps: (b.renders - a.renders) / wall, frames: (b.frames ?? 0) - (a.frames ?? 0),
     jsMs: ((b.jsMs ?? 0) - (a.jsMs ?? 0)) / Math.max(1, (b.frames ?? 0) - (a.frames ?? 0)),
     changed: ((b.changed ?? 0) - (a.changed ?? 0)) / Math.max(1, (b.frames ?? 0) - (a.frames ?? 0)), wall };
