@@ -1,9 +1,11 @@
 // The tissue in 3D: the surface as one three.js BufferGeometry updated in place (only moved
 // vertices' positions and the normals around them, uploaded as update ranges), the tool as a
 // sphere of its radius (thesis 6.1), the force as an arrow scaled to its magnitude. Renders only
-// when something changed; nothing is allocated per frame once the first keyframe is drawn.
+// when something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the
+// first keyframe is drawn.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { FrameLoop } from './frame_loop.js';
 
 const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
@@ -27,9 +29,13 @@ export function placeCamera(camera, sphere) {
 }
 
 export class SurfaceView {
-  /** @param {HTMLElement} host */
-  constructor(host) {
+  /**
+   * @param {HTMLElement} host
+   * @param {FrameLoop} [loop] the page's frame loop, shared with its other drawings
+   */
+  constructor(host, loop = new FrameLoop()) {
     this.host = host;
+    this.loop = loop;
     this.renderer = new THREE.WebGLRenderer({ antialias: true });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
     this.renderer.domElement.setAttribute('aria-label', 'Tissue surface, tool and force (drag to orbit, wheel to zoom)');
@@ -86,9 +92,9 @@ export class SurfaceView {
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
     this.dirty = true;
-    this.frameRequested = false;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
     this.onRender = null;
+    loop.add(this);
     this.resizeObserver = new ResizeObserver(() => this.resize());
     this.resizeObserver.observe(host);
     this.resize();
@@ -105,18 +111,19 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Schedules one render on the next animation frame (at most one pending). */
+  /** Renders in the next frame (once, however many changes come before it). */
   invalidate() {
     this.dirty = true;
-    if (this.frameRequested) return;
-    this.frameRequested = true;
-    requestAnimationFrame(() => {
-      this.frameRequested = false;
-      if (!this.dirty) return;
-      this.dirty = false;
-      this.renderer.render(this.scene, this.camera);
-      this.onRender?.();
-    });
+    this.loop.request();
+  }
+
+  /** The frame loop's part: one render when something changed. @returns {boolean} */
+  draw() {
+    if (!this.dirty) return false;
+    this.dirty = false;
+    this.renderer.render(this.scene, this.camera);
+    this.onRender?.();
+    return false;
   }
 
   /** @param {boolean} on */
@@ -314,6 +321,7 @@ export class SurfaceView {
   }
 
   dispose() {
+    this.loop.remove(this);
     this.resizeObserver.disconnect();
     this.controls.dispose();
     this.geometry.dispose();
