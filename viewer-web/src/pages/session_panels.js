@@ -53,7 +53,7 @@ export class SessionHeader {
   /** @param {number} now ms @returns {boolean} still to draw in a later frame */
   draw(now) {
     if (Number.isNaN(this.recordS)) return false;
-    const s = this.recordS;
+    const s = this.mode === 'live' ? Math.max(this.recordS, this.st.timeS) : this.recordS;
     const text = `${fixed(s, 1)} s`;
     if (text === this.shown) return false;
     if (!isDue(this.lastDraw, now, kPanelHz)) return true;
