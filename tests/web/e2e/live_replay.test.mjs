@@ -115,7 +115,10 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   // The agent finishes: the page says so.
   assert.equal(await agent.exited, 0, agent.log());
   await page.waitForSelector('#meta a[href^="/replay/"]', { timeout: 30000 });
-  // Nothing changes any more, so nothing is drawn (an absence: watched for a fixed second).
+  // Nothing changes any more, so nothing is drawn (an absence: watched for a fixed second), once
+  // the frame already asked for by the last samples before the end has been drawn (a loaded
+  // machine's frame can come after the end's link shows).
+  await page.evaluate(() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => done(undefined)))));
   const idle = (await state(page)).renders;
   await page.waitForTimeout(1000);
   assert.equal((await state(page)).renders, idle, 'no renders without changes');
