@@ -2,7 +2,8 @@
 // "page": the live view as /session/{id} assembles it (LiveView: the 3D view with the tool and
 // force arrow, the force, position and force-depth plots, the tool's state; and the loop-health
 // panel, all in one frame loop), fed C++-encoded mesh frames and 17 device samples (1 kHz / 60)
-// as protobuf envelopes at 60 Hz; its own JavaScript is timed (decode, apply, normals, plots).
+// as protobuf envelopes at 60 Hz; its own JavaScript is timed (decode, apply, normals, plots;
+// the last two in the frames drawn, added to the frames received in between).
 // "bare": three.js alone drawing the same mesh (still) with the same lights, material, antialias
 // and pixel ratio, rendering every animation frame. Both report their canvas and draw calls.
 import * as THREE from 'three';
@@ -99,8 +100,9 @@ async function viewerPage() {
     i = i + 1 < list.length ? i + 1 : 0;
     apply(list[i]);
     apply(samples);
-    // The plots' draws (in the frame loop, at their own rate) are the page's JavaScript too.
-    let d = 0;
+    // The normals and the plots' draws (in the frame loop, when a frame is drawn) are the page's
+    // JavaScript too.
+    let d = view.view.normalsMs;
     for (const p of plots) d += p.drawMs;
     stats.jsMs += performance.now() - start + (d - drawMs);
     drawMs = d;
