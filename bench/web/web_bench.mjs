@@ -4,11 +4,13 @@
 // the same mesh in a canvas of the same size with the same renderer settings (page.js says what
 // each page holds), in Debian's headless chromium (software WebGL). The two pages alternate, RUNS
 // times each per size, and the medians are printed with the load average: this machine is
-// shared, and its frame rates swing by a third from one run to the next. Never fails on time.
-//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N]
+// shared, and its frame rates swing by a third from one run to the next; so it also prints the
+// CPU time the browser's processes spent per frame drawn (from /proc), which load moves less.
+// Never fails on time.
+//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
-import { mkdtempSync, readFileSync } from 'node:fs';
+import { mkdtempSync, readFileSync, readdirSync } from 'node:fs';
 import { loadavg, tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -23,8 +25,9 @@ const option = (name, fallback) => {
 };
 const seconds = option('--seconds', 6);
 const runs = option('--runs', 3);
+const only = process.argv.includes('--vertices') ? process.argv[process.argv.indexOf('--vertices') + 1].split(',').map(Number) : null;
 if (!build || !(seconds > 0) || !(runs >= 1)) {
-  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N]');
+  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]');
   process.exit(2);
 }
 const esbuild = await import(join(root, 'viewer-web', 'node_modules', 'esbuild', 'lib', 'main.js'));
@@ -35,7 +38,7 @@ const out = mkdtempSync(join(tmpdir(), 'idms-web-bench-'));
 await esbuild.build({ entryPoints: [join(here, 'page.js')], outdir: out, bundle: true, format: 'esm', minify: true,
   target: 'es2020', nodePaths: [join(root, 'viewer-web', 'node_modules')], logLevel: 'warning' });
 
-const sizes = [[40, 25], [100, 100], [400, 250]];
+const sizes = [[40, 25], [100, 100], [400, 250]].filter(([nx, ny]) => !only || only.includes(nx * ny));
 /** @type {Record<string, Buffer>} */
 const files = {};
 const server = createServer((req, res) => {
@@ -49,8 +52,42 @@ const server = createServer((req, res) => {
 await new Promise((r) => server.listen(0, '127.0.0.1', () => r(undefined)));
 const port = /** @type {import('node:net').AddressInfo} */ (server.address()).port;
 
+// A switch chromium ignores, to find its process tree in /proc.
+const tag = `--idms-web-bench=${process.pid}`;
 const browser = await chromium.launch({ executablePath: '/usr/bin/chromium', headless: true,
-  args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'] });
+  args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', tag] });
+const ticksPerS = 100;  // USER_HZ
+
+/** CPU seconds (user + system) of the browser's processes so far, by --type (renderer, gpu-process, ...). */
+function browserCpu() {
+  /** @type {{pid: number, ppid: number, s: number, type: string, root: boolean}[]} */
+  const procs = [];
+  for (const d of readdirSync('/proc')) {
+    if (!/^\d+$/.test(d)) continue;
+    try {
+      const stat = readFileSync(`/proc/${d}/stat`, 'utf8');
+      const f = stat.slice(stat.lastIndexOf(')') + 2).split(' ');
+      const cmd = readFileSync(`/proc/${d}/cmdline`, 'utf8');
+      const type = /--type=([a-z-]+)/.exec(cmd)?.[1] ?? 'browser';
+      procs.push({ pid: Number(d), ppid: Number(f[1]), s: (Number(f[11]) + Number(f[12])) / ticksPerS, type, root: cmd.includes(tag) && type === 'browser' });
+    } catch {
+      // gone meanwhile
+    }
+  }
+  const tree = new Set(procs.filter((p) => p.root).map((p) => p.pid));
+  for (let grew = true; grew;) {
+    grew = false;
+    for (const p of procs) {
+      if (tree.has(p.pid) || !tree.has(p.ppid)) continue;
+      tree.add(p.pid);
+      grew = true;
+    }
+  }
+  /** @type {Record<string, number>} */
+  const out = {};
+  for (const p of procs) if (tree.has(p.pid)) out[p.type] = (out[p.type] ?? 0) + p.s;
+  return out;
+}
 /** @param {string} hash '' for the live view, '#bare' for three.js alone */
 async function run(hash) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
@@ -59,9 +96,11 @@ async function run(hash) {
   const err = await page.evaluate(() => /** @type {any} */ (window).__benchError);
   if (err) throw new Error(err);
   await page.waitForTimeout(1500);  // warm-up: the plots' window and the GPU buffers fill
+  const cpu0 = browserCpu();
   const a = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
   await page.waitForTimeout(seconds * 1000);
   const b = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
+  const cpu1 = browserCpu();
   await page.close();
   const wall = (b.now - a.now) / 1000;
   if (b.gaps) throw new Error(`${hash || 'page'}: ${b.gaps} mesh frames were gaps or invalid: the page drew nothing for them`);
@@ -69,6 +108,9 @@ async function run(hash) {
   const renders = b.renders - a.renders;
   return { fps: renders / wall, frames, wall, jsMs: ((b.jsMs ?? 0) - (a.jsMs ?? 0)) / Math.max(1, frames),
     changed: ((b.changed ?? 0) - (a.changed ?? 0)) / Math.max(1, frames), calls: (b.calls - a.calls) / Math.max(1, renders),
+    // CPU per frame drawn, ms: the page's renderer process and the GPU process (SwiftShader).
+    rendererMs: 1000 * ((cpu1.renderer ?? 0) - (cpu0.renderer ?? 0)) / Math.max(1, renders),
+    gpuMs: 1000 * ((cpu1['gpu-process'] ?? 0) - (cpu0['gpu-process'] ?? 0)) / Math.max(1, renders),
     canvas: b.canvas, pixelRatio: b.pixelRatio, antialias: b.antialias };
 }
 
@@ -112,6 +154,13 @@ for (const [nx, ny] of sizes) {
     `${median(viewer.map((x) => x.frames / x.wall)).toFixed(1).padStart(11)}  ${median(viewer.map((x) => x.jsMs)).toFixed(3).padStart(16)}  ` +
     `${pageFps.toFixed(1).padStart(5)} (${list(viewer)})`.padEnd(23) + `${bareFps.toFixed(1).padStart(5)} (${list(bare)})`.padEnd(23) +
     `${(pageFps / bareFps).toFixed(2).padStart(6)}`);
+  /** @param {Awaited<ReturnType<typeof run>>[]} xs */
+  const cpu = (xs) => {
+    const r = median(xs.map((x) => x.rendererMs)), g = median(xs.map((x) => x.gpuMs));
+    return { text: `${(r + g).toFixed(1)} (renderer ${r.toFixed(1)} + GPU process ${g.toFixed(1)})`, total: r + g };
+  };
+  const [cv, cb] = [cpu(viewer), cpu(bare)];
+  console.log(`  CPU ms per frame drawn: page ${cv.text}, bare ${cb.text}, bare/page ${(cb.total / cv.total).toFixed(2)}`);
   console.log(`  draw calls per render: page ${median(viewer.map((x) => x.calls)).toFixed(1)}, bare ${median(bare.map((x) => x.calls)).toFixed(1)}; load average ${load()}`);
 }
 await browser.close();
