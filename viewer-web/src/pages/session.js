@@ -63,6 +63,58 @@ function layout(id, mode, panels) {
 }
 
 /**
+ * What each message feeds.
+ * @typedef {{st: PageState, view: LiveView, health: HealthPanel, header: SessionHeader, timeline: Timeline | null,
+ *   notes: AnnotationList, onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
+ */
+
+/** @param {Parts} p @param {idms.v1.Envelope} env */
+function dispatch(p, env) {
+  if (env.meshKeyframe) p.view.applyKeyframe(env.meshKeyframe);
+  else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
+  else if (env.deviceSamples) {
+    const batch = env.deviceSamples;
+    p.view.onSamples(batch.samples || []);
+    if (batch.samples?.length) p.timeline?.setTime(p.st.timeS);
+    p.health.setStats(batch.stats, batch.samplesDropped || 0);
+    p.header.invalidate();
+    return;
+  } else if (env.sessionEvent) p.onEvent(env.sessionEvent);
+  else if (env.annotation) p.notes.add(env.annotation);
+  else if (env.playbackState) {
+    // A confirmed seek: the plots restart at the new time.
+    if (p.timeline?.onState(env.playbackState)) p.view.clearPlots();
+  } else if (env.welcome) {
+    const tools = env.welcome.scene?.tools || [];
+    p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
+  }
+  p.health.invalidate();
+}
+
+/** The connection's state in the top bar (nothing while connected). @param {string} state @param {string} text */
+function showConnection(state, text) {
+  const conn = document.getElementById('conn');
+  if (!conn) return;
+  conn.textContent = state === 'open' ? '' : text;
+  conn.className = `conn ${state}`;
+}
+
+/**
+ * The session's record: model, state, duration, past events and annotations.
+ * @param {string} id @param {'live' | 'replay'} mode @param {Parts} p
+ */
+function loadRecord(id, mode, p) {
+  api(`/api/sessions/${encodeURIComponent(id)}`).then((s) => {
+    p.header.setRecord(s);
+    for (const a of s.annotations || []) p.notes.add({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
+    for (const e of s.events || []) {
+      if (mode === 'replay') p.timeline?.addMark(e.time_s, 'event', `${e.kind}: ${e.message}`);
+    }
+    p.timeline?.setDuration(s.duration_s);
+  }).catch((e) => p.header.fail(`Cannot load the session: ${e instanceof Error ? e.message : String(e)}`));
+}
+
+/**
  * @param {string} id
  * @param {string} role
  * @param {'live' | 'replay'} mode
@@ -95,64 +147,28 @@ export function sessionPage(id, role, mode) {
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
-  /** @param {idms.v1.ISessionEvent} e */
-  function onEvent(e) {
+  /** @type {Parts} */
+  const parts = { st, view, health, header, timeline, notes, onEvent: (e) => {
     events.add(e);
-    if (e.kind === idms.v1.SessionEvent.Kind.KIND_ENDED && mode === 'live') endLive();
-  }
-
-  function endLive() {
+    if (e.kind !== idms.v1.SessionEvent.Kind.KIND_ENDED || mode !== 'live') return;
+    // The end of a live session: say so, link its replay, stop reconnecting.
     st.ended = true;
     header.el.append(' · ', h('a', { href: `/replay/${id}`, text: 'ended: open the replay' }));
     socket?.close();
-  }
-
+  } };
   socket = new EnvelopeSocket(`/ws/${mode === 'live' ? 'session' : 'replay'}/${encodeURIComponent(id)}`, {
     onStatus: (state, text) => {
       st.connection = state;
-      const conn = document.getElementById('conn');
-      if (conn) {
-        conn.textContent = state === 'open' ? '' : text;
-        conn.className = `conn ${state}`;
-      }
+      showConnection(state, text);
     },
     onOpen: () => {
       // A fresh connection starts with a keyframe: drop what the last one left half-done.
       hosts.gapNote.textContent = '';
       if (mode === 'replay') timeline?.reconnected();
     },
-    onEnvelope: (env) => {
-      if (env.meshKeyframe) view.applyKeyframe(env.meshKeyframe);
-      else if (env.meshDelta) view.applyDelta(env.meshDelta);
-      else if (env.deviceSamples) {
-        const batch = env.deviceSamples;
-        view.onSamples(batch.samples || []);
-        if (batch.samples?.length) timeline?.setTime(st.timeS);
-        health.setStats(batch.stats, batch.samplesDropped || 0);
-        header.invalidate();
-        return;
-      } else if (env.sessionEvent) onEvent(env.sessionEvent);
-      else if (env.annotation) notes.add(env.annotation);
-      else if (env.playbackState) {
-        // A confirmed seek: the plots restart at the new time.
-        if (timeline?.onState(env.playbackState)) view.clearPlots();
-      } else if (env.welcome) {
-        const tools = env.welcome.scene?.tools || [];
-        view.view.setToolRadius(tools[0]?.radius ?? 1.5);
-      }
-      health.invalidate();
-    },
+    onEnvelope: (env) => dispatch(parts, env),
   });
-
-  // The session's record: model, state, past events and annotations.
-  api(`/api/sessions/${encodeURIComponent(id)}`).then((s) => {
-    header.setRecord(s);
-    for (const a of s.annotations || []) notes.add({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
-    for (const e of s.events || []) {
-      if (mode === 'replay') timeline?.addMark(e.time_s, 'event', `${e.kind}: ${e.message}`);
-    }
-    if (timeline) timeline.setDuration(s.duration_s);
-  }).catch((e) => header.fail(`Cannot load the session: ${e instanceof Error ? e.message : String(e)}`));
+  loadRecord(id, mode, parts);
 
   return () => {
     socket?.close();
