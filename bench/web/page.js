@@ -1,12 +1,17 @@
-// The bench's two pages in one bundle. "viewer": the viewer's own modules (MeshState, SurfaceView,
-// RollingPlot) fed C++-encoded frames at 60 Hz with 17 samples per frame, its JavaScript timed;
-// "bare": three.js drawing the same mesh, rendering every animation frame. Both at the window's size.
-// "#noupload" (the mesh decoded, not uploaded) and "#noplots" split the viewer's costs.
+// The bench's two pages in one bundle, both in a canvas the size of the window.
+// "page": the live view as /session/{id} assembles it (LiveView: the 3D view with the tool and
+// force arrow, the force, position and force-depth plots, the tool's state; and the loop-health
+// panel, all in one frame loop), fed C++-encoded mesh frames and 17 device samples (1 kHz / 60)
+// as protobuf envelopes at 60 Hz; its own JavaScript is timed (decode, apply, normals, plots;
+// the last two in the frames drawn, added to the frames received in between).
+// "bare": three.js alone drawing the same mesh (still) with the same lights, material, antialias
+// and pixel ratio, rendering every animation frame. Both report their canvas and draw calls.
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
-import { SurfaceView, placeCamera } from '../../viewer-web/src/view/surface.js';
-import { RollingPlot } from '../../viewer-web/src/plots/rolling.js';
+import { placeCamera } from '../../viewer-web/src/view/surface.js';
+import { LiveView } from '../../viewer-web/src/pages/live_view.js';
+import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
 const Envelope = idms.v1.Envelope;
 const w = /** @type {any} */ (window);
@@ -23,66 +28,98 @@ async function frames() {
   return out;
 }
 
-/** @param {boolean} withPlots */
-async function viewer(withPlots) {
-  const list = await frames();
-  const host = /** @type {HTMLElement} */ (document.getElementById('view'));
-  const plotHost = /** @type {HTMLElement} */ (document.getElementById('plots'));
-  const mirror = new MeshState();
-  const view = new SurfaceView(host);
-  const force = new RollingPlot(plotHost, { title: 'force', unit: 'N', capacity: 5000,
-    series: [{ label: 'x', color: 'red' }, { label: 'y', color: 'green' }, { label: 'z', color: 'blue' }, { label: 'm', color: 'black' }] });
-  const pos = new RollingPlot(plotHost, { title: 'position', unit: 'u', capacity: 5000,
-    series: [{ label: 'x', color: 'red' }, { label: 'y', color: 'green' }, { label: 'z', color: 'blue' }] });
-  const stats = { frames: 0, jsMs: 0, renders: 0, changed: 0, startedAt: 0, jsSamples: /** @type {number[]} */ ([]) };
-  w.__bench = stats;
-  view.onRender = () => stats.renders++;
-  // The plots' draws are the page's JavaScript too (uPlot draws in a microtask after setData:
-  // the time to the next macrotask counts them).
-  for (const plot of [force, pos]) {
-    const draw = plot.draw.bind(plot);
-    plot.draw = () => {
-      const a = performance.now();
-      draw();
-      queueMicrotask(() => queueMicrotask(() => { stats.jsMs += performance.now() - a; }));
-    };
+/**
+ * The device samples of frame `n` as the agent sends them: a press every 2 s (contact for 1 s).
+ * The bench's own work, not timed.
+ * @param {number} n
+ */
+function samplesEnvelope(n) {
+  const samples = [];
+  for (let k = 0; k < 17; k++) {
+    const t = (17 * n + k) / 1000;
+    const contact = t % 2 < 1;
+    const depth = contact ? 0.3 * Math.sin(Math.PI * (t % 2)) : 0;
+    samples.push({ timeS: t, toolPos: { x: Math.cos(t), y: Math.sin(t), z: 1 - depth },
+      force: { x: 0.05 * Math.sin(7 * t), y: 0.05 * Math.cos(5 * t), z: contact ? 2 * depth : 0 }, contact });
   }
-  let i = 0;
-  let tick = 0;
-  const apply = (/** @type {Uint8Array} */ bytes) => {
+  return Envelope.encode({ deviceSamples: { samples, stats: { ticks: 17 * n, computeP99Us: 40, periodP99Us: 1010 } } }).finish();
+}
+
+/** @param {HTMLCanvasElement} canvas @param {THREE.WebGLRenderer} renderer */
+function describe(canvas, renderer) {
+  const gl = renderer.getContext();
+  return { canvas: `${gl.drawingBufferWidth}x${gl.drawingBufferHeight}`, pixelRatio: renderer.getPixelRatio(),
+    antialias: !!gl.getContextAttributes()?.antialias, cssSize: `${canvas.clientWidth}x${canvas.clientHeight}` };
+}
+
+async function viewerPage() {
+  const list = await frames();
+  const panel = /** @type {HTMLElement} */ (document.getElementById('plots'));
+  /** @param {string} tag @param {string} id */
+  const el = (tag, id) => {
+    const e = document.createElement(tag);
+    e.id = id;
+    return e;
+  };
+  const hosts = { view: /** @type {HTMLElement} */ (document.getElementById('view')), force: el('div', 'force'),
+    position: el('div', 'position'), depth: el('div', 'depth'), toolState: el('span', 'tool'), gapNote: el('p', 'gap') };
+  const st = { frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0, warnings: 0,
+    fallbacks: 0, lastError: '', lastInvalid: '', movedVertices: 0, peakForce: 0, contactSamples: 0 };
+  // The three plots on screen (they skip drawing when scrolled away), the panel's text below them.
+  panel.append(hosts.force, hosts.position, hosts.depth, hosts.toolState, hosts.gapNote);
+  const view = new LiveView(st, hosts, 5);
+  const health = new HealthPanel(st, view.loop);
+  panel.append(health.el);
+  const plots = [view.forcePlot, view.posPlot, view.depthPlot];
+  const stats = { frames: 0, jsMs: 0, renders: 0, changed: 0, gaps: 0, calls: 0, ...describe(view.view.renderer.domElement, view.view.renderer) };
+  w.__bench = stats;
+  view.view.onRender = () => {
+    stats.renders++;
+    stats.calls += view.view.renderer.info.render.calls;
+  };
+  /** @param {Uint8Array} bytes */
+  const apply = (bytes) => {
     const env = Envelope.decode(bytes);
-    if (env.meshKeyframe) {
-      if (mirror.applyKeyframe(/** @type {any} */ (env.meshKeyframe)) === 'ok') view.setSurface(mirror);
-    } else if (env.meshDelta && mirror.applyDelta(/** @type {any} */ (env.meshDelta)) === 'ok') {
-      stats.changed += mirror.numChanged;
-      if (location.hash.includes('noupload')) view.invalidate();
-      else view.applyMoved(mirror);
+    if (env.meshKeyframe) view.applyKeyframe(env.meshKeyframe);
+    else if (env.meshDelta) view.applyDelta(env.meshDelta);
+    else if (env.deviceSamples) {
+      view.onSamples(env.deviceSamples.samples || []);
+      health.setStats(env.deviceSamples.stats, 0);
     }
   };
   apply(list[0]);
-  // 60 Hz: one mesh frame and 17 device samples each time (1 kHz / 60).
-  stats.startedAt = performance.now();
+  // 60 Hz: one mesh frame and 17 device samples each time, as the server relays them.
+  let i = 0;
+  let n = 0;
+  let drawMs = 0;
   setInterval(() => {
-    const a = performance.now();
-    i = i + 1 < list.length ? i + 1 : 1;
+    const samples = samplesEnvelope(n++);
+    const start = performance.now();
+    // The stream loops through its keyframe, as a server's periodic keyframe: a delta after the
+    // last frame would be based on a sequence the page has passed (a gap, never drawn).
+    i = i + 1 < list.length ? i + 1 : 0;
     apply(list[i]);
-    for (let k = 0; withPlots && k < 17; k++, tick++) {
-      const t = tick / 1000;
-      force.push(t, Math.sin(t), Math.cos(t), 0.5, 1);
-      pos.push(t, Math.cos(t), Math.sin(t), 0);
-    }
-    const ms = performance.now() - a;
-    stats.jsMs += ms;
+    apply(samples);
+    // The normals and the plots' draws (in the frame loop, when a frame is drawn) are the page's
+    // JavaScript too.
+    let d = view.view.normalsMs;
+    for (const p of plots) d += p.drawMs;
+    stats.jsMs += performance.now() - start + (d - drawMs);
+    drawMs = d;
     stats.frames++;
+    stats.gaps = st.gaps + st.invalid;
+    stats.changed = st.movedVertices;
   }, 1000 / 60);
 }
 
-async function bare() {
+async function barePage() {
   const list = await frames();
   const mirror = new MeshState();
-  mirror.apply(Envelope.decode(list[0]));
+  mirror.applyKeyframe(/** @type {any} */ (Envelope.decode(list[0]).meshKeyframe));
   const host = /** @type {HTMLElement} */ (document.getElementById('view'));
+  // The viewer's renderer settings: antialias, pixel ratio capped at 2.
   const renderer = new THREE.WebGLRenderer({ antialias: true });
+  renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
   renderer.setSize(host.clientWidth, host.clientHeight);
   host.appendChild(renderer.domElement);
   const scene = new THREE.Scene();
@@ -101,14 +138,15 @@ async function bare() {
   const s = /** @type {THREE.Sphere} */ (geometry.boundingSphere);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
   placeCamera(camera, s);
-  const stats = { renders: 0, startedAt: performance.now() };
+  const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
   const loop = () => {
     renderer.render(scene, camera);
     stats.renders++;
+    stats.calls += renderer.info.render.calls;
     requestAnimationFrame(loop);
   };
   loop();
 }
 
-(location.hash === '#bare' ? bare() : viewer(!location.hash.includes('noplots'))).catch((e) => { w.__benchError = String(e); });
+(location.hash === '#bare' ? barePage() : viewerPage()).catch((e) => { w.__benchError = String(e); });

@@ -1,22 +1,33 @@
 // The browser viewer's bench: for 10^3, 10^4 and 10^5 surface vertices streamed at 60 Hz (frames
-// from protocol/'s C++ encoder), the page's own JavaScript per frame (decode, apply, normals,
-// plots) and its frame rate, beside a bare three.js page drawing the same mesh at the same size,
-// in Debian's headless chromium (software WebGL). Prints figures; never fails on time.
-//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S]
-// IDMS_WEB_BENCH_BREAKDOWN=1 adds the viewer page without its buffer uploads and without plots.
+// from protocol/'s C++ encoder, with 17 device samples each), the live view's own JavaScript per
+// frame (decode, apply, normals, plots) and its frame rate, beside a bare three.js page drawing
+// the same mesh in a canvas of the same size with the same renderer settings (page.js says what
+// each page holds), in Debian's headless chromium (software WebGL). The two pages alternate, RUNS
+// times each per size, and the medians are printed with the load average: this machine is
+// shared, and its frame rates swing by a third from one run to the next; so it also prints the
+// CPU time the browser's processes spent per frame drawn (from /proc), which load moves less.
+// Never fails on time.
+//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
-import { mkdtempSync, readFileSync } from 'node:fs';
-import { tmpdir } from 'node:os';
+import { mkdtempSync, readFileSync, readdirSync } from 'node:fs';
+import { loadavg, tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 const here = dirname(fileURLToPath(import.meta.url));
 const root = join(here, '..', '..');
 const build = process.argv[2];
-const seconds = process.argv[3] === '--seconds' ? Number(process.argv[4]) : 6;
-if (!build) {
-  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S]');
+/** @param {string} name @param {number} fallback */
+const option = (name, fallback) => {
+  const i = process.argv.indexOf(name);
+  return i > 0 ? Number(process.argv[i + 1]) : fallback;
+};
+const seconds = option('--seconds', 6);
+const runs = option('--runs', 3);
+const only = process.argv.includes('--vertices') ? process.argv[process.argv.indexOf('--vertices') + 1].split(',').map(Number) : null;
+if (!build || !(seconds > 0) || !(runs >= 1)) {
+  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]');
   process.exit(2);
 }
 const esbuild = await import(join(root, 'viewer-web', 'node_modules', 'esbuild', 'lib', 'main.js'));
@@ -27,7 +38,7 @@ const out = mkdtempSync(join(tmpdir(), 'idms-web-bench-'));
 await esbuild.build({ entryPoints: [join(here, 'page.js')], outdir: out, bundle: true, format: 'esm', minify: true,
   target: 'es2020', nodePaths: [join(root, 'viewer-web', 'node_modules')], logLevel: 'warning' });
 
-const sizes = [[40, 25], [100, 100], [400, 250]];
+const sizes = [[40, 25], [100, 100], [400, 250]].filter(([nx, ny]) => !only || only.includes(nx * ny));
 /** @type {Record<string, Buffer>} */
 const files = {};
 const server = createServer((req, res) => {
@@ -41,9 +52,43 @@ const server = createServer((req, res) => {
 await new Promise((r) => server.listen(0, '127.0.0.1', () => r(undefined)));
 const port = /** @type {import('node:net').AddressInfo} */ (server.address()).port;
 
+// A switch chromium ignores, to find its process tree in /proc.
+const tag = `--idms-web-bench=${process.pid}`;
 const browser = await chromium.launch({ executablePath: '/usr/bin/chromium', headless: true,
-  args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'] });
-/** @param {string} hash */
+  args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', tag] });
+const ticksPerS = 100;  // USER_HZ
+
+/** CPU seconds (user + system) of the browser's processes so far, by --type (renderer, gpu-process, ...). */
+function browserCpu() {
+  /** @type {{pid: number, ppid: number, s: number, type: string, root: boolean}[]} */
+  const procs = [];
+  for (const d of readdirSync('/proc')) {
+    if (!/^\d+$/.test(d)) continue;
+    try {
+      const stat = readFileSync(`/proc/${d}/stat`, 'utf8');
+      const f = stat.slice(stat.lastIndexOf(')') + 2).split(' ');
+      const cmd = readFileSync(`/proc/${d}/cmdline`, 'utf8');
+      const type = /--type=([a-z-]+)/.exec(cmd)?.[1] ?? 'browser';
+      procs.push({ pid: Number(d), ppid: Number(f[1]), s: (Number(f[11]) + Number(f[12])) / ticksPerS, type, root: cmd.includes(tag) && type === 'browser' });
+    } catch {
+      // gone meanwhile
+    }
+  }
+  const tree = new Set(procs.filter((p) => p.root).map((p) => p.pid));
+  for (let grew = true; grew;) {
+    grew = false;
+    for (const p of procs) {
+      if (tree.has(p.pid) || !tree.has(p.ppid)) continue;
+      tree.add(p.pid);
+      grew = true;
+    }
+  }
+  /** @type {Record<string, number>} */
+  const out = {};
+  for (const p of procs) if (tree.has(p.pid)) out[p.type] = (out[p.type] ?? 0) + p.s;
+  return out;
+}
+/** @param {string} hash '' for the live view, '#bare' for three.js alone */
 async function run(hash) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
   await page.goto(`http://127.0.0.1:${port}/${hash}`);
@@ -51,32 +96,72 @@ async function run(hash) {
   const err = await page.evaluate(() => /** @type {any} */ (window).__benchError);
   if (err) throw new Error(err);
   await page.waitForTimeout(1500);  // warm-up: the plots' window and the GPU buffers fill
+  const cpu0 = browserCpu();
   const a = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
   await page.waitForTimeout(seconds * 1000);
   const b = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
+  const cpu1 = browserCpu();
   await page.close();
   const wall = (b.now - a.now) / 1000;
-  return { fps: (b.renders - a.renders) / wall, frames: (b.frames ?? 0) - (a.frames ?? 0),
-    jsMs: ((b.jsMs ?? 0) - (a.jsMs ?? 0)) / Math.max(1, (b.frames ?? 0) - (a.frames ?? 0)),
-    changed: ((b.changed ?? 0) - (a.changed ?? 0)) / Math.max(1, (b.frames ?? 0) - (a.frames ?? 0)), wall };
+  if (b.gaps) throw new Error(`${hash || 'page'}: ${b.gaps} mesh frames were gaps or invalid: the page drew nothing for them`);
+  const frames = (b.frames ?? 0) - (a.frames ?? 0);
+  const renders = b.renders - a.renders;
+  return { fps: renders / wall, frames, wall, jsMs: ((b.jsMs ?? 0) - (a.jsMs ?? 0)) / Math.max(1, frames),
+    changed: ((b.changed ?? 0) - (a.changed ?? 0)) / Math.max(1, frames), calls: (b.calls - a.calls) / Math.max(1, renders),
+    // CPU per frame drawn, ms: the page's renderer process and the GPU process (SwiftShader).
+    rendererMs: 1000 * ((cpu1.renderer ?? 0) - (cpu0.renderer ?? 0)) / Math.max(1, renders),
+    gpuMs: 1000 * ((cpu1['gpu-process'] ?? 0) - (cpu0['gpu-process'] ?? 0)) / Math.max(1, renders),
+    canvas: b.canvas, pixelRatio: b.pixelRatio, antialias: b.antialias };
 }
 
-console.log(`idms web bench: headless chromium ${browser.version()}, 1280x720, ${seconds} s per point, frames at 60 Hz`);
-console.log('vertices  triangles  moved/frame  frames/s in  page JS ms/frame  page fps  bare fps  page/bare');
+/** @param {number[]} xs */
+const median = (xs) => {
+  const s = [...xs].sort((x, y) => x - y);
+  return s.length % 2 ? s[(s.length - 1) / 2] : (s[s.length / 2 - 1] + s[s.length / 2]) / 2;
+};
+const load = () => loadavg().map((x) => x.toFixed(2)).join(' ');
+
+console.log(`idms web bench: headless chromium ${browser.version()} (SwiftShader), 1280x720 window, ${seconds} s per run, ` +
+  `${runs} alternating runs per page and size, frames at 60 Hz, load average ${load()}`);
+console.log('page: the live view (3D view with tool and force arrow, force/position/depth plots, loop health) fed mesh frames + 17 samples at 60 Hz');
+console.log('bare: three.js alone, the same mesh held still, the same lights, material, antialias and pixel ratio, a render every animation frame');
+let described = false;
+console.log('vertices  triangles  moved/frame  frames/s in  page JS ms/frame  page fps (runs)        bare fps (runs)        median page/bare');
 for (const [nx, ny] of sizes) {
   const file = join(out, `frames-${nx}x${ny}.bin`);
   execFileSync(join(build, 'bin', 'idms-web-mesh-frames'), ['--sheet', String(nx), String(ny), '240', file]);
   files.frames = readFileSync(file);
-  const viewer = await run('');
-  const noPlots = process.env.IDMS_WEB_BENCH_BREAKDOWN ? await run('#noplots') : null;
-  const noUpload = process.env.IDMS_WEB_BENCH_BREAKDOWN ? await run('#noupload') : null;
-  if (noUpload) console.log(`  no upload: page JS ${noUpload.jsMs.toFixed(3)} ms/frame, ${noUpload.fps.toFixed(1)} fps`);
-  if (noPlots) console.log(`  without plots: page JS ${noPlots.jsMs.toFixed(3)} ms/frame, ${noPlots.fps.toFixed(1)} fps`);
-  const bare = await run('#bare');
+  /** @type {Awaited<ReturnType<typeof run>>[]} */
+  const viewer = [];
+  /** @type {Awaited<ReturnType<typeof run>>[]} */
+  const bare = [];
+  // Alternating, so that a change in the machine's load falls on both.
+  for (let r = 0; r < runs; r++) {
+    viewer.push(await run(''));
+    bare.push(await run('#bare'));
+  }
+  if (!described) {
+    const [v, b] = [viewer[0], bare[0]];
+    console.log(`  canvas: page ${v.canvas} (pixel ratio ${v.pixelRatio}, antialias ${v.antialias}), ` +
+      `bare ${b.canvas} (pixel ratio ${b.pixelRatio}, antialias ${b.antialias})`);
+    described = true;
+  }
   const tris = 2 * (nx - 1) * (ny - 1);
-  console.log(`${String(nx * ny).padStart(8)}  ${String(tris).padStart(9)}  ${viewer.changed.toFixed(0).padStart(11)}  ` +
-    `${(viewer.frames / viewer.wall).toFixed(1).padStart(11)}  ${viewer.jsMs.toFixed(3).padStart(16)}  ` +
-    `${viewer.fps.toFixed(1).padStart(8)}  ${bare.fps.toFixed(1).padStart(8)}  ${(viewer.fps / bare.fps).toFixed(2).padStart(9)}`);
+  const pageFps = median(viewer.map((x) => x.fps));
+  const bareFps = median(bare.map((x) => x.fps));
+  const list = (/** @type {{fps: number}[]} */ xs) => xs.map((x) => x.fps.toFixed(1)).join(' ');
+  console.log(`${String(nx * ny).padStart(8)}  ${String(tris).padStart(9)}  ${median(viewer.map((x) => x.changed)).toFixed(0).padStart(11)}  ` +
+    `${median(viewer.map((x) => x.frames / x.wall)).toFixed(1).padStart(11)}  ${median(viewer.map((x) => x.jsMs)).toFixed(3).padStart(16)}  ` +
+    `${pageFps.toFixed(1).padStart(5)} (${list(viewer)})`.padEnd(23) + `${bareFps.toFixed(1).padStart(5)} (${list(bare)})`.padEnd(23) +
+    `${(pageFps / bareFps).toFixed(2).padStart(6)}`);
+  /** @param {Awaited<ReturnType<typeof run>>[]} xs */
+  const cpu = (xs) => {
+    const r = median(xs.map((x) => x.rendererMs)), g = median(xs.map((x) => x.gpuMs));
+    return { text: `${(r + g).toFixed(1)} (renderer ${r.toFixed(1)} + GPU process ${g.toFixed(1)})`, total: r + g };
+  };
+  const [cv, cb] = [cpu(viewer), cpu(bare)];
+  console.log(`  CPU ms per frame drawn: page ${cv.text}, bare ${cb.text}, bare/page ${(cb.total / cv.total).toFixed(2)}`);
+  console.log(`  draw calls per render: page ${median(viewer.map((x) => x.calls)).toFixed(1)}, bare ${median(bare.map((x) => x.calls)).toFixed(1)}; load average ${load()}`);
 }
 await browser.close();
 server.close();

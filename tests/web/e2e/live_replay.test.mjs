@@ -27,6 +27,8 @@ after(async () => {
 
 /** @param {import('playwright-core').Page} page */
 const state = (page) => page.evaluate(() => /** @type {any} */ (window).__idms);
+/** The header's duration, s (NaN before the session's record came). @param {import('playwright-core').Page} page */
+const headerDuration = (page) => page.evaluate(() => Number.parseFloat(document.getElementById('duration')?.textContent ?? ''));
 
 test('live: list, surface that moves, tool and force, plots, late join, command, annotation', async () => {
   const { page, context, errors } = browser;
@@ -46,6 +48,8 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s.keyframes >= 1 && s.renders >= 1 && s.samples >= 300; });
   const view = page.locator('#view3d');
   const first = await shot(view, 'live-1.png');
+  await page.waitForFunction(() => /\d/.test(document.getElementById('duration')?.textContent ?? ''));
+  const duration1 = await headerDuration(page);
   const before1 = await state(page);
   await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.timeS > t + 1.5 && s.movedVertices > 0 && s.contactSamples > 0; }, before1.timeS, { timeout: 60000 });
   const second = await shot(view, 'live-2.png');
@@ -58,6 +62,13 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   assert.equal(after1.gaps + after1.invalid, 0, after1.lastError);
   assert.ok(after1.depthSamples > 10, `force-depth plot of the press: ${after1.depthSamples} samples`);
   assert.match(await page.locator('#tool-state').innerText(), /^tool: (free|in contact|grasping)$/);
+  // The header's duration follows the session's time (not the list's figure when the page opened).
+  await page.waitForFunction((d) => Number.parseFloat(document.getElementById('duration')?.textContent ?? '') >= d + 1, duration1,
+    { timeout: 10000 }).catch(() => {});
+  const duration2 = await headerDuration(page);
+  const now1 = (await state(page)).timeS;
+  assert.ok(duration2 >= duration1 + 1, `the header's duration went from ${duration1} s to ${duration2} s while the session ran on`);
+  assert.ok(Math.abs(duration2 - now1) < 1, `the header says ${duration2} s, the session's time is ${now1} s`);
   await page.evaluate(() => scrollTo(0, 0));
   await shot(page, 'live-view.png');
   const health = await page.locator('#health').innerText();
@@ -104,7 +115,10 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   // The agent finishes: the page says so.
   assert.equal(await agent.exited, 0, agent.log());
   await page.waitForSelector('#meta a[href^="/replay/"]', { timeout: 30000 });
-  // Nothing changes any more, so nothing is drawn (an absence: watched for a fixed second).
+  // Nothing changes any more, so nothing is drawn (an absence: watched for a fixed second), once
+  // the frame already asked for by the last samples before the end has been drawn (a loaded
+  // machine's frame can come after the end's link shows).
+  await page.evaluate(() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => done(undefined)))));
   const idle = (await state(page)).renders;
   await page.waitForTimeout(1000);
   assert.equal((await state(page)).renders, idle, 'no renders without changes');

@@ -1,20 +1,17 @@
-// /session/{id} (live, /ws/session) and /replay/{id}?t=SECONDS (/ws/replay): the tissue in 3D,
-// the tool and force, 1 kHz force and position plots, the loop's health, events, annotations,
-// admin commands (live) and a timeline with play, pause, seek and speed (replay).
+// /session/{id} (live, /ws/session) and /replay/{id}?t=SECONDS (/ws/replay): the layout, the
+// socket and what each message feeds. The drawing is LiveView's (3D, plots, tool state); the
+// header, loop health, events, annotations and commands are session_panels.js's; the replay's
+// timeline is timeline.js's.
 import { idms } from '../codec/proto.js';
-import { MeshState } from '../codec/mesh.js';
-import { SurfaceView } from '../view/surface.js';
-import { RollingPlot } from '../plots/rolling.js';
-import { DepthPlot } from '../plots/depth.js';
 import { EnvelopeSocket } from '../net/socket.js';
+import { FrameLoop } from '../view/frame_loop.js';
 import { api } from '../net/api.js';
-import { h, page, fixed, formatTime } from './dom.js';
+import { h, page } from './dom.js';
 import { Timeline } from './timeline.js';
-import { annotationForm, commandPanel, renderHealth } from './session_panels.js';
+import { LiveView } from './live_view.js';
+import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel } from './session_panels.js';
 
-const v1 = idms.v1;
 const kWindowS = 5;
-const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n]) => [n, name.replace(/^KIND_/, '')]));
 
 /**
  * What the page has seen, for the status line and the tests (window.__idms).
@@ -23,6 +20,99 @@ const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n])
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
  *   contactSamples: number, forcePoints: number, depthSamples: number}} PageState
  */
+
+/**
+ * The page's elements, laid out: the title, header and timeline, the 3D view with its toolbar,
+ * and the side panels (the commands on top, for admins of a live session).
+ * @param {string} id @param {'live' | 'replay'} mode
+ * @param {{meta: HTMLElement, timeline: HTMLElement, health: HTMLElement, notes: HTMLElement,
+ *   annotate: HTMLElement | null, events: HTMLElement, commands: HTMLElement | null}} panels
+ */
+function layout(id, mode, panels) {
+  const hosts = {
+    view: h('div', { class: 'view3d', id: 'view3d' }),
+    force: h('div', { class: 'plot', id: 'force-plot' }),
+    position: h('div', { class: 'plot', id: 'position-plot' }),
+    depth: h('div', { class: 'plot', id: 'depth-plot' }),
+    toolState: h('span', { id: 'tool-state', class: 'tool-state', role: 'status', text: 'tool: –' }),
+    gapNote: h('p', { class: 'gap-note', id: 'gap-note', role: 'status' }),
+  };
+  const wire = h('input', { type: 'checkbox', id: 'wireframe' });
+  const side = h('aside', { class: 'side' }, [
+    panels.commands,
+    h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), panels.health]),
+    h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }),
+      hosts.force, hosts.position, hosts.depth]),
+    h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
+      panels.annotate, panels.notes]),
+    h('section', { 'aria-labelledby': 'events-title' }, [h('h2', { id: 'events-title', text: 'Events' }), panels.events]),
+  ]);
+  page(`${mode === 'live' ? 'Live' : 'Replay'} ${id}`, [
+    h('h1', {}, [mode === 'live' ? 'Live session ' : 'Replay of ', h('code', { text: id })]),
+    panels.meta,
+    mode === 'replay' ? panels.timeline : null,
+    h('div', { class: 'session-grid' }, [
+      h('section', { class: 'view-section', 'aria-label': '3D view' }, [
+        hosts.view,
+        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
+      ]),
+      side,
+    ]),
+  ].filter((x) => x !== null));
+  return { hosts, wire };
+}
+
+/**
+ * What each message feeds.
+ * @typedef {{st: PageState, view: LiveView, health: HealthPanel, header: SessionHeader, timeline: Timeline | null,
+ *   notes: AnnotationList, onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
+ */
+
+/** @param {Parts} p @param {idms.v1.Envelope} env */
+function dispatch(p, env) {
+  if (env.meshKeyframe) p.view.applyKeyframe(env.meshKeyframe);
+  else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
+  else if (env.deviceSamples) {
+    const batch = env.deviceSamples;
+    p.view.onSamples(batch.samples || []);
+    if (batch.samples?.length) p.timeline?.setTime(p.st.timeS);
+    p.health.setStats(batch.stats, batch.samplesDropped || 0);
+    p.header.invalidate();
+    return;
+  } else if (env.sessionEvent) p.onEvent(env.sessionEvent);
+  else if (env.annotation) p.notes.add(env.annotation);
+  else if (env.playbackState) {
+    // A confirmed seek: the plots restart at the new time.
+    if (p.timeline?.onState(env.playbackState)) p.view.clearPlots();
+  } else if (env.welcome) {
+    const tools = env.welcome.scene?.tools || [];
+    p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
+  }
+  p.health.invalidate();
+}
+
+/** The connection's state in the top bar (nothing while connected). @param {string} state @param {string} text */
+function showConnection(state, text) {
+  const conn = document.getElementById('conn');
+  if (!conn) return;
+  conn.textContent = state === 'open' ? '' : text;
+  conn.className = `conn ${state}`;
+}
+
+/**
+ * The session's record: model, state, duration, past events and annotations.
+ * @param {string} id @param {'live' | 'replay'} mode @param {Parts} p
+ */
+function loadRecord(id, mode, p) {
+  api(`/api/sessions/${encodeURIComponent(id)}`).then((s) => {
+    p.header.setRecord(s);
+    for (const a of s.annotations || []) p.notes.add({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
+    for (const e of s.events || []) {
+      if (mode === 'replay') p.timeline?.addMark(e.time_s, 'event', `${e.kind}: ${e.message}`);
+    }
+    p.timeline?.setDuration(s.duration_s);
+  }).catch((e) => p.header.fail(`Cannot load the session: ${e instanceof Error ? e.message : String(e)}`));
+}
 
 /**
  * @param {string} id
@@ -36,201 +126,52 @@ export function sessionPage(id, role, mode) {
     movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, depthSamples: 0 };
   /** @type {any} */ (window).__idms = st;
 
-  // Layout.
-  const viewHost = h('div', { class: 'view3d', id: 'view3d' });
-  const meta = h('p', { class: 'meta', id: 'meta', text: 'Loading…' });
-  const gapNote = h('p', { class: 'gap-note', id: 'gap-note', role: 'status' });
-  const wire = h('input', { type: 'checkbox', id: 'wireframe' });
-  const health = h('dl', { class: 'health', id: 'health' });
-  const forceHost = h('div', { class: 'plot', id: 'force-plot' });
-  const posHost = h('div', { class: 'plot', id: 'position-plot' });
-  const depthHost = h('div', { class: 'plot', id: 'depth-plot' });
-  const toolState = h('span', { id: 'tool-state', class: 'tool-state', role: 'status', text: 'tool: –' });
-  const events = h('ol', { class: 'events', id: 'events', 'aria-live': 'polite' });
-  const notes = h('ol', { class: 'notes', id: 'annotations' });
-  const side = h('aside', { class: 'side' });
+  // The panels, the layout, then what draws into it (the plots take their width from their boxes).
+  /** @type {EnvelopeSocket | null} */
+  let socket = null;
+  /** @param {idms.v1.IEnvelope} env */
+  const send = (env) => socket?.send(env) ?? false;
+  const loop = new FrameLoop();
+  const header = new SessionHeader(mode, st, loop);
+  const health = new HealthPanel(st, loop);
+  const events = new EventList(st);
   const timelineHost = h('section', { class: 'timeline-section', 'aria-label': 'Timeline' });
-  page(`${mode === 'live' ? 'Live' : 'Replay'} ${id}`, [
-    h('h1', {}, [mode === 'live' ? 'Live session ' : 'Replay of ', h('code', { text: id })]),
-    meta,
-    mode === 'replay' ? timelineHost : null,
-    h('div', { class: 'session-grid' }, [
-      h('section', { class: 'view-section', 'aria-label': '3D view' }, [
-        viewHost,
-        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), toolState, gapNote]),
-      ]),
-      side,
-    ]),
-  ].filter((x) => x !== null));
-  side.append(
-    h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), health]),
-    h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }), forceHost, posHost, depthHost]),
-    h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
-      mode === 'live' ? annotationForm((env) => socket.send(env), st) : null, notes].filter((x) => x !== null)),
-    h('section', { 'aria-labelledby': 'events-title' }, [h('h2', { id: 'events-title', text: 'Events' }), events]),
-  );
-  if (mode === 'live' && role === 'admin') side.prepend(commandPanel((env) => socket.send(env)));
-
-  const mirror = new MeshState();
-  const view = new SurfaceView(viewHost);
-  view.onRender = () => st.renders++;
-  wire.addEventListener('change', () => view.setWireframe(wire.checked));
-  const capacity = kWindowS * 1000;
-  const forcePlot = new RollingPlot(forceHost, { title: 'Force on the device', unit: 'force', capacity, series: [
-    { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] });
-  Object.defineProperty(st, 'forcePoints', { get: () => forcePlot.length + forcePlot.numPending, enumerable: true });
-  const posPlot = new RollingPlot(posHost, { title: 'Tool position', unit: 'model units', capacity, series: [
-    { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] });
-  const depthPlot = new DepthPlot(depthHost, capacity);
-  Object.defineProperty(st, 'depthSamples', { get: () => depthPlot.count, enumerable: true });
   /** @type {Timeline | null} */
-  const timeline = mode === 'replay' ? new Timeline(timelineHost, (msg) => socket.send({ playbackControl: msg })) : null;
+  const timeline = mode === 'replay' ? new Timeline(timelineHost, (msg) => send({ playbackControl: msg })) : null;
+  const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
+  const { hosts, wire } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
+    annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el,
+    commands: mode === 'live' && role === 'admin' ? commandPanel(send) : null });
+  const view = new LiveView(st, hosts, kWindowS, loop);
+  wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
+  Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
+  Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
-  // Loop health: the latest cumulative stats, drawn a few times a second when they changed.
-  /** @type {idms.v1.ILoopStats | null} */
-  let stats = null;
-  let dropped = 0;
-  let healthDirty = false;
-  const healthTimer = window.setInterval(() => {
-    if (!healthDirty) return;
-    healthDirty = false;
-    renderHealth(health, st, stats, dropped);
-  }, 250);
-
-  let shownToolState = '';
-  /** @param {idms.v1.IDeviceSamples} batch */
-  function onSamples(batch) {
-    const samples = batch.samples || [];
-    for (const s of samples) {
-      const f = s.force || {}, p = s.toolPos || {};
-      const fx = f.x || 0, fy = f.y || 0, fz = f.z || 0;
-      const t = s.timeS || 0;
-      const f2 = Math.hypot(fx, fy, fz);
-      forcePlot.push(t, fx, fy, fz, f2);
-      if (f2 > st.peakForce) st.peakForce = f2;
-      if (s.contact) st.contactSamples++;
-      posPlot.push(t, p.x || 0, p.y || 0, p.z || 0);
-      depthPlot.push(p.x || 0, p.y || 0, p.z || 0, fx, fy, fz, !!s.contact);
-      st.warnings += s.warnings || 0;
-    }
-    st.samples += samples.length;
-    const last = samples[samples.length - 1];
-    if (last) {
-      const f = last.force || {}, p = last.toolPos || {};
-      view.setTool(p.x || 0, p.y || 0, p.z || 0, f.x || 0, f.y || 0, f.z || 0, !!last.contact, !!last.grasp);
-      // The tool's state in words (colour alone is not enough), written only when it changes.
-      const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';
-      if (words !== shownToolState) toolState.textContent = shownToolState = words;
-      st.timeS = last.timeS || 0;
-      timeline?.setTime(st.timeS);
-    }
-    if (batch.stats) stats = batch.stats;
-    dropped = batch.samplesDropped || 0;
-    healthDirty = true;
-  }
-
-  /** @param {'ok' | 'gap' | 'invalid'} status @param {boolean} keyframe */
-  function onMesh(status, keyframe) {
-    st.frames++;
-    if (status === 'ok') {
-      if (keyframe) {
-        st.keyframes++;
-        view.setSurface(mirror);
-        gapNote.textContent = '';
-      } else {
-        st.deltas++;
-        st.movedVertices += mirror.numChanged;
-        view.applyMoved(mirror);
-      }
-    } else {
-      // Never drawn: the surface stays at the last frame applied until a keyframe comes.
-      if (status === 'gap') st.gaps++;
-      else {
-        st.invalid++;
-        st.lastInvalid = mirror.error;
-      }
-      st.lastError = mirror.error;
-      gapNote.textContent = `${status === 'gap' ? 'Frames lost' : 'Bad frame'}: ${mirror.error}. Waiting for a keyframe.`;
-    }
-    healthDirty = true;
-  }
-
-  /** @param {idms.v1.ISessionEvent} e */
-  function addEvent(e) {
-    const kind = e.kind ? kEventNames.get(e.kind) || String(e.kind) : 'NOTE';
-    if (e.kind === v1.SessionEvent.Kind.KIND_STABILITY_FALLBACK) st.fallbacks++;
-    const li = h('li', { class: `event ${kind.toLowerCase()}` }, [
-      h('span', { class: 'time', text: formatTime(e.timeS || 0) }), ' ', h('strong', { text: kind }), ' ', e.message || '']);
-    events.prepend(li);
-    while (events.childElementCount > 200) events.lastElementChild?.remove();
-    if (e.kind === v1.SessionEvent.Kind.KIND_ENDED && mode === 'live') {
-      st.ended = true;
-      meta.append(' · ', h('a', { href: `/replay/${id}`, text: 'ended: open the replay' }));
-      socket.close();
-    }
-  }
-
-  /** @param {idms.v1.IAnnotation} a */
-  function addAnnotation(a) {
-    if (notes.querySelector(`[data-id="${a.id}"]`)) return;
-    st.annotations++;
-    notes.append(h('li', { 'data-id': String(a.id ?? ''), 'data-time': String(a.timeS ?? 0) }, [
-      h('span', { class: 'time', text: formatTime(a.timeS || 0) }), ' ', a.text || '', ' ',
-      h('span', { class: 'muted', text: `— ${a.author || ''}` })]));
-    timeline?.addMark(a.timeS || 0, 'annotation', a.text || '');
-  }
-
-  const socket = new EnvelopeSocket(`/ws/${mode === 'live' ? 'session' : 'replay'}/${encodeURIComponent(id)}`, {
+  /** @type {Parts} */
+  const parts = { st, view, health, header, timeline, notes, onEvent: (e) => {
+    events.add(e);
+    if (e.kind !== idms.v1.SessionEvent.Kind.KIND_ENDED || mode !== 'live') return;
+    // The end of a live session: say so, link its replay, stop reconnecting.
+    st.ended = true;
+    header.el.append(' · ', h('a', { href: `/replay/${id}`, text: 'ended: open the replay' }));
+    socket?.close();
+  } };
+  socket = new EnvelopeSocket(`/ws/${mode === 'live' ? 'session' : 'replay'}/${encodeURIComponent(id)}`, {
     onStatus: (state, text) => {
       st.connection = state;
-      const conn = document.getElementById('conn');
-      if (conn) {
-        conn.textContent = state === 'open' ? '' : text;
-        conn.className = `conn ${state}`;
-      }
+      showConnection(state, text);
     },
     onOpen: () => {
       // A fresh connection starts with a keyframe: drop what the last one left half-done.
-      gapNote.textContent = '';
+      hosts.gapNote.textContent = '';
       if (mode === 'replay') timeline?.reconnected();
     },
-    onEnvelope: (env) => {
-      if (env.meshKeyframe) onMesh(mirror.applyKeyframe(/** @type {any} */ (env.meshKeyframe)), true);
-      else if (env.meshDelta) onMesh(mirror.applyDelta(/** @type {any} */ (env.meshDelta)), false);
-      else if (env.deviceSamples) onSamples(env.deviceSamples);
-      else if (env.sessionEvent) addEvent(env.sessionEvent);
-      else if (env.annotation) addAnnotation(env.annotation);
-      else if (env.playbackState) {
-        const ps = env.playbackState;
-        if (timeline?.onState(ps)) {
-          // A seek: the plots restart at the new time.
-          forcePlot.clear();
-          posPlot.clear();
-          depthPlot.clear();
-        }
-      } else if (env.welcome) {
-        const tools = env.welcome.scene?.tools || [];
-        view.setToolRadius(tools[0]?.radius ?? 1.5);
-      }
-    },
+    onEnvelope: (env) => dispatch(parts, env),
   });
-
-  // The session's record: model, state, past events and annotations.
-  api(`/api/sessions/${encodeURIComponent(id)}`).then((s) => {
-    meta.textContent = `${s.model} · ${s.device} · ${s.identity} · ${s.state} · ${fixed(s.duration_s, 1)} s`;
-    for (const a of s.annotations || []) addAnnotation({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
-    for (const e of s.events || []) {
-      if (mode === 'replay') timeline?.addMark(e.time_s, 'event', `${e.kind}: ${e.message}`);
-    }
-    if (timeline) timeline.setDuration(s.duration_s);
-  }).catch((e) => { meta.textContent = `Cannot load the session: ${e instanceof Error ? e.message : String(e)}`; });
+  loadRecord(id, mode, parts);
 
   return () => {
-    socket.close();
-    clearInterval(healthTimer);
+    socket?.close();
     view.dispose();
-    forcePlot.dispose();
-    posPlot.dispose();
-    depthPlot.dispose();
   };
 }

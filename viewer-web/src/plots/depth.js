@@ -1,10 +1,18 @@
 // Force against depth while pressing (thesis fig. 6-3): for the current or last press, |F|
 // against how far the tool has gone along the force's line since contact began. A plain canvas
-// over preallocated arrays, redrawn at most once per animation frame and only when it changed.
+// over preallocated arrays, redrawn in the page's frame (FrameLoop) as often as the time plots,
+// only when it changed and only while it is on screen.
+import { FrameLoop, Visibility, isDue } from '../view/frame_loop.js';
+import { kPlotRedrawHz } from './rolling.js';
 
 export class DepthPlot {
-  /** @param {HTMLElement} host @param {number} capacity samples kept per press */
-  constructor(host, capacity) {
+  /**
+   * @param {HTMLElement} host
+   * @param {number} capacity samples kept per press
+   * @param {FrameLoop} [loop] the page's frame loop
+   */
+  constructor(host, capacity, loop = new FrameLoop()) {
+    this.loop = loop;
     this.canvas = document.createElement('canvas');
     this.canvas.setAttribute('role', 'img');
     this.canvas.setAttribute('aria-label', 'Force magnitude against pressing depth for the current press');
@@ -12,10 +20,15 @@ export class DepthPlot {
     this.canvas.style.width = '100%';
     this.canvas.style.height = '160px';
     host.append(this.canvas);
-    // Redrawn at its box's width whenever that changes.
-    this.resizeObserver = new ResizeObserver(() => this.draw());
+    // Redrawn at its box's width whenever that changes (kept here: no layout read per frame).
+    this.width = 100;
+    this.resizeObserver = new ResizeObserver((entries) => {
+      this.width = Math.max(100, Math.round(entries[entries.length - 1].contentRect.width));
+      this.invalidate();
+    });
     this.resizeObserver.observe(host);
-    this.ctx = /** @type {CanvasRenderingContext2D} */ (this.canvas.getContext('2d'));
+    // Rasterised by the CPU, as the time plots are (withCpuCanvases says why).
+    this.ctx = /** @type {CanvasRenderingContext2D} */ (this.canvas.getContext('2d', { willReadFrequently: true }));
     this.depth = new Float32Array(capacity);
     this.force = new Float32Array(capacity);
     this.count = 0;
@@ -23,7 +36,18 @@ export class DepthPlot {
     this.x0 = 0;
     this.y0 = 0;
     this.z0 = 0;
-    this.frameRequested = false;
+    this.dirty = true;
+    this.lastDraw = -1e9;
+    /** Time spent drawing, ms (the bench reads it). */
+    this.drawMs = 0;
+    this.visibility = new Visibility(host, () => loop.request());
+    loop.add(this);
+    loop.request();
+  }
+
+  invalidate() {
+    this.dirty = true;
+    this.loop.request();
   }
 
   /**
@@ -51,27 +75,42 @@ export class DepthPlot {
     this.depth[this.count] = d;
     this.force[this.count] = f;
     this.count++;
-    if (!this.frameRequested) {
-      this.frameRequested = true;
-      requestAnimationFrame(() => this.draw());
-    }
+    this.invalidate();
   }
 
   /** Forgets the press (a seek in a replay). */
   clear() {
     this.pressing = false;
     this.count = 0;
-    this.draw();
+    this.invalidate();
   }
 
   dispose() {
+    this.loop.remove(this);
+    this.visibility.dispose();
     this.resizeObserver.disconnect();
   }
 
-  draw() {
-    this.frameRequested = false;
+  /**
+   * The frame loop's part: a redraw when it changed, is on screen and its rate allows.
+   * @param {number} now ms @returns {boolean} still to draw in a later frame
+   */
+  draw(now) {
+    if (!this.dirty || !this.visibility.visible) return false;
+    if (!isDue(this.lastDraw, now, kPlotRedrawHz)) return true;
+    this.dirty = false;
+    this.lastDraw = now;
+    const start = performance.now();
+    this.paint();
+    this.drawMs += performance.now() - start;
+    return false;
+  }
+
+  paint() {
     const c = this.ctx;
-    const w = (this.canvas.width = Math.max(100, this.canvas.clientWidth));
+    // Resizing a canvas reallocates and clears it: only when its box's width changed.
+    const w = this.width;
+    if (this.canvas.width !== w) this.canvas.width = w;
     const h = this.canvas.height;
     c.clearRect(0, 0, w, h);
     c.fillStyle = '#5b6673';

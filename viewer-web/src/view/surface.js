@@ -1,9 +1,12 @@
 // The tissue in 3D: the surface as one three.js BufferGeometry updated in place (only moved
-// vertices' positions and the normals around them, uploaded as update ranges), the tool as a
+// vertices' positions and the normals around them, uploaded as update ranges; the normals once
+// per frame drawn, for every vertex moved since the last, not once per delta), the tool as a
 // sphere of its radius (thesis 6.1), the force as an arrow scaled to its magnitude. Renders only
-// when something changed; nothing is allocated per frame once the first keyframe is drawn.
+// when something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the
+// first keyframe is drawn.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { FrameLoop } from './frame_loop.js';
 
 const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
@@ -27,9 +30,13 @@ export function placeCamera(camera, sphere) {
 }
 
 export class SurfaceView {
-  /** @param {HTMLElement} host */
-  constructor(host) {
+  /**
+   * @param {HTMLElement} host
+   * @param {FrameLoop} [loop] the page's frame loop, shared with its other drawings
+   */
+  constructor(host, loop = new FrameLoop()) {
     this.host = host;
+    this.loop = loop;
     this.renderer = new THREE.WebGLRenderer({ antialias: true });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
     this.renderer.domElement.setAttribute('aria-label', 'Tissue surface, tool and force (drag to orbit, wheel to zoom)');
@@ -69,7 +76,14 @@ export class SurfaceView {
     this.vertStamp = new Uint32Array(0);
     this.touchedTris = new Int32Array(0);
     this.touchedVerts = new Int32Array(0);
-    this.stamp = 0;
+    this.stamp = 1;
+    // Moved since the last frame drawn: the triangles around them (stamped with this.stamp) and
+    // the span of their ids; their normals are recomputed when the frame is drawn.
+    this.numTouchedTris = 0;
+    this.movedLo = 0;
+    this.movedHi = -1;
+    /** Time spent on normals, ms (the bench counts it as the page's work). */
+    this.normalsMs = 0;
     // The tool and the force.
     this.toolMaterial = new THREE.MeshStandardMaterial({ color: kToolFree, transparent: true, opacity: 0.5, depthWrite: false });
     this.tool = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), this.toolMaterial);
@@ -86,9 +100,9 @@ export class SurfaceView {
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
     this.dirty = true;
-    this.frameRequested = false;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
     this.onRender = null;
+    loop.add(this);
     this.resizeObserver = new ResizeObserver(() => this.resize());
     this.resizeObserver.observe(host);
     this.resize();
@@ -105,18 +119,20 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Schedules one render on the next animation frame (at most one pending). */
+  /** Renders in the next frame (once, however many changes come before it). */
   invalidate() {
     this.dirty = true;
-    if (this.frameRequested) return;
-    this.frameRequested = true;
-    requestAnimationFrame(() => {
-      this.frameRequested = false;
-      if (!this.dirty) return;
-      this.dirty = false;
-      this.renderer.render(this.scene, this.camera);
-      this.onRender?.();
-    });
+    this.loop.request();
+  }
+
+  /** The frame loop's part: one render when something changed. @returns {boolean} */
+  draw() {
+    if (!this.dirty) return false;
+    this.dirty = false;
+    if (this.movedHi >= 0) this.updateNormals();
+    this.renderer.render(this.scene, this.camera);
+    this.onRender?.();
+    return false;
   }
 
   /** @param {boolean} on */
@@ -149,23 +165,27 @@ export class SurfaceView {
       a.clearUpdateRanges();
       a.needsUpdate = true;
     }
+    // Everything is new: nothing moved is left to do (a new stamp: the arrays may be new too).
+    this.stamp++;
+    this.numTouchedTris = 0;
+    this.movedHi = -1;
     this.mesh.visible = nt > 0;
     if (!this.fitted && nv > 0) this.fit();
     this.invalidate();
   }
 
   /**
-   * The vertices a delta moved: their positions, the normals of the vertices around them.
+   * The vertices a delta moved: their positions now; the normals around them when the frame is
+   * drawn (a stream faster than the frame rate moves some vertices several times a frame).
    * @param {{positions: Float32Array, changed: Int32Array, numChanged: number}} s
    */
   applyMoved(s) {
     const n = s.numChanged;
     if (n === 0 || !this.posAttr || !this.normAttr) return;
     const p = /** @type {Float32Array} */ (this.posAttr.array);
-    const stamp = ++this.stamp;
-    let numTris = 0;
-    let numVerts = 0;
-    // Positions of the moved vertices, and the triangles around them.
+    const stamp = this.stamp;
+    let numTris = this.numTouchedTris;
+    // Positions of the moved vertices, and the triangles around them not yet collected.
     for (let k = 0; k < n; k++) {
       const v = s.changed[k];
       p[3 * v] = s.positions[3 * v];
@@ -179,9 +199,22 @@ export class SurfaceView {
         }
       }
     }
-    // Those triangles' normals, and the vertices whose normals they feed.
+    this.numTouchedTris = numTris;
+    // The span of moved ids (each delta's are increasing).
+    if (s.changed[0] < this.movedLo || this.movedHi < 0) this.movedLo = s.changed[0];
+    if (s.changed[n - 1] > this.movedHi) this.movedHi = s.changed[n - 1];
+    this.invalidate();
+  }
+
+  /** The collected triangles' normals, their vertices' normals, and the spans to upload. */
+  updateNormals() {
+    const start = performance.now();
+    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
+    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
+    const stamp = this.stamp;
     const index = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
-    for (let k = 0; k < numTris; k++) {
+    let numVerts = 0;
+    for (let k = 0; k < this.numTouchedTris; k++) {
       const t = this.touchedTris[k];
       this.faceNormal(t);
       for (let c = 0; c < 3; c++) {
@@ -200,16 +233,20 @@ export class SurfaceView {
       if (v < lo) lo = v;
       if (v > hi) hi = v;
     }
-    // Upload only the spans that changed (changed ids are increasing).
-    const first = s.changed[0];
-    const last = s.changed[n - 1];
-    this.posAttr.clearUpdateRanges();
-    this.posAttr.addUpdateRange(3 * first, 3 * (last - first + 1));
-    this.posAttr.needsUpdate = true;
-    this.normAttr.clearUpdateRanges();
-    this.normAttr.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
-    this.normAttr.needsUpdate = true;
-    this.invalidate();
+    // Upload only the spans that changed.
+    pos.clearUpdateRanges();
+    pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
+    pos.needsUpdate = true;
+    if (hi >= lo) {
+      norm.clearUpdateRanges();
+      norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
+      norm.needsUpdate = true;
+    }
+    // The next frame collects afresh: a new stamp, nothing cleared.
+    this.stamp++;
+    this.numTouchedTris = 0;
+    this.movedHi = -1;
+    this.normalsMs += performance.now() - start;
   }
 
   /**
@@ -314,6 +351,7 @@ export class SurfaceView {
   }
 
   dispose() {
+    this.loop.remove(this);
     this.resizeObserver.disconnect();
     this.controls.dispose();
     this.geometry.dispose();

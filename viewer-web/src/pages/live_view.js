@@ -1,0 +1,128 @@
+// What /session and /replay draw from the stream: the tissue, tool and force in 3D, the 1 kHz
+// force and position plots, force against depth, and the tool's state in words; all drawn in one
+// frame loop (one composited frame per change). The bench (bench/web) drives this same class.
+import { MeshState } from '../codec/mesh.js';
+import { SurfaceView } from '../view/surface.js';
+import { FrameLoop } from '../view/frame_loop.js';
+import { RollingPlot } from '../plots/rolling.js';
+import { DepthPlot } from '../plots/depth.js';
+
+/**
+ * What the view has seen (a part of the page's state object, window.__idms).
+ * @typedef {{frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
+ *   samples: number, renders: number, timeS: number, warnings: number, lastError: string, lastInvalid: string,
+ *   movedVertices: number, peakForce: number, contactSamples: number}} ViewState
+ */
+
+/**
+ * Where the view draws: elements the page has laid out.
+ * @typedef {{view: HTMLElement, force: HTMLElement, position: HTMLElement, depth: HTMLElement,
+ *   toolState: HTMLElement, gapNote: HTMLElement}} ViewHosts
+ */
+
+export class LiveView {
+  /**
+   * @param {ViewState} st counted into
+   * @param {ViewHosts} hosts already in the document (the plots take their width from them)
+   * @param {number} windowS seconds the time plots keep at 1 kHz
+   * @param {FrameLoop} [loop] the page's frame loop, when other parts draw in it too
+   */
+  constructor(st, hosts, windowS, loop = new FrameLoop()) {
+    this.st = st;
+    this.hosts = hosts;
+    this.loop = loop;
+    this.mirror = new MeshState();
+    this.view = new SurfaceView(hosts.view, this.loop);
+    this.view.onRender = () => st.renders++;
+    const capacity = windowS * 1000;
+    this.forcePlot = new RollingPlot(hosts.force, { title: 'Force on the device', unit: 'force', capacity, series: [
+      { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] }, this.loop);
+    this.posPlot = new RollingPlot(hosts.position, { title: 'Tool position', unit: 'model units', capacity, series: [
+      { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] }, this.loop);
+    this.depthPlot = new DepthPlot(hosts.depth, capacity, this.loop);
+    this.shownToolState = '';
+  }
+
+  /** @param {any} msg a MeshKeyframe */
+  applyKeyframe(msg) {
+    this.onMesh(this.mirror.applyKeyframe(msg), true);
+  }
+
+  /** @param {any} msg a MeshDelta */
+  applyDelta(msg) {
+    this.onMesh(this.mirror.applyDelta(msg), false);
+  }
+
+  /** @param {'ok' | 'gap' | 'invalid'} status @param {boolean} keyframe */
+  onMesh(status, keyframe) {
+    const st = this.st;
+    st.frames++;
+    if (status === 'ok') {
+      if (keyframe) {
+        st.keyframes++;
+        this.view.setSurface(this.mirror);
+        this.hosts.gapNote.textContent = '';
+      } else {
+        st.deltas++;
+        st.movedVertices += this.mirror.numChanged;
+        this.view.applyMoved(this.mirror);
+      }
+      return;
+    }
+    // Never drawn: the surface stays at the last frame applied until a keyframe comes.
+    if (status === 'gap') st.gaps++;
+    else {
+      st.invalid++;
+      st.lastInvalid = this.mirror.error;
+    }
+    st.lastError = this.mirror.error;
+    this.hosts.gapNote.textContent = `${status === 'gap' ? 'Frames lost' : 'Bad frame'}: ${this.mirror.error}. Waiting for a keyframe.`;
+  }
+
+  /**
+   * A batch of device samples (1 kHz): into the plots; the last one moves the tool and the arrow.
+   * @param {{timeS?: number | null, force?: {x?: number | null, y?: number | null, z?: number | null} | null,
+   *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
+   *   grasp?: boolean | null, warnings?: number | null}[]} samples
+   */
+  onSamples(samples) {
+    const st = this.st;
+    for (let i = 0; i < samples.length; i++) {
+      const s = samples[i];
+      const f = s.force, p = s.toolPos;
+      const fx = f?.x || 0, fy = f?.y || 0, fz = f?.z || 0;
+      const px = p?.x || 0, py = p?.y || 0, pz = p?.z || 0;
+      const t = s.timeS || 0;
+      const f2 = Math.hypot(fx, fy, fz);
+      this.forcePlot.push(t, fx, fy, fz, f2);
+      if (f2 > st.peakForce) st.peakForce = f2;
+      if (s.contact) st.contactSamples++;
+      this.posPlot.push(t, px, py, pz);
+      this.depthPlot.push(px, py, pz, fx, fy, fz, !!s.contact);
+      st.warnings += s.warnings || 0;
+    }
+    st.samples += samples.length;
+    const last = samples[samples.length - 1];
+    if (!last) return;
+    const f = last.force, p = last.toolPos;
+    this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp);
+    // The tool's state in words (colour alone is not enough), written only when it changes.
+    const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';
+    if (words !== this.shownToolState) this.hosts.toolState.textContent = this.shownToolState = words;
+    st.timeS = last.timeS || 0;
+  }
+
+  /** Forgets the plots' samples (a seek in a replay). */
+  clearPlots() {
+    this.forcePlot.clear();
+    this.posPlot.clear();
+    this.depthPlot.clear();
+  }
+
+  dispose() {
+    this.view.dispose();
+    this.forcePlot.dispose();
+    this.posPlot.dispose();
+    this.depthPlot.dispose();
+  }
+}
