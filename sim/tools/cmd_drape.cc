@@ -117,13 +117,19 @@ void Run(DrapeArgs& a) {
   const auto start = std::chrono::steady_clock::now();
   auto last_print = start;
   double next_fraction = 0;
-  // Stage 2's CPU time from its first tick (after the set-up) to its last.
-  double cpu_first = 0, cpu_last = 0;
-  int64_t tick_first = 0, tick_last = 0;
+  // Stage 2's CPU time per tick, from its first progress report after tick 0 to its last (the
+  // first ticks build full mode's lists and ask for huge pages), or from tick 0 when there is no
+  // such report in between.
+  struct Mark {
+    int64_t tick = 0;
+    double cpu_s = 0;
+  };
+  Mark marks[3];  // the first two reports and the last
+  int64_t reports = 0;
   auto progress = [&](const DrapeProgress& p) {
-    const double cpu = ThreadCpuSeconds();
-    if (p.tick == 0) cpu_first = cpu, tick_first = p.tick;
-    cpu_last = cpu, tick_last = p.tick;
+    const Mark mark{p.tick, ThreadCpuSeconds()};
+    marks[std::min<int64_t>(reports++, 2)] = mark;
+    marks[2] = mark;
     const auto now = std::chrono::steady_clock::now();
     const bool due = p.fraction >= next_fraction || now - last_print >= std::chrono::seconds(1) || p.settled;
     if (a.quiet || !due) return;
@@ -136,8 +142,9 @@ void Run(DrapeArgs& a) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   // Per tick of stage 2 (form forces, the step, progress), CPU time; element updates per second
   // counts one substep per tick (the default tick is 90% of the predicted stable one).
+  const Mark& from = marks[2].tick > marks[1].tick && reports > 2 ? marks[1] : marks[0];
   const double tick_cpu_s =
-      tick_last > tick_first ? (cpu_last - cpu_first) / static_cast<double>(tick_last - tick_first) : 0.0;
+      marks[2].tick > from.tick ? (marks[2].cpu_s - from.cpu_s) / static_cast<double>(marks[2].tick - from.tick) : 0.0;
 
   // Stage 3 output and summary.
   std::string error;
