@@ -48,7 +48,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   options.full = true;
   options.integrator = Integrator::kSymplecticEuler;
   options.stability.predict = false;
-  options.stability.energy_check = false;  // the check needs the general path
+  options.stability.energy_check = variant.energy_check;
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
   workspace.full.enabled = variant.fused;
@@ -63,6 +63,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   const double bytes_per_elem = StreamedBytes(model, workspace) / model.num_elems;
   std::vector<double> rates, ratios, triads;
   ThroughputResult r;
+  const int64_t warnings_before = TotalWarnings(state.warnings);
   for (int rep = 0; rep < reps; ++rep) {
     const double triad = TriadSample();
     int64_t steps = 0;
@@ -82,6 +83,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
     std::sort(v.begin(), v.end());
     return v[v.size() / 2];
   };
+  r.timed_warnings = TotalWarnings(state.warnings) - warnings_before;
   r.atoms = model.num_atoms;
   r.elements = model.num_elems;
   r.elem_updates_per_s = median(rates);

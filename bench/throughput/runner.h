@@ -9,6 +9,7 @@ struct ThroughputVariant {
   bool reorder = true;  // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
   bool fused = true;    // full mode's fused pass (false: the general path, ws.full.enabled = false)
   bool huge_pages = true;  // FullPass::huge_pages (the pass's arrays on 2 MiB pages where the kernel agrees)
+  bool energy_check = false;  // StabilityOptions::energy_check (the pass then forms the energies)
 };
 
 struct ThroughputResult {
@@ -23,6 +24,8 @@ struct ThroughputResult {
   double ns_per_step = 0;
   bool identity = false;  // the fused pass read its element arrays without an index
   double huge_mib = 0;    // MiB of the pass's arrays the kernel put on huge pages (FullPass::huge_bytes)
+  // Warnings counted while timed (a rollback or fallback there would time the general path).
+  int64_t timed_warnings = 0;
 };
 
 // Steps a full (local simulation off) slab of about `atoms` atoms with symplectic Euler for at

@@ -49,6 +49,7 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
       if (a == at.grasp_atom) continue;  // held by the grasp element instead
       const Real* p = &s.atom_pos[3 * a];
       const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
+      if (!InsideSphere(d, at.r)) continue;
       const ContactForce cf = SphereContact(at.law, at.k, at.r, frac, d);
       if (!cf.touching) continue;
       for (int c = 0; c < 3; ++c) at.eval_force[c] += cf.f[c];
@@ -160,6 +161,51 @@ void EvaluateForces(const Model& m, State& s, Workspace& ws, bool filtered, Real
   }
 }
 
+namespace {
+
+// Gravity's potential relative to rest over the active atoms: -sum m g . (p - p_eq).
+double GravityEnergy(const Model& m, const State& s, const Workspace& ws) {
+  double gravity = 0;
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    const Real* p = &s.atom_pos[3 * a];
+    for (int c = 0; c < 3; ++c) {
+      gravity -= m.atom_mass[a] * ws.options.gravity_accel[c] * (p[c] - m.atom_pos_eq[3 * a + c]);
+    }
+  }
+  return gravity;
+}
+
+// Tool penalty potentials and grasp elements, at the tools' current pose, added to *contact,
+// their rounding noise to *noise.
+void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* noise) {
+  const double eps = 4 * std::numeric_limits<Real>::epsilon();
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    const ActiveTool& at = ws.tools[t];
+    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    const double dl = eps * (std::fabs(at.c[0]) + std::fabs(at.c[1]) + std::fabs(at.c[2]) + 1);
+    for (int32_t i = 0; i < ws.num_candidates; ++i) {
+      const int32_t a = ws.candidates[i];
+      if (a == at.grasp_atom) continue;
+      const Real* p = &s.atom_pos[3 * a];
+      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
+      if (!InsideSphere(d, at.r)) continue;
+      const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+      *contact += cf.energy;
+      *noise += (std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]) + cf.stiffness * dl) * dl;
+    }
+    if (at.grasp_atom >= 0) {
+      const Real* p = &s.atom_pos[3 * at.grasp_atom];
+      const double dx = at.c[0] - p[0], dy = at.c[1] - p[1], dz = at.c[2] - p[2];
+      const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - at.grasp_leq;
+      *contact += 0.5 * at.grasp_k * stretch * stretch;
+      *noise += at.grasp_k * (std::fabs(stretch) + dl) * dl;
+    }
+  }
+}
+
+}  // namespace
+
 Energy ActiveEnergy(const Model& m, const State& s, const Workspace& ws) {
   const StepOptions& o = ws.options;
   double kinetic = 0, gravity = 0, elastic = 0, contact = 0, noise = 0;
@@ -187,33 +233,20 @@ Energy ActiveEnergy(const Model& m, const State& s, const Workspace& ws) {
     const double dl = eps * (std::fabs(double(p0[0])) + std::fabs(double(p0[1])) + std::fabs(double(p0[2])) + 1);
     noise += m.elem_k[e] * (std::fabs(stretch) + dl) * dl;
   }
-  // Tool penalty potentials and grasp elements, at the tools' current pose.
-  for (int32_t t = 0; t < ws.num_tools; ++t) {
-    const ActiveTool& at = ws.tools[t];
-    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
-    const double dl = eps * (std::fabs(at.c[0]) + std::fabs(at.c[1]) + std::fabs(at.c[2]) + 1);
-    for (int32_t i = 0; i < ws.num_candidates; ++i) {
-      const int32_t a = ws.candidates[i];
-      if (a == at.grasp_atom) continue;
-      const Real* p = &s.atom_pos[3 * a];
-      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-      const ContactForce cf = SphereContact(at.law, at.k, at.r, o.min_distance_fraction, d);
-      contact += cf.energy;
-      noise += (std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]) + cf.stiffness * dl) * dl;
-    }
-    if (at.grasp_atom >= 0) {
-      const Real* p = &s.atom_pos[3 * at.grasp_atom];
-      const double dx = at.c[0] - p[0], dy = at.c[1] - p[1], dz = at.c[2] - p[2];
-      const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - at.grasp_leq;
-      contact += 0.5 * at.grasp_k * stretch * stretch;
-      noise += at.grasp_k * (std::fabs(stretch) + dl) * dl;
-    }
-  }
+  ToolEnergy(s, ws, &contact, &noise);
   Energy out;
   out.scale = kinetic + elastic + contact + std::fabs(gravity);
   out.noise = noise;
   out.h = finite ? kinetic + gravity + elastic + contact : std::nan("");
   return out;
+}
+
+void ToolAndGravityEnergy(const Model& m, const State& s, const Workspace& ws, Energy* e) {
+  const double gravity = ws.options.gravity ? GravityEnergy(m, s, ws) : 0.0;
+  double contact = 0;
+  ToolEnergy(s, ws, &contact, &e->noise);
+  e->h += gravity + contact;
+  e->scale += contact + std::fabs(gravity);
 }
 
 }  // namespace internal

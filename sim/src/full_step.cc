@@ -115,6 +115,7 @@ struct Batch {
   Real* fresh;            // (kBatch) 1 = continue the filter, 0 = restart it
   Real* new_len;          // (kBatch) eq. 4.6 outputs when they are scattered
   Real* new_rate;         // (kBatch)
+  Real* end_len2;         // (kBatch) |s'|^2 at the tick's end, of an earlier batch (energy check)
 };
 
 Batch BatchViews(FullPass& fp) {
@@ -124,9 +125,10 @@ Batch BatchViews(FullPass& fp) {
   b.ex = p + 8 * kBatch, b.ey = p + 9 * kBatch, b.ez = p + 10 * kBatch;
   b.prev_len = p + 11 * kBatch, b.prev_rate = p + 12 * kBatch, b.fresh = p + 13 * kBatch;
   b.new_len = p + 14 * kBatch, b.new_rate = p + 15 * kBatch;
+  b.end_len2 = p + 16 * kBatch;
   return b;
 }
-constexpr int32_t kScratchPerElement = 16;
+constexpr int32_t kScratchPerElement = 17;
 
 // How far a substep got: atoms [0, atoms) by slot and elements [0, elems) by walk index have
 // been written (and copied). ok = false: it stopped at a non-finite input, or at the end of the
@@ -136,6 +138,12 @@ struct Progress {
   int32_t elems = 0;
   int32_t marks = 0;  // filters marked to restart (degenerate elements)
   bool ok = true;
+  // The energy check's sums (Substep's `before` / `after`): kinetic energy at the substep's
+  // start and end, elastic energy at its start (with sum k |l - l_eq| and sum k) and end, and
+  // the largest |x|, |y|, |z| of a free atom at its start.
+  double kinetic_before = 0, kinetic_after = 0;
+  double elastic_before = 0, stretch_k = 0, sum_k = 0, elastic_after = 0;
+  double abs_pos = 0;
 };
 
 // The pass reads each atom's position and force accumulator first at the front of its window,
@@ -168,7 +176,13 @@ constexpr bool kRowBackup = false;
 // filter inputs that need an index or a stamp), (2) eqs. 4.4-4.9 for the whole batch, vectorised
 // (full_step_batch.cc), (3) the sums and integrations in walk order. A batch may only read atoms
 // whose group has not ended, so no atom moves under a later batch.
-template <bool kSymplectic, Rate kRate, bool kIdentity>
+//
+// kEnergy: the substep also forms the energy check's sums (Progress) on the way: the kinetic
+// energy of each atom as it is integrated, the elastic energy at the substep's start from phase
+// 2's lengths (`before`), and at its end (`after`) from the lengths of each batch whose atoms have
+// all been integrated, formed again a bandwidth behind the front (in renumbered models the atoms
+// and element arrays are still in cache there), so the check costs no pass of its own.
+template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy>
 class Substep {
  public:
   static constexpr bool kFilter = IsFiltered(kRate);
@@ -176,8 +190,9 @@ class Substep {
   static constexpr bool kDirectIn = kIdentity && (kRate == Rate::kFiltered || kRate == Rate::kFilteredMarked);
   static constexpr bool kDirectOut = kIdentity;
 
-  Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup)
-      : m_(m), s_(s), ws_(ws), fp_(ws.full), b_(BatchViews(ws.full)), T_(T), backup_(backup) {}
+  Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after)
+      : m_(m), s_(s), ws_(ws), fp_(ws.full), b_(BatchViews(ws.full)), T_(T), backup_(backup),
+        before_(kEnergy && before), after_(kEnergy && after) {}
 
   Progress Run() {
     const int32_t n = ws_.num_active, ne = ws_.num_elems;
@@ -195,6 +210,7 @@ class Substep {
     int32_t g = active[0];
     V4 acc = Load4(force + 4 * g);  // g's sum so far: field, tools, earlier groups
     V4 check = Make4(0, 0, 0);      // the integrated atoms' x - x: 0 while every result is finite
+    [[maybe_unused]] Kinetic kinetic;
     for (int32_t w0 = 0; w0 < ne; w0 += kBatch) {
       const int32_t nb = std::min(kBatch, ne - w0), w_end = w0 + nb;
       out.elems = w0;
@@ -217,7 +233,7 @@ class Substep {
         }
         if (j == nb) break;
         if (group_end[slot] - w0 <= j) {
-          Integrate(atom_io, slot, g, acc, check);
+          Integrate(atom_io, slot, g, acc, check, kinetic);
           g = active[++slot];
           acc = Load4(force + 4 * g);
           continue;
@@ -226,10 +242,14 @@ class Substep {
         ++j, next_degenerate = PopDegenerate();
       }
       if (!Finite3(check)) return Stop(out, slot);
+      if constexpr (kEnergy) {
+        FlushKinetic(kinetic, out);
+        if (after_) ElasticAfter(slot, w_end, out);
+      }
     }
     // The last group, and free atoms after it whose elements all lie in earlier groups.
     for (;;) {
-      Integrate(atom_io, slot, g, acc, check);
+      Integrate(atom_io, slot, g, acc, check, kinetic);
       if (++slot == n) break;
       g = active[slot];
       acc = Load4(force + 4 * g);
@@ -237,6 +257,12 @@ class Substep {
     if (!Finite3(check)) return Stop(out, n);
     out.atoms = n;
     out.marks = marks_;
+    if constexpr (kEnergy) {
+      FlushKinetic(kinetic, out);
+      if (after_) ElasticAfter(n, ne, out);
+      out.elastic_before = energy_[0], out.stretch_k = energy_[1], out.sum_k = energy_[2];
+      out.abs_pos = kinetic.abs_pos;
+    }
     return out;
   }
 
@@ -305,6 +331,44 @@ class Substep {
     return true;
   }
 
+  // The energy check's kinetic sums over the atoms integrated since the last flush, as m |v|^2 / T,
+  // and the largest |x| + |y| + |z| at the start. Scalars: three more 4-wide accumulators beside
+  // acc and check spilled to the stack in every integration.
+  struct Kinetic {
+    Real before = 0, after = 0, abs_pos = 0;
+  };
+
+  // Into double once per batch (a float summing 10^6 atoms would lose the small ones).
+  void FlushKinetic(Kinetic& k, Progress& out) const {
+    const double half_t = 0.5 * T_;
+    out.kinetic_before += half_t * k.before;
+    out.kinetic_after += half_t * k.after;
+    k.before = k.after = 0;
+  }
+
+  // The end-of-tick elastic energy of the batches from trail_ up to w_end whose free endpoints
+  // are all integrated (their slots below `slot`): |s'|^2 from the new positions (a gather per
+  // element: about a quarter of a substep's time, so only in the tick's last substep), summed by
+  // BatchElastic. Rejected: rows of s' transposed as in phase 2 (no faster).
+  void ElasticAfter(int32_t slot, int32_t w_end, Progress& out) {
+    const int32_t* const ready = fp_.batch_ready.data();
+    while (trail_ < w_end && ready[trail_ / kBatch] < slot) {
+      const int32_t nb = std::min(kBatch, ws_.num_elems - trail_);
+      const int32_t* const other = fp_.other.data() + trail_;
+      const int32_t* const group_atom = fp_.elem_g.data() + trail_;
+      const Real* const pos = pos_;
+      Real* const len2 = b_.end_len2;
+      const int32_t last = last_;
+      for (int32_t j = 0; j < nb; ++j) {
+        const int32_t raw = other[j], o = raw ^ (raw >> 31);
+        const V4 d = LoadAtom(pos, o, last) - LoadAtom(pos, group_atom[j], last);
+        len2[j] = X(d) * X(d) + Y(d) * Y(d) + Z(d) * Z(d);
+      }
+      out.elastic_after += BatchElastic(fp_.avx2, nb, len2, fp_.elem_k.data() + trail_, fp_.elem_leq.data() + trail_);
+      trail_ += nb;
+    }
+  }
+
   // The lines of position and force from the last prefetched atom to kPrefetchAtoms past hi.
   void Prefetch(int32_t hi) {
     const int32_t to = std::min(hi + kPrefetchAtoms, last_);
@@ -341,7 +405,8 @@ class Substep {
                      .ex = b_.ex,
                      .ey = b_.ey,
                      .ez = b_.ez,
-                     .degenerate = degenerate_};
+                     .degenerate = degenerate_,
+                     .energy = before_ ? energy_ : nullptr};
     BatchForces(kRate, kDirectIn, fp_.avx2, io);
     if constexpr (kFilter && !kDirectOut) {
       for (int32_t j = 0; j < nb; ++j) {
@@ -401,7 +466,7 @@ class Substep {
             ws_.backup_vel.data(), backup_ ? ws_.full.backup_rows.data() : nullptr, T_, last_};
   }
 
-  static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check) {
+  static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check, [[maybe_unused]] Kinetic& k) {
     const V4 p = LoadAtom(io.pos, g, io.last), v = LoadAtom(io.vel, g, io.last);
     const Real t_over_m = io.t_over_m[i];
     V4 np, nv;
@@ -413,6 +478,12 @@ class Substep {
       nv = v + t_over_m * acc;
     }
     check += (np - np) + (nv - nv);
+    if constexpr (kEnergy) {
+      const Real m_over_t = Real(1) / t_over_m;
+      k.before += m_over_t * (X(v) * X(v) + Y(v) * Y(v) + Z(v) * Z(v));
+      k.after += m_over_t * (X(nv) * X(nv) + Y(nv) * Y(nv) + Z(nv) * Z(nv));
+      k.abs_pos = std::max(k.abs_pos, std::fabs(X(p)) + std::fabs(Y(p)) + std::fabs(Z(p)));
+    }
     if constexpr (kRowBackup) {
       if (io.backup_rows) StreamRow(io.backup_rows + 8 * i, p), StreamRow(io.backup_rows + 8 * i + 4, v);
     } else if (io.backup_pos) {
@@ -431,6 +502,7 @@ class Substep {
   const Batch b_;
   const Real T_;
   const bool backup_;
+  const bool before_, after_;  // form the energy check's sums at the start, at the end
   Real* const pos_ = s_.atom_pos.data();
   Real* const vel_ = s_.atom_vel.data();
   Real* const force_ = ws_.full.force.data();
@@ -439,35 +511,42 @@ class Substep {
   int32_t prefetched_ = 0;  // Prefetch has covered the atoms before this one
   int32_t marks_ = 0;
   uint64_t degenerate_[kMaskWords] = {};  // the batch's degenerate elements not yet taken
+  double energy_[3] = {0, 0, 0};           // BatchIo::energy at the substep's start
+  int32_t trail_ = 0;                      // ElasticAfter has summed the elements before this
 };
 
-template <bool kSymplectic, Rate kRate, bool kIdentity>
-Progress RunSubstep(const Model& m, State& s, Workspace& ws, Real T, bool backup) {
-  return Substep<kSymplectic, kRate, kIdentity>(m, s, ws, T, backup).Run();
+template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy>
+Progress RunSubstep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after) {
+  return Substep<kSymplectic, kRate, kIdentity, kEnergy>(m, s, ws, T, backup, before, after).Run();
 }
 
-using SubstepFn = Progress (*)(const Model&, State&, Workspace&, Real, bool);
+using SubstepFn = Progress (*)(const Model&, State&, Workspace&, Real, bool, bool, bool);
 
-template <bool kSymplectic, bool kIdentity>
+template <bool kSymplectic, bool kIdentity, bool kEnergy>
 SubstepFn PickRate(Rate rate) {
   switch (rate) {
     case Rate::kNone:
-      return RunSubstep<kSymplectic, Rate::kNone, kIdentity>;
+      return RunSubstep<kSymplectic, Rate::kNone, kIdentity, kEnergy>;
     case Rate::kAnalytic:
-      return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity>;
+      return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity, kEnergy>;
     case Rate::kFiltered:
-      return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity>;
+      return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity, kEnergy>;
     case Rate::kFilteredMarked:
-      return RunSubstep<kSymplectic, Rate::kFilteredMarked, kIdentity>;
+      return RunSubstep<kSymplectic, Rate::kFilteredMarked, kIdentity, kEnergy>;
     case Rate::kFilteredStamped:
       break;
   }
-  return RunSubstep<kSymplectic, Rate::kFilteredStamped, kIdentity>;
+  return RunSubstep<kSymplectic, Rate::kFilteredStamped, kIdentity, kEnergy>;
 }
 
-SubstepFn PickSubstep(bool symplectic, Rate rate, bool identity) {
-  if (symplectic) return identity ? PickRate<true, true>(rate) : PickRate<true, false>(rate);
-  return identity ? PickRate<false, true>(rate) : PickRate<false, false>(rate);
+template <bool kEnergy>
+SubstepFn PickScheme(bool symplectic, Rate rate, bool identity) {
+  if (symplectic) return identity ? PickRate<true, true, kEnergy>(rate) : PickRate<true, false, kEnergy>(rate);
+  return identity ? PickRate<false, true, kEnergy>(rate) : PickRate<false, false, kEnergy>(rate);
+}
+
+SubstepFn PickSubstep(bool symplectic, Rate rate, bool identity, bool energy) {
+  return energy ? PickScheme<true>(symplectic, rate, identity) : PickScheme<false>(symplectic, rate, identity);
 }
 
 // Back to the tick's start from the rollback copy: the atoms and elements a failed substep had
@@ -499,7 +578,7 @@ void BuildFullPass(const Model& m, Workspace& ws) {
   const int32_t n = ws.num_active, ne = ws.num_elems;
   std::fill(fp.group_end.begin(), fp.group_end.begin() + n, 0);
   fp.identity = true;
-  int32_t last_slot = 0;
+  int32_t last_slot = 0, ready = 0;
   for (int32_t w = 0; w < ne; ++w) {
     const int32_t e = ws.elems[w];
     const int32_t a0 = m.elem_atoms[2 * e], a1 = m.elem_atoms[2 * e + 1];
@@ -516,6 +595,9 @@ void BuildFullPass(const Model& m, Workspace& ws) {
     fp.elem_b[w] = static_cast<Real>(m.elem_b[e]);
     fp.elem_leq[w] = static_cast<Real>(m.elem_leq[e]);
     fp.identity = fp.identity && e == w;
+    // The highest free endpoint's slot in this batch and every earlier one (Substep::ElasticAfter).
+    ready = std::max(ready, m.atom_fixed[o] ? slot : std::max(slot, ws.atom_slot[o]));
+    if ((w + 1) % kBatch == 0 || w + 1 == ne) fp.batch_ready[w / kBatch] = ready;
   }
   int32_t end = 0;
   for (int32_t i = 0; i < n; ++i) end += fp.group_end[i], fp.group_end[i] = end;
@@ -544,7 +626,7 @@ void BuildFullPass(const Model& m, Workspace& ws) {
 bool FusedEligible(const Model& m, const Workspace& ws) {
   const StepOptions& o = ws.options;
   const bool euler = o.integrator == Integrator::kExplicitEuler || o.integrator == Integrator::kSymplecticEuler;
-  return o.full && ws.full.enabled && euler && !o.stability.energy_check && ws.num_pending_cuts == 0 &&
+  return o.full && ws.full.enabled && euler && ws.num_pending_cuts == 0 &&
          static_cast<int32_t>(ws.full.group_end.size()) == m.num_atoms;
 }
 
@@ -559,6 +641,7 @@ void SizeFullPass(const Model& m, Workspace& ws) {
   fp.elem_leq.assign(m.num_elems, Real(0));
   fp.force.assign(4 * static_cast<size_t>(m.num_atoms), Real(0));
   fp.scratch.assign(kScratchPerElement * kBatch, Real(0));
+  fp.batch_ready.assign(m.num_elems / kBatch + 1, 0);
   if constexpr (kRowBackup) fp.backup_rows.assign(8 * static_cast<size_t>(m.num_atoms), Real(0));
 }
 
@@ -669,7 +752,8 @@ double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integ
   return dt;
 }
 
-bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, int32_t substeps, StageTimes* times) {
+bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, int32_t substeps, StageTimes* times,
+              FusedEnergy* energy) {
   const StepOptions& o = ws.options;
   const Real T = static_cast<Real>(o.dt_s / substeps);
   const bool filter = ws.any_damping && UsesFilter(o, integrator);
@@ -702,9 +786,21 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     } else if (s.elem_stamp_floor == s.substep_clock - 1 && ws.full.restart_marks >= 0) {
       rate = ws.full.restart_marks == 0 ? Rate::kFiltered : Rate::kFilteredMarked;
     }
-    const SubstepFn substep = PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.full.identity);
-    const Progress p = substep(m, s, ws, T, /*backup=*/k == 0);
+    // The energy check's sums: at the tick's start in the first substep, at its end in the last.
+    const bool before = energy && k == 0, after = energy && k == substeps - 1;
+    const SubstepFn substep =
+        PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.full.identity, before || after);
+    const Progress p = substep(m, s, ws, T, /*backup=*/k == 0, before, after);
     times->forces_ns += NowNs() - t0;
+    if (before) {
+      energy->kinetic_before = p.kinetic_before;
+      energy->elastic_before = p.elastic_before;
+      // ActiveEnergy's rounding noise, sum of k (|l - l_eq| + dl) dl with dl = eps (|p0|_1 + 1),
+      // bounded with the largest |p|_1 of a free atom (a fixed endpoint lies within an element).
+      const double dl = 4 * std::numeric_limits<Real>::epsilon() * (p.abs_pos + 1);
+      energy->noise_before = dl * p.stretch_k + dl * dl * p.sum_k;
+    }
+    if (after) energy->kinetic_after = p.kinetic_after, energy->elastic_after = p.elastic_after;
     ws.full.restart_marks = p.marks;
     if (!p.ok) {
       ws.full.restart_marks = -1;
@@ -719,6 +815,14 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   }
   StreamFence();
   return true;
+}
+
+void UndoFused(State& s, Workspace& ws, int64_t clock, int64_t stamp_floor) {
+  const bool filter = ws.any_damping && UsesFilter(ws.options, ws.options.integrator);
+  RestoreWritten(s, ws, ws.num_active, ws.num_elems, filter);
+  s.substep_clock = clock;
+  s.elem_stamp_floor = stamp_floor;
+  ws.full.restart_marks = -1;
 }
 
 }  // namespace idms::internal

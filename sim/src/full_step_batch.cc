@@ -27,20 +27,56 @@ template <class V>
   std::memcpy(p, &v, sizeof(V));
 }
 
+// The energy check's sums (BatchIo::energy) over lanes of elements, at their lengths l: the
+// elastic energy as forces.cc's ActiveEnergy forms it, and what its rounding allowance needs.
+template <class V>
+struct EnergySums {
+  V u{}, ks{}, k{};
+};
+
+// Called with phase 2's loads, before its stores (see ForceMultiple).
+template <class V>
+[[gnu::always_inline]] inline void AddEnergy(const V& l, const V& k, const V& leq, EnergySums<V>& e) {
+  const V stretch = l - leq;
+  e.u += Real(0.5) * k * stretch * stretch;
+  e.ks += k * (stretch < Real(0) ? -stretch : stretch);
+  e.k += k;
+}
+
+// Inline, as everything that touches an EnergySums: a sum whose address escapes lives in memory,
+// where every vector store of the loop (memcpy) might write it (phase 2 ran 2.7 times as long).
+template <class V>
+[[gnu::always_inline]] inline double LaneSum(const V& v) {
+  if constexpr (std::is_same_v<V, Real>) {
+    return v;
+  } else {
+    double sum = 0;
+    for (size_t i = 0; i < sizeof(V) / sizeof(Real); ++i) sum += v[i];
+    return sum;
+  }
+}
+
+template <class V>
+[[gnu::always_inline]] inline void FlushEnergy(const BatchIo& io, const EnergySums<V>& e) {
+  io.energy[0] += LaneSum(e.u), io.energy[1] += LaneSum(e.ks), io.energy[2] += LaneSum(e.k);
+}
+
 // Eqs. 4.6-4.9 for element j (V = Real) or elements j.. (vectors), given s', l = |s'| and, with
 // kDirectIn, the filter state read in place: the filter state advances and mag is the force's
 // multiple of s'. Every load comes before the first store: large arrays each start a page, so
 // the arrays indexed by element share their offsets within a page, and a load that follows a
 // store at the same offset of another page waits for it (4K aliasing; up to 10% at 10^6 atoms).
-template <Rate kRate, bool kDirectIn, class V>
+template <Rate kRate, bool kDirectIn, bool kEnergy, class V>
 [[gnu::always_inline]] inline void ForceMultiple(const BatchIo& io, int32_t j, const V& l, const V& sx, const V& sy,
                                                  const V& sz, [[maybe_unused]] const V& dvx,
                                                  [[maybe_unused]] const V& dvy, [[maybe_unused]] const V& dvz,
                                                  [[maybe_unused]] const V& old_len,
-                                                 [[maybe_unused]] const V& old_rate, V& mag) {
+                                                 [[maybe_unused]] const V& old_rate, V& mag,
+                                                 [[maybe_unused]] EnergySums<V>& energy) {
   V k, leq;
   [[maybe_unused]] V b{}, rate{};
   LoadLanes(k, io.k + j), LoadLanes(leq, io.leq + j);
+  if constexpr (kEnergy) AddEnergy(l, k, leq, energy);
   if constexpr (kRate != Rate::kNone) LoadLanes(b, io.b + j);
   if constexpr (IsFiltered(kRate)) {
     V pl, pr;
@@ -70,8 +106,9 @@ template <Rate kRate, bool kDirectIn, class V>
 
 // Elements [j, n) one at a time: the tail after the vectors, or a whole batch where there are no
 // vector registers.
-template <Rate kRate, bool kDirectIn>
+template <Rate kRate, bool kDirectIn, bool kEnergy>
 void BatchForcesScalar(const BatchIo io, int32_t j) {
+  [[maybe_unused]] EnergySums<Real> energy;
   for (; j < io.n; ++j) {
     const Real* s = io.s4 + 4 * j;
     const Real l = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
@@ -82,10 +119,12 @@ void BatchForcesScalar(const BatchIo io, int32_t j) {
       if (io.backup_len) StreamStore(io.backup_len + j, old_len), StreamStore(io.backup_rate + j, old_rate);
     }
     Real mag;
-    ForceMultiple<kRate, kDirectIn>(io, j, l, s[0], s[1], s[2], dv[0], dv[1], dv[2], old_len, old_rate, mag);
+    ForceMultiple<kRate, kDirectIn, kEnergy>(io, j, l, s[0], s[1], s[2], dv[0], dv[1], dv[2], old_len, old_rate, mag,
+                                             energy);
     io.ex[j] = mag * s[0], io.ey[j] = mag * s[1], io.ez[j] = mag * s[2];
     if (l <= kMinLength) io.degenerate[j / 64] |= uint64_t{1} << (j % 64);
   }
+  if constexpr (kEnergy) FlushEnergy(io, energy);
 }
 
 #if defined(__SSE2__)
@@ -124,12 +163,13 @@ using D2 = double __attribute__((vector_size(16)));
 // The vector loop, for the baseline target. Its twin below is the same loop with AVX2 types: the
 // target-specific helpers (transposes, sqrt, movemask) cannot be called from one shared loop
 // compiled for the baseline target, but ForceMultiple, plain vector arithmetic, can.
-template <Rate kRate, bool kDirectIn>
+template <Rate kRate, bool kDirectIn, bool kEnergy>
 void BatchForcesBase(const BatchIo io) {
   int32_t j = 0;
 #if defined(__SSE2__)
   using V = std::conditional_t<sizeof(Real) == 4, F4, D2>;
   constexpr int32_t kLanes = sizeof(V) / sizeof(Real);
+  [[maybe_unused]] EnergySums<V> energy;
   for (; j + kLanes <= io.n; j += kLanes) {
     V sx, sy, sz, dvx{}, dvy{}, dvz{}, old_len{}, old_rate{};
     LoadXyz(io.s4 + 4 * j, sx, sy, sz);
@@ -140,12 +180,13 @@ void BatchForcesBase(const BatchIo io) {
     }
     const V l = Sqrt(sx * sx + sy * sy + sz * sz);  // eq. 4.4
     V mag;
-    ForceMultiple<kRate, kDirectIn>(io, j, l, sx, sy, sz, dvx, dvy, dvz, old_len, old_rate, mag);
+    ForceMultiple<kRate, kDirectIn, kEnergy>(io, j, l, sx, sy, sz, dvx, dvy, dvz, old_len, old_rate, mag, energy);
     StoreLanes(io.ex + j, mag * sx), StoreLanes(io.ey + j, mag * sy), StoreLanes(io.ez + j, mag * sz);
     io.degenerate[j / 64] |= DegenerateBits(l) << (j % 64);
   }
+  if constexpr (kEnergy) FlushEnergy(io, energy);
 #endif
-  BatchForcesScalar<kRate, kDirectIn>(io, j);
+  BatchForcesScalar<kRate, kDirectIn, kEnergy>(io, j);
 }
 
 #if defined(__x86_64__) && !defined(__AVX2__)
@@ -190,11 +231,12 @@ using D4 = double __attribute__((vector_size(32)));
   return static_cast<uint64_t>(_mm256_movemask_pd(_mm256_cmp_pd(__m256d(l), _mm256_set1_pd(kMinLength), _CMP_LE_OQ)));
 }
 
-template <Rate kRate, bool kDirectIn>
+template <Rate kRate, bool kDirectIn, bool kEnergy>
 [[gnu::target("avx2")]] void BatchForcesAvx2(const BatchIo io) {
   using V = std::conditional_t<sizeof(Real) == 4, F8, D4>;
   constexpr int32_t kLanes = sizeof(V) / sizeof(Real);
   int32_t j = 0;
+  [[maybe_unused]] EnergySums<V> energy;
   for (; j + kLanes <= io.n; j += kLanes) {
     V sx, sy, sz, dvx{}, dvy{}, dvz{}, old_len{}, old_rate{};
     LoadXyz(io.s4 + 4 * j, sx, sy, sz);
@@ -205,14 +247,34 @@ template <Rate kRate, bool kDirectIn>
     }
     const V l = Sqrt(sx * sx + sy * sy + sz * sz);  // eq. 4.4
     V mag;
-    ForceMultiple<kRate, kDirectIn>(io, j, l, sx, sy, sz, dvx, dvy, dvz, old_len, old_rate, mag);
+    ForceMultiple<kRate, kDirectIn, kEnergy>(io, j, l, sx, sy, sz, dvx, dvy, dvz, old_len, old_rate, mag, energy);
     StoreLanes(io.ex + j, mag * sx), StoreLanes(io.ey + j, mag * sy), StoreLanes(io.ez + j, mag * sz);
     io.degenerate[j / 64] |= DegenerateBits(l) << (j % 64);
   }
+  if constexpr (kEnergy) FlushEnergy(io, energy);
   // The tail and the caller are SSE code, which runs about half as fast while the registers'
   // upper halves are dirty; GCC leaves the vzeroupper out before this tail call.
   _mm256_zeroupper();
-  BatchForcesScalar<kRate, kDirectIn>(io, j);
+  BatchForcesScalar<kRate, kDirectIn, kEnergy>(io, j);
+}
+
+// BatchElastic's vector loop in AVX2.
+[[gnu::target("avx2")]] double BatchElasticAvx2(int32_t n, const Real* len2, const Real* k, const Real* leq,
+                                                int32_t* done) {
+  using V = std::conditional_t<sizeof(Real) == 4, F8, D4>;
+  constexpr int32_t kLanes = sizeof(V) / sizeof(Real);
+  V u{};
+  int32_t j = 0;
+  for (; j + kLanes <= n; j += kLanes) {
+    V l2, kj, leqj;
+    LoadLanes(l2, len2 + j), LoadLanes(kj, k + j), LoadLanes(leqj, leq + j);
+    const V stretch = Sqrt(l2) - leqj;
+    u += Real(0.5) * kj * stretch * stretch;
+  }
+  *done = j;
+  const double sum = LaneSum(u);
+  _mm256_zeroupper();
+  return sum;
 }
 #endif
 
@@ -221,34 +283,75 @@ template <Rate kRate, bool kDirectIn>
 // any CI machine); compiling the whole file twice (inline functions it shares with other files
 // could be linked in their AVX2 form and fault on an older CPU), or the whole substep as an AVX2
 // clone (no faster).
-template <Rate kRate, bool kDirectIn>
-void Dispatch([[maybe_unused]] bool allow_avx2, const BatchIo& io) {
+bool UseAvx2([[maybe_unused]] bool allow_avx2) {
 #if defined(__x86_64__) && !defined(__AVX2__)
   static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2 && allow_avx2) return BatchForcesAvx2<kRate, kDirectIn>(io);
+  return avx2 && allow_avx2;
+#else
+  return false;
 #endif
-  BatchForcesBase<kRate, kDirectIn>(io);
+}
+
+template <Rate kRate, bool kDirectIn, bool kEnergy>
+void Dispatch(bool allow_avx2, const BatchIo& io) {
+#if defined(__x86_64__) && !defined(__AVX2__)
+  if (UseAvx2(allow_avx2)) return BatchForcesAvx2<kRate, kDirectIn, kEnergy>(io);
+#endif
+  BatchForcesBase<kRate, kDirectIn, kEnergy>(io);
+}
+
+template <bool kEnergy>
+void DispatchRate(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io) {
+  switch (rate) {
+    case Rate::kNone:
+      return Dispatch<Rate::kNone, false, kEnergy>(allow_avx2, io);
+    case Rate::kAnalytic:
+      return Dispatch<Rate::kAnalytic, false, kEnergy>(allow_avx2, io);
+    case Rate::kFiltered:
+      return direct_in ? Dispatch<Rate::kFiltered, true, kEnergy>(allow_avx2, io)
+                       : Dispatch<Rate::kFiltered, false, kEnergy>(allow_avx2, io);
+    case Rate::kFilteredMarked:
+      return direct_in ? Dispatch<Rate::kFilteredMarked, true, kEnergy>(allow_avx2, io)
+                       : Dispatch<Rate::kFilteredMarked, false, kEnergy>(allow_avx2, io);
+    case Rate::kFilteredStamped:
+      break;
+  }
+  Dispatch<Rate::kFilteredStamped, false, kEnergy>(allow_avx2, io);
 }
 
 }  // namespace
 
 void BatchForces(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io) {
   std::fill(io.degenerate, io.degenerate + kMaskWords, 0);
-  switch (rate) {
-    case Rate::kNone:
-      return Dispatch<Rate::kNone, false>(allow_avx2, io);
-    case Rate::kAnalytic:
-      return Dispatch<Rate::kAnalytic, false>(allow_avx2, io);
-    case Rate::kFiltered:
-      return direct_in ? Dispatch<Rate::kFiltered, true>(allow_avx2, io)
-                       : Dispatch<Rate::kFiltered, false>(allow_avx2, io);
-    case Rate::kFilteredMarked:
-      return direct_in ? Dispatch<Rate::kFilteredMarked, true>(allow_avx2, io)
-                       : Dispatch<Rate::kFilteredMarked, false>(allow_avx2, io);
-    case Rate::kFilteredStamped:
-      break;
+  if (io.energy) return DispatchRate<true>(rate, direct_in, allow_avx2, io);
+  DispatchRate<false>(rate, direct_in, allow_avx2, io);
+}
+
+double BatchElastic(bool allow_avx2, int32_t n, const Real* len2, const Real* k, const Real* leq) {
+  double sum = 0;
+  int32_t j = 0;
+#if defined(__x86_64__) && !defined(__AVX2__)
+  if (UseAvx2(allow_avx2)) sum = BatchElasticAvx2(n, len2, k, leq, &j);
+#endif
+#if defined(__SSE2__)
+  if (j == 0) {
+    using V = std::conditional_t<sizeof(Real) == 4, F4, D2>;
+    constexpr int32_t kLanes = sizeof(V) / sizeof(Real);
+    V u{};
+    for (; j + kLanes <= n; j += kLanes) {
+      V l2, kj, leqj;
+      LoadLanes(l2, len2 + j), LoadLanes(kj, k + j), LoadLanes(leqj, leq + j);
+      const V stretch = Sqrt(l2) - leqj;
+      u += Real(0.5) * kj * stretch * stretch;
+    }
+    sum = LaneSum(u);
   }
-  Dispatch<Rate::kFilteredStamped, false>(allow_avx2, io);
+#endif
+  for (; j < n; ++j) {
+    const Real stretch = std::sqrt(len2[j]) - leq[j];
+    sum += Real(0.5) * k[j] * stretch * stretch;
+  }
+  return sum;
 }
 
 }  // namespace idms::internal

@@ -50,11 +50,18 @@ struct BatchIo {
   Real *ex, *ey, *ez;  // (n) the element's force on g (eq. 4.9, g's frame)
   // (kMaskWords) bit j: element j is degenerate (l <= kMinLength; its force is not used).
   uint64_t* degenerate;
+  // Null, or the energy check's sums over the batch at these lengths, added to: [0] elastic
+  // energy, sum of k (l - l_eq)^2 / 2; [1] sum of k |l - l_eq|; [2] sum of k.
+  double* energy;
 };
 
 // Phase 2: eqs. 4.4-4.9 for a batch, vectorised, with the AVX2 code where allow_avx2 and the
 // CPU has it (the same bits either way). direct_in: len and rate are read in place.
 void BatchForces(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io);
+
+// The energy check's end-of-tick elastic energy of n elements, sum of k (l - l_eq)^2 / 2 with
+// l = sqrt(len2); vectorised as BatchForces.
+double BatchElastic(bool allow_avx2, int32_t n, const Real* len2, const Real* k, const Real* leq);
 
 // The rollback copy is written once and read only after a failure: non-temporal stores keep it
 // from evicting the arrays the pass is still working on, and skip the read-for-ownership.

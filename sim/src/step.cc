@@ -60,6 +60,7 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
       const int32_t a = ws.candidates[i];
       const Real* p = &s.atom_pos[3 * a];
       const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
+      if (!internal::InsideSphere(d, at.r)) continue;
       const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
       if (!cf.touching) continue;
       ++report->tools[t].contacts;
@@ -301,9 +302,12 @@ void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, in
 }
 
 // Stages 3-4 through full mode's fused pass: the plan's first attempt, when it is the configured
-// explicit scheme, with the rollback copy written on the way. False = not taken, or stopped at a
-// non-finite value with the State restored: the caller then runs GeneralTick, so this undoes
-// what GeneralTick does again (tool stiffness, contacts, a substep-limit warning).
+// explicit scheme, with the rollback copy written on the way and, when the energy check is on,
+// the energies formed on the way too and checked as GeneralTick checks them. False = not taken,
+// stopped at a non-finite value, or the check failed, with the State restored: the caller then
+// runs GeneralTick, so this undoes what GeneralTick does again (tool stiffness, contacts, a
+// substep-limit warning), and a failed check is met again there, rolled back, retried and
+// counted as the general path does.
 bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, internal::StageTimes* times) {
   using namespace internal;
   int64_t t0 = NowNs();
@@ -311,16 +315,43 @@ bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, inte
   const int64_t substep_limit = s.warnings.substep_limit;
   Plan plans[3];
   MakePlans(m, s, ws, report, plans);
+  const StabilityOptions& st = ws.options.stability;
+  const int64_t clock = s.substep_clock, stamp_floor = s.elem_stamp_floor;
+  // The tools' and gravity's energies at the tick's start (tools at their new pose); the pass
+  // forms the kinetic and elastic ones.
+  Energy before, after;
+  if (st.energy_check) ToolAndGravityEnergy(m, s, ws, &before);
   report->checks_ns += NowNs() - t0;
   const Plan& plan = plans[0];
-  if (plan.integrator == ws.options.integrator && RunFused(m, s, ws, plan.integrator, plan.substeps, times)) {
-    t0 = NowNs();
-    const double decay = std::exp(-ws.options.dt_s / ws.options.stability.energy_memory_s);
-    s.energy_excess *= decay;
-    s.energy_allowance *= decay;
+  FusedEnergy fe;
+  bool accepted = plan.integrator == ws.options.integrator &&
+                  RunFused(m, s, ws, plan.integrator, plan.substeps, times, st.energy_check ? &fe : nullptr);
+  t0 = NowNs();
+  const double decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
+  double excess = s.energy_excess * decay, allowance = std::max(st.energy_abs_tol, s.energy_allowance * decay);
+  if (accepted && st.energy_check) {
+    // GeneralTick's test on the same terms.
+    before.h += fe.kinetic_before + fe.elastic_before;
+    before.scale += fe.kinetic_before + fe.elastic_before;
+    before.noise += fe.noise_before;
+    ToolAndGravityEnergy(m, s, ws, &after);
+    after.h += fe.kinetic_after + fe.elastic_after;
+    const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
+    const double gain = after.h - before.h;
+    allowance = std::max(tolerance, s.energy_allowance * decay);
+    excess = std::max(0.0, s.energy_excess * decay + gain);
+    accepted = gain <= tolerance && excess <= allowance;  // false for NaN
+    if (!accepted) UndoFused(s, ws, clock, stamp_floor);
+  }
+  if (accepted) {
+    s.energy_excess = std::isfinite(excess) ? excess : s.energy_excess * decay;
+    if (std::isfinite(allowance)) s.energy_allowance = allowance;
+    report->energy_before = before.h;
+    report->energy_after = after.h;
     report->attempts = 1;
     report->substeps = plan.substeps;
     report->integrator_used = plan.integrator;
+    report->fused = true;
     report->checks_ns += NowNs() - t0;
     return true;
   }
@@ -328,6 +359,7 @@ bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, inte
   for (ToolReport& tr : report->tools) tr.contacts = 0;
   s.warnings.substep_limit = substep_limit;
   report->predicted_dt_s = 0;
+  report->checks_ns += NowNs() - t0;
   return false;
 }
 

@@ -26,6 +26,10 @@ inline constexpr Real kFilterRestart = Real(-1);
 
 inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
+// SphereContact's own first test, inline: the loops over full mode's contact candidates (every
+// external atom) skip the call for the atoms a tool cannot touch.
+inline bool InsideSphere(const double d[3], double r) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < r * r; }
+
 struct StageTimes {
   int64_t forces_ns = 0;
   int64_t integrate_ns = 0;
@@ -73,6 +77,10 @@ struct Energy {
   double noise = 0;
 };
 Energy ActiveEnergy(const Model& model, const State& state, const Workspace& ws);
+// The terms of ActiveEnergy the full-mode fused pass does not form itself, added to `e`: gravity
+// over the active atoms (relative to rest) and the tools' penalty potentials and grasp elements
+// at their current pose (h, scale, noise; finiteness is the pass's).
+void ToolAndGravityEnergy(const Model& model, const State& state, const Workspace& ws, Energy* e);
 
 // Elastic energy of every element against its rest length, sum of k (l - l_eq)^2 / 2.
 double ElasticEnergy(const Model& model, const State& state);
@@ -90,9 +98,8 @@ int32_t ImplicitEulerSubstep(const Model& model, State& state, Workspace& ws, Re
 void SizeImplicitBuffers(const Model& model, Workspace& ws);
 
 // full_step.cc — the full-mode fused pass (Workspace::FullPass).
-// True when this tick can take it: full mode, explicit or symplectic Euler, no energy check
-// (the check needs the energy of the whole model before and after: two more passes), no cut
-// pending, and a model with elements. Evaluated after ResolveTools.
+// True when this tick can take it: full mode, explicit or symplectic Euler, no cut pending, and
+// a model with elements. Evaluated after ResolveTools.
 bool FusedEligible(const Model& model, const Workspace& ws);
 // Makes the full-mode lists live (BuildActiveSet once, then the pass's arrays), or rebuilds
 // them after a topology edit. O(atoms + elements) when it rebuilds, else O(1); no allocation.
@@ -111,11 +118,22 @@ HugeRange HugePageInterior(const void* data, size_t bytes);
 // The stable step of `integrator` over the free atoms with the tools' stiffness this tick, from
 // the cached tool-free minimum plus the atoms a tool stiffens: the value PredictStableDt gives.
 double FullPredictStableDt(const Model& model, const Workspace& ws, Integrator integrator);
+// The energy check's kinetic and elastic energy of the active region (ActiveEnergy's terms), as
+// the fused pass forms them on the way: at the tick's start and at its end.
+struct FusedEnergy {
+  double kinetic_before = 0, elastic_before = 0;
+  double noise_before = 0;  // a bound on the elastic part of Energy::noise
+  double kinetic_after = 0, elastic_after = 0;
+};
 // `substeps` fused substeps of `integrator` (the plan's first attempt). Writes the rollback copy
 // on the way; returns false, with the State back at the tick's start, when an input or a result
-// was not finite (the general path then repairs, retries and falls back as usual).
+// was not finite (the general path then repairs, retries and falls back as usual). `energy`, if
+// not null, receives the energy check's terms (one more gather per element, from cache).
 bool RunFused(const Model& model, State& state, Workspace& ws, Integrator integrator, int32_t substeps,
-              StageTimes* times);
+              StageTimes* times, FusedEnergy* energy);
+// Takes back a tick RunFused completed (its energy check failed): the State back at the tick's
+// start from the rollback copy, substep_clock and elem_stamp_floor as they were before it.
+void UndoFused(State& state, Workspace& ws, int64_t clock, int64_t stamp_floor);
 // Zeroes atom_extra_k where ToolStiffness may have set it (candidates and grasped atoms).
 void ClearExtraK(Workspace& ws);
 

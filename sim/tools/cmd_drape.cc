@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <ctime>
 #include <sstream>
 
 #include "command.h"
@@ -67,6 +68,13 @@ bool SameModel(const Model& got, const Model& expected, double tolerance, double
   return true;
 }
 
+// CPU time of this thread, s (as idms-sim run and the benches measure).
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
 // JSON has no infinity: a range that saw no atom is null.
 nlohmann::json Range(double lo, double hi) {
   if (!std::isfinite(lo) || !std::isfinite(hi)) return nullptr;
@@ -110,7 +118,19 @@ void Run(DrapeArgs& a) {
   const auto start = std::chrono::steady_clock::now();
   auto last_print = start;
   double next_fraction = 0;
+  // Stage 2's CPU time per tick, from its first progress report after tick 0 to its last (the
+  // first ticks build full mode's lists and ask for huge pages), or from tick 0 when there is no
+  // such report in between.
+  struct Mark {
+    int64_t tick = 0;
+    double cpu_s = 0;
+  };
+  Mark marks[3];  // the first two reports and the last
+  int64_t reports = 0;
   auto progress = [&](const DrapeProgress& p) {
+    const Mark mark{p.tick, ThreadCpuSeconds()};
+    marks[std::min<int64_t>(reports++, 2)] = mark;
+    marks[2] = mark;
     const auto now = std::chrono::steady_clock::now();
     const bool due = p.fraction >= next_fraction || now - last_print >= std::chrono::seconds(1) || p.settled;
     if (a.quiet || !due) return;
@@ -121,6 +141,11 @@ void Run(DrapeArgs& a) {
   };
   const DrapeResult r = Drape(slab, o, progress);
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // Per tick of stage 2 (form forces, the step, progress), CPU time; element updates per second
+  // counts one substep per tick (the default tick is 90% of the predicted stable one).
+  const Mark& from = marks[2].tick > marks[1].tick && reports > 2 ? marks[1] : marks[0];
+  const double tick_cpu_s =
+      marks[2].tick > from.tick ? (marks[2].cpu_s - from.cpu_s) / static_cast<double>(marks[2].tick - from.tick) : 0.0;
 
   // Stage 3 output and summary.
   std::string error;
@@ -149,6 +174,8 @@ void Run(DrapeArgs& a) {
                {"dt", o.step.dt_s},
                {"integrator", IntegratorName(o.step.integrator)},
                {"wall_s", wall_s},
+               {"tick_cpu_ms", 1e3 * tick_cpu_s},
+               {"element_updates_per_s", tick_cpu_s > 0 ? stripped.num_elems / tick_cpu_s : 0.0},
                {"kinetic", r.kinetic},
                {"max_speed", r.max_speed},
                {"energy_start", r.energy_start},

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <ctime>
 
 #include "command.h"
 #include "idms/sim/edit.h"
@@ -24,6 +25,7 @@ struct RunArgs {
   std::string model, script = "palpate", preset = "default", integrator, tool, csv, plot, fit_plot;
   double dt = 1e-3, local_radius = 0, lambda = 1.0;  // integrator, local_radius: the preset's unless given
   std::vector<double> plot_window;  // --plot-window T0,T1: the plot's time axis
+  int64_t max_ticks = -1;  // -1 = the whole script
   bool full = false, json = false;
 };
 
@@ -92,6 +94,14 @@ bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
     }
   }
   return true;
+}
+
+// CPU time of this thread, s: what a tick cost, whatever else the machine runs (the benches'
+// clock, docs/performance.md).
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 double Percentile(std::vector<double> v, double q) {
@@ -193,17 +203,19 @@ void Run(const RunArgs& a) {
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
-  const int64_t ticks = std::llround(ScriptDuration(script) / a.dt);
+  const int64_t script_ticks = std::llround(ScriptDuration(script) / a.dt);
+  const int64_t ticks = a.max_ticks >= 0 ? std::min(a.max_ticks, script_ticks) : script_ticks;
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
   if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
   if (csv) std::fputs("t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us\n", csv);
   ToolInput input;
   input.num_tools = 1;
-  std::vector<double> compute_us;
+  std::vector<double> compute_us, cpu_us;
   compute_us.reserve(ticks);
+  cpu_us.reserve(ticks);
   double max_force = 0, max_fz = 0, onset_z = NAN, last_z = INFINITY;
   std::vector<std::array<double, 2>> loading;  // (z, f_z) while pressing in, in contact
-  int64_t fallbacks = 0;
+  int64_t fallbacks = 0, fused_ticks = 0, substeps = 0;
   std::vector<Crossing> crossings;
   for (const auto& [t0, t1] : StrokeCrossings(script)) crossings.push_back({.t0 = t0, .t1 = t1});
   for (int64_t n = 0; n < ticks; ++n) {
@@ -212,10 +224,12 @@ void Run(const RunArgs& a) {
     tool.closed = sample.closed;
     input.tools[0] = tool;
     const auto start = std::chrono::steady_clock::now();
+    const double cpu_start = a.full ? ThreadCpuSeconds() : 0.0;  // a system call: full mode only
     const StepReport report = Step(model, state, workspace, input);
     if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
     const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - start).count();
     compute_us.push_back(us);
+    if (a.full) cpu_us.push_back(1e6 * (ThreadCpuSeconds() - cpu_start));
     const double* f = report.tools[0].force;
     max_force = std::max(max_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
     max_fz = std::max(max_fz, f[2]);
@@ -223,6 +237,8 @@ void Run(const RunArgs& a) {
     if (f[2] > 1e-3 && tool.pos[2] < last_z - 1e-12) loading.push_back({tool.pos[2], f[2]});
     last_z = tool.pos[2];
     fallbacks += report.fallback;
+    fused_ticks += report.fused;
+    substeps += report.substeps;
     for (Crossing& c : crossings) {
       if (state.time_s > c.t0 && state.time_s <= c.t1 + 1e-9) c.Add(state.time_s, f);
     }
@@ -260,6 +276,18 @@ void Run(const RunArgs& a) {
       {"warnings", TotalWarnings(state.warnings)},
       {"warnings_by_kind", warnings_by_kind},
       {"fallbacks", fallbacks},
+      // Ticks full mode's fused pass computed (the rest took the general path), and element
+      // updates per second at the median tick: elements x substeps per tick / its compute time.
+      {"fused_ticks", fused_ticks},
+      {"elements", model.num_elems},
+      {"substeps_mean", ticks > 0 ? static_cast<double>(substeps) / ticks : 0.0},
+      // Full mode: the tick's CPU time (this thread's), and element updates per second at its
+      // median, elements x substeps per tick / CPU time, as idms-step-throughput-bench counts.
+      {"compute_cpu_us", {{"p50", Percentile(cpu_us, 0.5)}, {"p99", Percentile(cpu_us, 0.99)}}},
+      {"element_updates_per_s", ticks > 0 && Percentile(cpu_us, 0.5) > 0
+                                    ? model.num_elems * (static_cast<double>(substeps) / ticks) /
+                                          (1e-6 * Percentile(cpu_us, 0.5))
+                                    : 0.0},
       {"compute_us", {{"p50", Percentile(compute_us, 0.5)}, {"p99", Percentile(compute_us, 0.99)},
                       {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};
   if (a.json) {
@@ -279,6 +307,13 @@ void Run(const RunArgs& a) {
                   c["fz_range"][0].get<double>(), c["fz_range"][1].get<double>(),
                   c["mean_fx_accelerating"].get<double>(), c["mean_fx_decelerating"].get<double>());
     }
+    if (a.full) {
+      std::printf("full mode: %lld of %lld ticks in the fused pass; CPU p50 %.2f ms per tick, %.3g element updates "
+                  "per second\n",
+                  static_cast<long long>(fused_ticks), static_cast<long long>(ticks),
+                  1e-3 * summary["compute_cpu_us"]["p50"].get<double>(),
+                  summary["element_updates_per_s"].get<double>());
+    }
   }
 }
 
@@ -296,6 +331,8 @@ void Setup(CLI::App& app) {
   auto* radius = cmd->add_option("--local-radius", a.local_radius, "Haptic window radius r_l (default: the preset's)");
   cmd->add_flag("--full", a.full, "Simulate every atom (local simulation off)")->excludes(radius);
   cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
+  cmd->add_option("--ticks", a.max_ticks, "Stop after this many ticks (default: the whole script)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--tool", a.tool, "sphere:r=1.5,k=400[,law=thesis|linear] or tweezers:... (pluck)");
   cmd->add_option("--csv", a.csv, "Write t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us per tick");
   cmd->add_option("--plot", a.plot, "Write a PNG of the position and force histories (needs --csv)");

@@ -4,6 +4,9 @@
 #include <iostream>
 #include <utility>
 #include <vector>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "command.h"
 
@@ -29,6 +32,15 @@ void Fail(const std::string& command, const std::string& message) {
 }  // namespace idms::tool
 
 int main(int argc, char** argv) {
+#if defined(__GLIBC__)
+  // Large arrays from the heap rather than each from its own mmap: glibc maps every block past
+  // its threshold (128 KiB at start) to start 16 bytes into a page, so the ~20 arrays that full
+  // mode's fused pass streams side by side all sit at the same offset of a page, and `run --full`
+  // on 10^6 atoms ran at 6.5e7 element updates per second instead of 1.1e8, on the same model
+  // (docs/performance.md). The throughput bench escaped it by chance: its frees had already
+  // raised glibc's adaptive threshold.
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+#endif
   CLI::App app{"idms-sim: generate, validate, run and analyse Discrete Simulation Models (Swarup 1995)"};
   app.require_subcommand(1);
   auto& registry = idms::tool::Registry();

@@ -1,12 +1,14 @@
 // Tests of full mode's fused pass (full_step.cc): the same bits as the general path over many
 // ticks in every configuration it takes (integrators, rate modes, field forces, tools, substeps,
-// edits, a switch from local mode), the same repair and fallback on non-finite values, and no
-// allocation.
+// edits, a switch from local mode, the energy check on), the same repair and fallback on
+// non-finite values and on a divergence the energy check catches, and no allocation.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "alloc_counter.h"
 #include "idms/sim/edit.h"
@@ -70,6 +72,10 @@ struct Run {
   uint64_t hash = 0;
   int64_t warnings = 0;
   double force_bits = 0;  // sum of device forces, compared exactly
+  int64_t fused_ticks = 0;  // StepReport::fused
+  int64_t rollbacks = 0, fallbacks = 0, unrecovered = 0;
+  int64_t retried = 0;  // ticks whose first attempt was not accepted
+  double max_energy_diff = 0;  // the largest |energy_before - general's| relative to its scale, per tick
 };
 
 // Steps the same model and start three times: the general path, the fused pass, and the fused
@@ -77,6 +83,7 @@ struct Run {
 // general run and the fused one, after checking that both fused runs agree.
 std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOptions& o, int ticks, bool tools) {
   Run runs[3];
+  std::vector<double> general_energy;
   for (int fused = 0; fused < 3; ++fused) {
     State s = start;
     Workspace ws = MakeWorkspace(model, o);
@@ -86,9 +93,20 @@ std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOp
       const StepReport r = Step(model, s, ws, tools ? Tools(i) : ToolInput{});
       for (int t = 0; t < r.num_tools; ++t)
         runs[fused].force_bits += r.tools[t].force[0] + r.tools[t].force[1] + r.tools[t].force[2];
+      runs[fused].fused_ticks += r.fused;
+      runs[fused].fallbacks += r.fallback;
+      runs[fused].unrecovered += r.unrecovered;
+      runs[fused].retried += r.attempts != 1 || r.unrecovered;
+      if (fused == 0) {
+        general_energy.push_back(r.energy_before);
+      } else if (std::isfinite(r.energy_before) && std::isfinite(general_energy[i])) {
+        const double diff = std::fabs(r.energy_before - general_energy[i]) / (std::fabs(general_energy[i]) + 1e-12);
+        runs[fused].max_energy_diff = std::max(runs[fused].max_energy_diff, diff);
+      }
     }
     runs[fused].hash = FoldedHash(model, s);
     runs[fused].warnings = TotalWarnings(s.warnings);
+    runs[fused].rollbacks = s.warnings.rollback;
   }
   EXPECT_EQ(runs[2].hash, runs[1].hash) << "the baseline and the AVX2 code differ";
   EXPECT_EQ(runs[2].force_bits, runs[1].force_bits);
@@ -104,6 +122,7 @@ struct Case {
   bool predict;
   bool field;
   bool tools;
+  bool check = false;  // the energy check on (formed in the pass)
 };
 
 class FusedEqualsGeneral : public ::testing::TestWithParam<Case> {};
@@ -115,12 +134,23 @@ TEST_P(FusedEqualsGeneral, SameBitsOverManyTicks) {
   o.length_rate = c.rate;
   o.lambda = c.lambda;
   o.stability.predict = c.predict;
+  o.stability.energy_check = c.check;
   if (c.field) o.gravity = true, o.air_damping = 3;
   const auto [general, fused] = RunBoth(model, Deformed(model), o, 400, c.tools);
   EXPECT_EQ(fused.hash, general.hash);
   EXPECT_EQ(fused.warnings, general.warnings);
   EXPECT_EQ(fused.force_bits, general.force_bits);
-  EXPECT_EQ(general.warnings, 0);
+  // The deformed start's first tick fails the energy check (both paths roll it back alike).
+  if (!c.check) {
+    EXPECT_EQ(general.warnings, 0);
+  }
+  EXPECT_EQ(fused.fused_ticks, 400 - general.retried) << "a tick left the fused pass";
+  EXPECT_LE(general.retried, 1);
+  EXPECT_EQ(general.fused_ticks, 0);
+  // The energies the pass forms are ActiveEnergy's, up to the order of the sums.
+  if (c.check) {
+    EXPECT_LT(fused.max_energy_diff, sizeof(Real) == 4 ? 1e-4 : 1e-12);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -133,7 +163,13 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"symplectic_undamped", Integrator::kSymplecticEuler, 0.0, LengthRate::kAuto, 1.0, true, false, false},
         Case{"symplectic_field", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 1.0, true, true, false},
         Case{"euler_tools", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, true},
-        Case{"symplectic_everything", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true}),
+        Case{"symplectic_everything", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true},
+        Case{"euler_checked", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, false, true},
+        Case{"symplectic_analytic_checked", Integrator::kSymplecticEuler, 0.2, LengthRate::kAnalytic, 1.0, true,
+             false, false, true},
+        Case{"euler_tools_checked", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, true, false, true, true},
+        Case{"symplectic_everything_checked", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true,
+             true, true}),
     [](const auto& param_info) { return param_info.param.name; });
 
 TEST(FusedPass, RestartMarksOfDegenerateElementsMatch) {
@@ -188,13 +224,28 @@ TEST(FusedPass, IsTakenAndReportsTheWholeModel) {
   for (uint8_t f : model.atom_fixed) free_atoms += !f;
   EXPECT_EQ(r.active_atoms, free_atoms);
   EXPECT_EQ(r.active_elems, model.num_elems);
-  // The energy check needs the general path.
+  EXPECT_TRUE(r.fused);
+  // The energy check (on by default) keeps the pass, and reports the energies it formed.
   StepOptions checked = FullNoCheck(Integrator::kSymplecticEuler);
   checked.stability.energy_check = true;
   Workspace wc = MakeWorkspace(model, checked);
-  Step(model, s, wc, ToolInput{});
-  EXPECT_FALSE(wc.full.live);
-  EXPECT_EQ(s.elem_stamp_floor, kNoStamp);
+  r = Step(model, s, wc, ToolInput{});
+  EXPECT_TRUE(wc.full.live);
+  EXPECT_TRUE(r.fused);
+  EXPECT_GT(r.energy_before, 0);
+  EXPECT_GT(r.energy_after, 0);
+  // Full mode with the default options, as `idms-sim run --full` and the agent make them.
+  StepOptions defaults;
+  defaults.full = true;
+  Workspace wd = MakeWorkspace(model, defaults);
+  for (int i = 0; i < 20; ++i) EXPECT_TRUE(Step(model, s, wd, Tools(i)).fused) << "tick " << i;
+  // Local mode and the other integrators take the general path.
+  StepOptions rk4 = defaults;
+  rk4.integrator = Integrator::kRk4;
+  Workspace wr = MakeWorkspace(model, rk4);
+  EXPECT_FALSE(Step(model, s, wr, ToolInput{}).fused);
+  Workspace wl = MakeWorkspace(model, StepOptions{});
+  EXPECT_FALSE(Step(model, s, wl, Tools(0)).fused);
 }
 
 TEST(FusedPass, SwitchingFromLocalModeMatches) {
@@ -261,7 +312,34 @@ void ExpectDivergenceAlike(const Model& undamped) {
   EXPECT_EQ(fused.warnings, general.warnings);
 }
 
+// A tick too long for the model with the energy check on: symplectic Euler at twice its stable
+// step diverges within a tick or two, and the check must catch it before anything is non-finite,
+// roll back and fall back to implicit Euler, in the fused pass as in the general path.
+void ExpectCheckCatchesDivergenceAlike(const Model& model) {
+  StepOptions o;
+  o.full = true;
+  o.integrator = Integrator::kSymplecticEuler;
+  o.stability.predict = false;  // nothing substeps the tick
+  o.dt_s = 2.2e-3;              // the slab's symplectic bound is 1.01e-3 s
+  const auto [general, fused] = RunBoth(model, Deformed(model), o, 300, true);
+  EXPECT_GT(general.rollbacks, 0) << "the tick did not diverge";
+  EXPECT_GT(general.fallbacks, 0);
+  EXPECT_EQ(fused.hash, general.hash);
+  EXPECT_EQ(fused.warnings, general.warnings);
+  EXPECT_EQ(fused.rollbacks, general.rollbacks);
+  EXPECT_EQ(fused.fallbacks, general.fallbacks);
+  EXPECT_EQ(fused.unrecovered, general.unrecovered);
+  EXPECT_EQ(fused.force_bits, general.force_bits);
+  // Every tick whose check failed left the pass; the others stayed in it.
+  EXPECT_EQ(fused.fused_ticks, 300 - general.retried);
+}
+
 TEST(FusedPass, NonFiniteStateIsRepairedLikeTheGeneralPath) { ExpectNanRepairedAlike(Slab()); }
+
+TEST(FusedPass, EnergyCheckCatchesDivergenceLikeTheGeneralPath) {
+  ExpectCheckCatchesDivergenceAlike(Slab());
+  ExpectCheckCatchesDivergenceAlike(ReorderForLocality(Slab()));
+}
 
 TEST(FusedPass, DivergenceFallsBackLikeTheGeneralPath) { ExpectDivergenceAlike(Slab(0.0)); }
 

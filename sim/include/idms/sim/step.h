@@ -37,8 +37,9 @@ struct StabilityOptions {
   int32_t max_substeps = 8;
   bool implicit_fallback = true;  // beyond max_substeps, or after a failed check: implicit Euler
   // Reject a tick whose active-region energy grows (see below). Off: a tick is rejected only when
-  // an active atom is not finite, the two energy passes are skipped, and full mode can take the
-  // fused pass (Step).
+  // an active atom is not finite, and the energies are not formed. (Full mode's fused pass forms
+  // them on its way, for about a quarter more time in a one-substep tick: the end-of-tick lengths
+  // take a second gather of each element's atoms. The general path spends two passes on them.)
   bool energy_check = true;
   // A tick fails when H_after > H_before + energy_rel_tol * scale + energy_abs_tol, where H is
   // kinetic + elastic + contact + gravity energy of the active region with the tool held at its
@@ -118,6 +119,10 @@ struct StepReport {
   double predicted_dt_s = 0;          // stable step predicted for the configured integrator
   bool fallback = false;              // the accepted attempt used implicit Euler as a fallback
   bool unrecovered = false;           // every attempt failed; active region restored at rest
+  // Full mode's fused pass computed the accepted attempt (Workspace::FullPass); false = the
+  // general path did (local mode, another integrator, a pending cut, or a fused attempt that met a
+  // non-finite value or failed the energy check and was retried there).
+  bool fused = false;
   int32_t cg_iterations = 0;          // implicit Euler: total over substeps
   // Active region, with the tools at their new pose; 0 when stability.energy_check is off.
   double energy_before = 0, energy_after = 0;
@@ -145,11 +150,15 @@ struct StepReport {
 // tools), independent of model size; full mode O(model). The first Step after MakeWorkspace,
 // or after the State was replaced (snapshot restore), refiles the spatial hash from the State:
 // O(atoms) once — call ResyncWorkspace before a real-time loop starts to keep that out of it.
-// Full mode with explicit or symplectic Euler and no energy check takes a fused pass
-// (Workspace::FullPass): forces, sums and integration in one sweep, the same bits as the general
-// path at a fraction of its memory traffic; it keeps the full-mode lists from tick to tick and
-// rebuilds them (O(atoms + elements)) after a topology edit or a tick that took the general
-// path. Renumbering the model once (reorder.h) lets it stream its arrays without an index.
+// Full mode with explicit or symplectic Euler takes a fused pass (Workspace::FullPass): forces,
+// sums and integration in one sweep, the same bits as the general path at a fraction of its
+// memory traffic, with the energy check's energies formed on the way (a tick whose check fails
+// is taken back and run by the general path, which rolls back and retries as always; the
+// energies' rounding differs from the general path's, so a gain within rounding of the
+// tolerance could be judged differently); StepReport::fused says which ran. It keeps the
+// full-mode lists from tick to tick and rebuilds them (O(atoms + elements)) after a topology
+// edit or a tick that took the general path. Renumbering the model once (reorder.h) lets it
+// stream its arrays without an index.
 // Allocates nothing with the explicit integrators. Implicit Euler (also as the fallback)
 // allocates only when its active system outgrows every earlier one: never in full mode, and in
 // local mode only past 2048 active atoms (counted in warnings.implicit_grew).

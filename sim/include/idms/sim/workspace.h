@@ -72,6 +72,9 @@ struct FullPass {
   // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
   std::vector<Real> force;
   std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
+  // (num_elems / batch + 1) per batch of the walk: the highest active slot of a free endpoint in
+  // it or an earlier batch (the energy check forms a batch's end-of-tick lengths past it).
+  std::vector<int32_t> batch_ready;
   // Float builds: the rollback copy of the atoms as two 4-wide rows per slot (position, velocity;
   // lane 3 not used), written with one non-temporal vector store each (else Workspace::backup_pos
   // and backup_vel).
