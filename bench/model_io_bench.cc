@@ -1,12 +1,12 @@
 // Parse and write throughput (MB/s) of .fem/.plg, and memory per atom, for slabs of 10^4 to
 // 10^6 atoms generated in the run (never committed). Prints figures; never fails on time.
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <string>
-#include <sys/resource.h>
 
 #include "idms/sim/generate.h"
 #include "idms/sim/model_io.h"

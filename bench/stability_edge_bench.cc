@@ -3,6 +3,8 @@
 // (explicit Euler, eq. 4.6 filter, thesis contact law, r_l 2.25, none of our guards), beside the
 // Gershgorin bound and the exact linear analyses, and again with one factor of the
 // reconstruction changed at a time. Prints a table (CSV with --csv); never fails on time.
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <complex>
@@ -12,9 +14,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Eigenvalues>
 
 #include "idms/sim/haptic_window.h"
 #include "idms/sim/integrate.h"
@@ -39,8 +38,8 @@ constexpr double kThesisDt = 1.0 / 700.0;  // thesis 6.1: "refreshed at approxim
 // fragment is 4 x 3.5 x 0.8 units; converged, no script moves an atom 0.08), or a free atom faster than
 // kChatterSpeedFactor times the fastest atom of the same script and variant at T = kReferenceDt
 // (the converged dynamics) up to the same script time (a stroke at the thesis's speed moves atoms
-// fast while it crosses, but not while the tool presses still before it). The speed test is needed: past the edge the unstable contact mode
-// often grows only until the atom leaves the MIO, where it loses the contact stiffness that
+// fast while it crosses, but not while the tool presses still before it). The speed test is needed: past the edge the
+// unstable contact mode often grows only until the atom leaves the MIO, where it loses the contact stiffness that
 // destabilised it, and comes back: a bounded limit cycle (chatter) with atoms at 5-90 units/s and
 // the device force swinging 0-6 N while the tool is held still, which no displacement bound
 // below the fragment's size catches. On the thesis scripts stable runs stay below 2x the
@@ -80,7 +79,7 @@ struct Variant {
   // > 0: the MIO's k from the tweezers' closure on. The grasp element takes the MIO's k at closure
   // (tool.cc), so this sets its stiffness; atoms still touching the closed tweezers feel it too.
   double grasp_k = 0;
-  bool pluck_only = false; // the factor only exists in the pluck
+  bool pluck_only = false;  // the factor only exists in the pluck
 };
 
 // The thesis's step: explicit Euler (eqs. 4.13-4.15), eq. 4.6 with lambda 1, r_l = 1.5 r (6.2),
@@ -193,8 +192,8 @@ Outcome RunScript(const Model& model, Script script, const Variant& v, double dt
 }
 
 struct Edge {
-  double dt = 0;             // measured edge, s: largest T with every scanned T' <= T stable
-  bool islands = false;      // a scanned T above the edge was stable again
+  double dt = 0;                // measured edge, s: largest T with every scanned T' <= T stable
+  bool islands = false;         // a scanned T above the edge was stable again
   bool at_thesis_rate = false;  // stable at T = 1/700 s
   double diverged_t_s = 0;      // script time at which the run just past the edge diverged
 };
@@ -352,7 +351,8 @@ double LargestEigen(const Eigen::MatrixXd& a) {
 double GershgorinDt(const Model& m, LengthRate rate, double extra_k) {
   double dt = std::numeric_limits<double>::infinity();
   for (int32_t a = 0; a < m.num_atoms; ++a) {
-    if (!m.atom_fixed[a]) dt = std::min(dt, StableDt(Integrator::kExplicitEuler, GershgorinBound(m, a, extra_k), rate, 1.0));
+    if (!m.atom_fixed[a])
+      dt = std::min(dt, StableDt(Integrator::kExplicitEuler, GershgorinBound(m, a, extra_k), rate, 1.0));
   }
   return dt;
 }
@@ -365,8 +365,9 @@ std::vector<Variant> MakeVariants(bool quick) {
                [](StepOptions& o, ToolCommand&) { o.length_rate = LengthRate::kAnalytic; }});
   v.push_back({"contact law", "linear law k (r - |d|)", nullptr,
                [](StepOptions&, ToolCommand& t) { t.law = ContactLaw::kLinear; }});
-  v.push_back({"layout", "no home elements",
-               [](Model& m) { m = WithoutElements(m, [](const Model& b, int32_t e) { return b.elem_home[e] != 0; }); }});
+  v.push_back({"layout", "no home elements", [](Model& m) {
+                 m = WithoutElements(m, [](const Model& b, int32_t e) { return b.elem_home[e] != 0; });
+               }});
   v.push_back({"layout", "no apex-apex lattice", [](Model& m) {
                  m = WithoutElements(m, [](const Model& b, int32_t e) {
                    return IsApex(b, b.elem_atoms[2 * e]) && IsApex(b, b.elem_atoms[2 * e + 1]);
@@ -439,11 +440,12 @@ int main(int argc, char** argv) {
   const ScriptGeometry geometry = MakeScriptGeometry(base, 1.5);
   std::printf("model %s: %d atoms (%d free), %d elements; thesis ch. 6: k 15, b 0.2, m 0.002, MIO r 1.5 k 400\n",
               base.name.c_str(), base.num_atoms, Summarize(base).free_atoms, base.num_elems);
-  std::printf("bare thesis configuration: explicit Euler, eq. 4.6 lambda 1, thesis law k (r - |d|)/|d|, r_l 2.25,\n"
-              "no prediction, energy check, fallback, retry or settling; divergent = non-finite, a free atom\n"
-              "more than %.0f units from rest, or one faster than %.0fx the fastest atom of the same run at\n"
-              "T = %.1f ms (chatter). T = 1/700 s = %.3f ms.\n\n",
-              kDivergedDisplacement, kChatterSpeedFactor, 1e3 * kReferenceDt, 1e3 * kThesisDt);
+  std::printf(
+      "bare thesis configuration: explicit Euler, eq. 4.6 lambda 1, thesis law k (r - |d|)/|d|, r_l 2.25,\n"
+      "no prediction, energy check, fallback, retry or settling; divergent = non-finite, a free atom\n"
+      "more than %.0f units from rest, or one faster than %.0fx the fastest atom of the same run at\n"
+      "T = %.1f ms (chatter). T = 1/700 s = %.3f ms.\n\n",
+      kDivergedDisplacement, kChatterSpeedFactor, 1e3 * kReferenceDt, 1e3 * kThesisDt);
   {
     const HapticWindowParams hw{15.0, 0.2, 0.002, 1e-3};
     const Eigen::MatrixXd a = HapticWindowA(hw);
@@ -459,23 +461,26 @@ int main(int argc, char** argv) {
     std::printf("  Gershgorin, fragment, + MIO k 400 on an atom:                    %s filtered, %s analytic\n",
                 Ms(GershgorinDt(base, LengthRate::kFiltered, 400)).c_str(),
                 Ms(GershgorinDt(base, LengthRate::kAnalytic, 400)).c_str());
-    std::printf("  haptic window fig. 4-2 at k 15, b 0.2, m 0.002, exact:            %s filtered, %s analytic"
-                " (Gershgorin %s analytic)\n",
-                Ms(LinearEdge(mk, mc, true)).c_str(), Ms(StabilityLimitDt(a, Integrator::kExplicitEuler, 0.1)).c_str(),
-                Ms(*GershgorinStableDt(hw, Integrator::kExplicitEuler)).c_str());
+    std::printf(
+        "  haptic window fig. 4-2 at k 15, b 0.2, m 0.002, exact:            %s filtered, %s analytic"
+        " (Gershgorin %s analytic)\n",
+        Ms(LinearEdge(mk, mc, true)).c_str(), Ms(StabilityLimitDt(a, Integrator::kExplicitEuler, 0.1)).c_str(),
+        Ms(*GershgorinStableDt(hw, Integrator::kExplicitEuler)).c_str());
     // The fragment linearised at rest: all free atoms, and the window at a 0.05 press.
     const double centre[3] = {geometry.center[0], geometry.center[1], geometry.top_z + 1.5 - 0.05};
     const ToolCommand tool = BareTool(Script::kPalpate);
     const Linearised all = Linearise(base, 0, centre, nullptr, bare.min_distance_fraction);
     const Linearised win = Linearise(base, bare.local_radius, centre, &tool, bare.min_distance_fraction);
-    std::printf("  fragment linearised at rest, every free atom, exact:             %s filtered, %s analytic"
-                " (max eig K/m %.0f /s^2, B/m %.0f /s)\n",
-                Ms(LinearEdge(all.mk, all.mc, true)).c_str(), Ms(LinearEdge(all.mk, all.mc, false)).c_str(),
-                LargestEigen(all.mk), LargestEigen(all.mc));
-    std::printf("  window r_l 2.25 at a 0.05 press (%d atoms, %d in contact), exact: %s filtered, %s analytic"
-                " (max eig K/m %.0f /s^2, B/m %.0f /s)\n\n",
-                win.atoms, win.contacts, Ms(LinearEdge(win.mk, win.mc, true)).c_str(),
-                Ms(LinearEdge(win.mk, win.mc, false)).c_str(), LargestEigen(win.mk), LargestEigen(win.mc));
+    std::printf(
+        "  fragment linearised at rest, every free atom, exact:             %s filtered, %s analytic"
+        " (max eig K/m %.0f /s^2, B/m %.0f /s)\n",
+        Ms(LinearEdge(all.mk, all.mc, true)).c_str(), Ms(LinearEdge(all.mk, all.mc, false)).c_str(),
+        LargestEigen(all.mk), LargestEigen(all.mc));
+    std::printf(
+        "  window r_l 2.25 at a 0.05 press (%d atoms, %d in contact), exact: %s filtered, %s analytic"
+        " (max eig K/m %.0f /s^2, B/m %.0f /s)\n\n",
+        win.atoms, win.contacts, Ms(LinearEdge(win.mk, win.mc, true)).c_str(),
+        Ms(LinearEdge(win.mk, win.mc, false)).c_str(), LargestEigen(win.mk), LargestEigen(win.mc));
   }
 
   // The bare configuration at the thesis's rate, run through (how far it goes).
@@ -500,10 +505,12 @@ int main(int argc, char** argv) {
 
   std::FILE* csv = csv_path ? std::fopen(csv_path, "w") : nullptr;
   if (csv) {
-    std::fprintf(csv, "factor,variant,script,edge_ms,stable_at_700hz,islands,diverged_t_s,gershgorin_ms,linear_window_ms\n");
+    std::fprintf(csv,
+                 "factor,variant,script,edge_ms,stable_at_700hz,islands,diverged_t_s,gershgorin_ms,linear_window_ms\n");
   }
-  std::printf("measured edge, ms (700 Hz: ok = stable at T = 1/700 s, NO = diverges; * = stable again at some T\n"
-              "above the edge; @t = script time at which the run just past the edge diverged, s)\n");
+  std::printf(
+      "measured edge, ms (700 Hz: ok = stable at T = 1/700 s, NO = diverges; * = stable again at some T\n"
+      "above the edge; @t = script time at which the run just past the edge diverged, s)\n");
   std::printf("%-12s %-30s | %-18s %-18s %-18s %-18s | %8s %8s\n", "factor", "variant", "palpate", "stroke-slow",
               "stroke-fast", "pluck", "Gersh.", "lin.win");
   for (const Variant& v : MakeVariants(quick)) {
@@ -513,19 +520,18 @@ int main(int argc, char** argv) {
     ToolCommand tool = BareTool(Script::kPalpate);
     if (v.step) v.step(o, tool);
     const LengthRate rate = o.integrator == Integrator::kExplicitEuler ? o.length_rate : LengthRate::kAnalytic;
-    const double gersh = o.integrator == Integrator::kExplicitEuler
-                             ? GershgorinDt(model, rate, 0)
-                             : [&] {
-                                 double dt = std::numeric_limits<double>::infinity();
-                                 for (int32_t a = 0; a < model.num_atoms; ++a) {
-                                   if (!model.atom_fixed[a]) dt = std::min(dt, SymplecticStableDt(GershgorinBound(model, a)));
-                                 }
-                                 return dt;
-                               }();
+    const double gersh = o.integrator == Integrator::kExplicitEuler ? GershgorinDt(model, rate, 0) : [&] {
+      double dt = std::numeric_limits<double>::infinity();
+      for (int32_t a = 0; a < model.num_atoms; ++a) {
+        if (!model.atom_fixed[a]) dt = std::min(dt, SymplecticStableDt(GershgorinBound(model, a)));
+      }
+      return dt;
+    }();
     const double centre[3] = {geometry.center[0], geometry.center[1], geometry.top_z + tool.radius - 0.05};
     const Linearised win = Linearise(model, o.full ? 0 : o.local_radius, centre, &tool, o.min_distance_fraction);
-    const double lin = o.integrator == Integrator::kExplicitEuler ? LinearEdge(win.mk, win.mc, rate == LengthRate::kFiltered)
-                                                                  : std::numeric_limits<double>::quiet_NaN();
+    const double lin = o.integrator == Integrator::kExplicitEuler
+                           ? LinearEdge(win.mk, win.mc, rate == LengthRate::kFiltered)
+                           : std::numeric_limits<double>::quiet_NaN();
     std::printf("%-12s %-30s |", v.factor, v.name);
     for (Script script : kScripts) {
       if (v.pluck_only && script != Script::kPluck) {
@@ -546,10 +552,11 @@ int main(int argc, char** argv) {
     std::printf(" | %8s %8s\n", Ms(gersh).c_str(), std::isnan(lin) ? "-" : Ms(lin).c_str());
   }
   if (csv) std::fclose(csv);
-  std::printf("\nGersh. = Gershgorin bound over the variant's free atoms without a tool (filtered or analytic as the\n"
-              "variant integrates; symplectic: its own bound); lin.win = exact explicit-Euler edge of the variant's\n"
-              "window linearised at rest at a 0.05 press (home elements isotropic). Edges by a geometric scan of T\n"
-              "from 0.2 to 4 ms (ratio %.2f) and %d bisections.\n",
-              ratio, bisections);
+  std::printf(
+      "\nGersh. = Gershgorin bound over the variant's free atoms without a tool (filtered or analytic as the\n"
+      "variant integrates; symplectic: its own bound); lin.win = exact explicit-Euler edge of the variant's\n"
+      "window linearised at rest at a 0.05 press (home elements isotropic). Edges by a geometric scan of T\n"
+      "from 0.2 to 4 ms (ratio %.2f) and %d bisections.\n",
+      ratio, bisections);
   return 0;
 }

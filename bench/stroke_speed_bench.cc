@@ -4,10 +4,10 @@
 // (down between t = 1 and 3 s, 0.11 below contact, then across the 2.4-unit stroke line with the
 // scripts' half-cosine easing) is run with its crossing time D swept, three crossings each, and
 // the table prints, per D: the peak speed, max |f_x| and |f_y| while crossing, mean f_z, and the
-// inertial part of f_x while accelerating and while decelerating (the first crossing's halves): f_x minus a quasi-static crossing's f_x at the same x
-// (D = 40 s), which takes out what the discrete surface alone gives (0.26 N with the tool still).
-// The thesis: slow stroke, f_x "increases to -0.1 N" while accelerating; fast stroke, |f_x| "almost
-// 2 N" each traversal, f_y "increases dramatically", f_z "similar". Deterministic; prints figures.
+// inertial part of f_x while accelerating and while decelerating (the first crossing's halves): f_x minus a
+// quasi-static crossing's f_x at the same x (D = 40 s), which takes out what the discrete surface alone gives (0.26 N
+// with the tool still). The thesis: slow stroke, f_x "increases to -0.1 N" while accelerating; fast stroke, |f_x|
+// "almost 2 N" each traversal, f_y "increases dramatically", f_z "similar". Deterministic; prints figures.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -27,12 +27,13 @@ namespace {
 
 using namespace idms;
 
-constexpr double kDepth = 0.11;   // below first contact, as the stroke scripts
+constexpr double kDepth = 0.11;  // below first contact, as the stroke scripts
 constexpr double kPressedAt = 3.0;
 constexpr int kCrossings = 3;
 
 struct Row {
-  double crossing_s = 0, peak_speed = 0, max_fx = 0, max_fy = 0, mean_fz = 0, inertial_fx_accel = 0, inertial_fx_decel = 0;
+  double crossing_s = 0, peak_speed = 0, max_fx = 0, max_fy = 0, mean_fz = 0, inertial_fx_accel = 0,
+         inertial_fx_decel = 0;
   int64_t warnings = 0;
 };
 

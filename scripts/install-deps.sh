@@ -20,7 +20,7 @@ packages=(
   nodejs npm
 )
 $build_only || packages+=(
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
   docker.io docker-compose debootstrap

@@ -1,14 +1,14 @@
 // Bullet's btSoftBody stepped on the same atom/element network as the idms throughput bench.
-#include <algorithm>
-#include <cmath>
-#include <memory>
-#include <vector>
-
 #include <BulletSoftBody/btDefaultSoftBodySolver.h>
 #include <BulletSoftBody/btSoftBody.h>
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 #include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <vector>
 
 #include "idms/sim/generate.h"
 #include "runner.h"
@@ -39,7 +39,8 @@ double RunBulletSoftBody(int64_t atoms, double seconds, int reps, int64_t* links
   auto* body = new btSoftBody(&info, model.num_atoms, x.data(), m.data());
   btSoftBody::Material* material = body->appendMaterial();
   material->m_kLST = 0.5;
-  for (int32_t e = 0; e < model.num_elems; ++e) body->appendLink(model.elem_atoms[2 * e], model.elem_atoms[2 * e + 1], material);
+  for (int32_t e = 0; e < model.num_elems; ++e)
+    body->appendLink(model.elem_atoms[2 * e], model.elem_atoms[2 * e + 1], material);
   body->m_cfg.piterations = 1;
   body->m_cfg.collisions = 0;
   body->m_cfg.kDP = 0.01;

@@ -6,9 +6,9 @@
 
 // How a run is set up.
 struct ThroughputVariant {
-  bool reorder = true;  // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
-  bool fused = true;    // full mode's fused pass (false: the general path, ws.full.enabled = false)
-  bool huge_pages = true;  // FullPass::huge_pages (the pass's arrays on 2 MiB pages where the kernel agrees)
+  bool reorder = true;        // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
+  bool fused = true;          // full mode's fused pass (false: the general path, ws.full.enabled = false)
+  bool huge_pages = true;     // FullPass::huge_pages (the pass's arrays on 2 MiB pages where the kernel agrees)
   bool energy_check = false;  // StabilityOptions::energy_check (the pass then forms the energies)
 };
 

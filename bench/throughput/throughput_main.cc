@@ -97,12 +97,14 @@ int main(int argc, char** argv) {
     std::vector<double> a(size_t{40} << 20, 0.0), b(size_t{40} << 20, 1.0), c(size_t{40} << 20, 2.0);
     triad = Triad(a, b, c, 7);
   }
-  std::printf("STREAM triad (one core, 3 x 320 MiB, thread CPU time): %.2f GB/s (median of 7); each repetition\n"
-              "below is paired with its own triad (3 x 128 MiB, median of 3) taken just before it\n",
-              triad / 1e9);
-  std::printf("full model, symplectic Euler, eq. 4.6 filter on, energy check %s, one core; slabs renumbered by "
-              "`idms-sim reorder`\n\n",
-              check ? "on (formed in the pass)" : "off");
+  std::printf(
+      "STREAM triad (one core, 3 x 320 MiB, thread CPU time): %.2f GB/s (median of 7); each repetition\n"
+      "below is paired with its own triad (3 x 128 MiB, median of 3) taken just before it\n",
+      triad / 1e9);
+  std::printf(
+      "full model, symplectic Euler, eq. 4.6 filter on, energy check %s, one core; slabs renumbered by "
+      "`idms-sim reorder`\n\n",
+      check ? "on (formed in the pass)" : "off");
   std::printf("%9s %9s | %10s %6s %5s | %10s %6s %5s %6s | %10s %10s | %10s %7s\n", "atoms", "elements", "f64 el/s",
               "B/el", "bound", "f32 el/s", "B/el", "bound", "triad", "f32 as-gen", "f32 gener.", "bullet", "f32/blt");
   std::FILE* csv = csv_path ? std::fopen(csv_path, "w") : nullptr;
@@ -119,18 +121,22 @@ int main(int argc, char** argv) {
     const ThroughputResult d = f64 ? RunThroughputDouble(n, seconds, reps, main_variant) : ThroughputResult{};
     const ThroughputResult f = f32 ? RunThroughputFloat(n, seconds, reps, main_variant) : ThroughputResult{};
     // --main-only: the fused pass on the renumbered slab only (the other columns print 0).
-    const ThroughputResult f_gen = variants && f32 ? RunThroughputFloat(n, seconds, reps, {.reorder = false, .huge_pages = huge}) : ThroughputResult{};
+    const ThroughputResult f_gen = variants && f32
+                                       ? RunThroughputFloat(n, seconds, reps, {.reorder = false, .huge_pages = huge})
+                                       : ThroughputResult{};
     const ThroughputResult f_general =
-        variants && f32 ? RunThroughputFloat(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge}) : ThroughputResult{};
+        variants && f32 ? RunThroughputFloat(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge})
+                        : ThroughputResult{};
     const ThroughputResult d_general =
-        variants && f64 ? RunThroughputDouble(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge}) : ThroughputResult{};
+        variants && f64 ? RunThroughputDouble(n, seconds, reps, {.reorder = true, .fused = false, .huge_pages = huge})
+                        : ThroughputResult{};
     int64_t links = 0;
     const double b = bullet ? RunBulletSoftBody(n, seconds, reps, &links) : 0;
     const double d_ratio = d.bound_ratio, f_ratio = f.bound_ratio;
     std::printf("%9lld %9lld | %10.3e %6.1f %4.0f%% | %10.3e %6.1f %4.0f%% %6.1f | %10.3e %10.3e | ",
                 static_cast<long long>(f64 ? d.atoms : f.atoms), static_cast<long long>(f64 ? d.elements : f.elements),
-                d.elem_updates_per_s, d.bytes_per_elem, 100 * d_ratio, f.elem_updates_per_s, f.bytes_per_elem, 100 * f_ratio,
-                f.triad_bytes_per_s / 1e9, f_gen.elem_updates_per_s, f_general.elem_updates_per_s);
+                d.elem_updates_per_s, d.bytes_per_elem, 100 * d_ratio, f.elem_updates_per_s, f.bytes_per_elem,
+                100 * f_ratio, f.triad_bytes_per_s / 1e9, f_gen.elem_updates_per_s, f_general.elem_updates_per_s);
     if (b > 0) {
       std::printf("%10.3e %6.1fx\n", b, f.elem_updates_per_s / b);
     } else {
@@ -138,9 +144,9 @@ int main(int argc, char** argv) {
     }
     if (csv) {
       std::fprintf(csv, "%lld,%lld,%.6g,%.4g,%.4f,%.6g,%.4g,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.1f,%.1f\n",
-                   static_cast<long long>(f64 ? d.atoms : f.atoms), static_cast<long long>(f64 ? d.elements : f.elements),
-                   d.elem_updates_per_s,
-                   d.bytes_per_elem, d_ratio, f.elem_updates_per_s, f.bytes_per_elem, f_ratio, f_gen.elem_updates_per_s,
+                   static_cast<long long>(f64 ? d.atoms : f.atoms),
+                   static_cast<long long>(f64 ? d.elements : f.elements), d.elem_updates_per_s, d.bytes_per_elem,
+                   d_ratio, f.elem_updates_per_s, f.bytes_per_elem, f_ratio, f_gen.elem_updates_per_s,
                    f_general.elem_updates_per_s, d_general.elem_updates_per_s, b, triad, f.triad_bytes_per_s,
                    d.huge_mib, f.huge_mib);
     }

@@ -114,7 +114,8 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
   const std::string_view script_name = args.substr(0, comma);
   ScriptTarget target;
   if (!ParseScriptName(script_name, &target.script)) {
-    *error = Cat({"unknown script '", script_name}) + "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle";
+    *error = Cat({"unknown script '", script_name}) +
+             "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle";
     return nullptr;
   }
   if (context.model == nullptr) {

@@ -436,9 +436,9 @@ struct Uplink::Impl final : ConnectionHandler {
     backlog.MarkSent(n);
     FillStats(batch_msg->mutable_stats());
     batch_msg->set_samples_dropped(backlog.num_dropped());
-    batch_msg->set_sent_unix_ns(static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                                          std::chrono::system_clock::now().time_since_epoch())
-                                                          .count()));
+    batch_msg->set_sent_unix_ns(static_cast<uint64_t>(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+            .count()));
     SerializeEnvelope(scratch, &frame);
   }
 

@@ -332,7 +332,7 @@ void ApplySceneDefaults(v1::Scene* scene) {
   }
   if (scene->integrator() == v1::INTEGRATOR_UNSPECIFIED) {
     scene->set_integrator(preset.integrator == Integrator::kExplicitEuler ? v1::INTEGRATOR_EXPLICIT_EULER
-                                                                           : v1::INTEGRATOR_SYMPLECTIC_EULER);
+                                                                          : v1::INTEGRATOR_SYMPLECTIC_EULER);
   }
   if (!scene->has_dt_s()) scene->set_dt_s(0.001);
   if (!scene->has_air_resistance()) scene->set_air_resistance(0);

@@ -62,7 +62,8 @@ int main(int argc, char** argv) {
 #ifdef IDMS_DEFAULT_WEB_ROOT
   o.web_root = IDMS_DEFAULT_WEB_ROOT;
 #endif
-  app.add_option("--web-root", o.web_root, "The built web viewer served at / (index.html, assets/)")->capture_default_str();
+  app.add_option("--web-root", o.web_root, "The built web viewer served at / (index.html, assets/)")
+      ->capture_default_str();
   app.add_option("--max-upload-mb", max_upload_mb, "Largest request body, MiB (413 beyond, before it is read)")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();

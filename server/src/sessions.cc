@@ -50,12 +50,18 @@ double FrameTimeS(const v1::Envelope& e) {
       const auto& s = e.device_samples().samples();
       return s.empty() ? 0 : s[s.size() - 1].time_s();
     }
-    case v1::Envelope::kMeshKeyframe: return e.mesh_keyframe().time_s();
-    case v1::Envelope::kMeshDelta: return e.mesh_delta().time_s();
-    case v1::Envelope::kTopologyEvent: return e.topology_event().time_s();
-    case v1::Envelope::kSessionEvent: return e.session_event().time_s();
-    case v1::Envelope::kAnnotation: return e.annotation().time_s();
-    default: return 0;
+    case v1::Envelope::kMeshKeyframe:
+      return e.mesh_keyframe().time_s();
+    case v1::Envelope::kMeshDelta:
+      return e.mesh_delta().time_s();
+    case v1::Envelope::kTopologyEvent:
+      return e.topology_event().time_s();
+    case v1::Envelope::kSessionEvent:
+      return e.session_event().time_s();
+    case v1::Envelope::kAnnotation:
+      return e.annotation().time_s();
+    default:
+      return 0;
   }
 }
 

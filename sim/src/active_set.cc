@@ -108,8 +108,7 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
     for (int32_t a = 0; a < m.num_atoms; ++a) b.AddActive(a, 0), b.AddCandidate(a);
   } else {
     // Window atoms: within r_l of each tool (at least its radius) and of each grasped atom.
-    const int32_t linger =
-        static_cast<int32_t>(std::ceil(ws.options.settle_time_s / ws.options.dt_s - 1e-9));
+    const int32_t linger = static_cast<int32_t>(std::ceil(ws.options.settle_time_s / ws.options.dt_s - 1e-9));
     for (int32_t t = 0; t < ws.num_tools; ++t) {
       const ActiveTool& at = ws.tools[t];
       if (at.kind == ToolKind::kNone) continue;

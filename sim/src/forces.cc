@@ -43,7 +43,7 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     ActiveTool& at = ws.tools[t];
     at.eval_force[0] = at.eval_force[1] = at.eval_force[2] = 0;
-    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    if (!IsContactTool(at.kind)) continue;
     for (int32_t i = 0; i < ws.num_candidates; ++i) {
       const int32_t a = ws.candidates[i];
       if (a == at.grasp_atom) continue;  // held by the grasp element instead
@@ -81,7 +81,8 @@ void DegenerateElement(const Model& m, Workspace& ws, int32_t e, Real push) {
   if (push <= 0) return;
   const int32_t a0 = m.elem_atoms[2 * e], a1 = m.elem_atoms[2 * e + 1];
   Real dir[3];
-  for (int c = 0; c < 3; ++c) dir[c] = static_cast<Real>((m.atom_pos_eq[3 * a1 + c] - m.atom_pos_eq[3 * a0 + c]) / m.elem_leq[e]);
+  for (int c = 0; c < 3; ++c)
+    dir[c] = static_cast<Real>((m.atom_pos_eq[3 * a1 + c] - m.atom_pos_eq[3 * a0 + c]) / m.elem_leq[e]);
   for (int c = 0; c < 3; ++c) {
     if (ws.atom_mark[a0]) ws.atom_force[3 * a0 + c] -= push * dir[c];
     if (ws.atom_mark[a1]) ws.atom_force[3 * a1 + c] += push * dir[c];
@@ -134,7 +135,8 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
       if constexpr (!kFiltered) {
         // l' = s^ . (v1 - v0): exact, and a function of (x, v) as RK4 and the Jacobian need.
         rate = ((vel[3 * a1] - vel[3 * a0]) * sx + (vel[3 * a1 + 1] - vel[3 * a0 + 1]) * sy +
-                (vel[3 * a1 + 2] - vel[3 * a0 + 2]) * sz) * inv_l;
+                (vel[3 * a1 + 2] - vel[3 * a0 + 2]) * sz) *
+               inv_l;
       }
       // eq. 4.8: b l' s^; eq. 4.9: f = f_k + f_b.
       mag += static_cast<Real>(m.elem_b[e]) * rate * inv_l;
@@ -182,7 +184,7 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
   const double eps = 4 * std::numeric_limits<Real>::epsilon();
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     const ActiveTool& at = ws.tools[t];
-    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    if (!IsContactTool(at.kind)) continue;
     const double dl = eps * (std::fabs(at.c[0]) + std::fabs(at.c[1]) + std::fabs(at.c[2]) + 1);
     for (int32_t i = 0; i < ws.num_candidates; ++i) {
       const int32_t a = ws.candidates[i];

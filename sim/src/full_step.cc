@@ -107,15 +107,15 @@ inline void StreamFence() {
 // for s' too (three scalar stores in phase 1; 5% slower at 10^6 atoms), and rows for the force
 // (phase 2's transposes cost more than they save in phase 3; 8% slower).
 struct Batch {
-  Real* s4;               // (kBatch x 4) s' = p_other - p_g; lane 3 is not read
-  Real* dv4;              // (kBatch x 4) v_other - v_g (analytic rate)
-  Real *ex, *ey, *ez;     // (kBatch) the element's force on g (eq. 4.9, g's frame)
-  Real* prev_len;         // (kBatch) eq. 4.6 inputs when they are gathered
-  Real* prev_rate;        // (kBatch)
-  Real* fresh;            // (kBatch) 1 = continue the filter, 0 = restart it
-  Real* new_len;          // (kBatch) eq. 4.6 outputs when they are scattered
-  Real* new_rate;         // (kBatch)
-  Real* end_len2;         // (kBatch) |s'|^2 at the tick's end, of an earlier batch (energy check)
+  Real* s4;            // (kBatch x 4) s' = p_other - p_g; lane 3 is not read
+  Real* dv4;           // (kBatch x 4) v_other - v_g (analytic rate)
+  Real *ex, *ey, *ez;  // (kBatch) the element's force on g (eq. 4.9, g's frame)
+  Real* prev_len;      // (kBatch) eq. 4.6 inputs when they are gathered
+  Real* prev_rate;     // (kBatch)
+  Real* fresh;         // (kBatch) 1 = continue the filter, 0 = restart it
+  Real* new_len;       // (kBatch) eq. 4.6 outputs when they are scattered
+  Real* new_rate;      // (kBatch)
+  Real* end_len2;      // (kBatch) |s'|^2 at the tick's end, of an earlier batch (energy check)
 };
 
 Batch BatchViews(FullPass& fp) {
@@ -191,8 +191,15 @@ class Substep {
   static constexpr bool kDirectOut = kIdentity;
 
   Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after)
-      : m_(m), s_(s), ws_(ws), fp_(ws.full), b_(BatchViews(ws.full)), T_(T), backup_(backup),
-        before_(kEnergy && before), after_(kEnergy && after) {}
+      : m_(m),
+        s_(s),
+        ws_(ws),
+        fp_(ws.full),
+        b_(BatchViews(ws.full)),
+        T_(T),
+        backup_(backup),
+        before_(kEnergy && before),
+        after_(kEnergy && after) {}
 
   Progress Run() {
     const int32_t n = ws_.num_active, ne = ws_.num_elems;
@@ -455,15 +462,22 @@ class Substep {
   // Integrate's arrays and constants, as locals of Run (see there).
   struct AtomIo {
     Real *pos, *vel, *force;
-    const Real* t_over_m;             // by slot
-    Real *backup_pos, *backup_vel;    // by slot; null: no rollback copy in this substep
-    Real* backup_rows;                // by slot, 8 each (kRowBackup); null as backup_pos
+    const Real* t_over_m;           // by slot
+    Real *backup_pos, *backup_vel;  // by slot; null: no rollback copy in this substep
+    Real* backup_rows;              // by slot, 8 each (kRowBackup); null as backup_pos
     Real T;
     int32_t last;
   };
   AtomIo MakeAtomIo() const {
-    return {pos_,  vel_, force_, fp_.atom_t_over_m.data(), backup_ ? ws_.backup_pos.data() : nullptr,
-            ws_.backup_vel.data(), backup_ ? ws_.full.backup_rows.data() : nullptr, T_, last_};
+    return {pos_,
+            vel_,
+            force_,
+            fp_.atom_t_over_m.data(),
+            backup_ ? ws_.backup_pos.data() : nullptr,
+            ws_.backup_vel.data(),
+            backup_ ? ws_.full.backup_rows.data() : nullptr,
+            T_,
+            last_};
   }
 
   static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check, [[maybe_unused]] Kinetic& k) {
@@ -511,8 +525,8 @@ class Substep {
   int32_t prefetched_ = 0;  // Prefetch has covered the atoms before this one
   int32_t marks_ = 0;
   uint64_t degenerate_[kMaskWords] = {};  // the batch's degenerate elements not yet taken
-  double energy_[3] = {0, 0, 0};           // BatchIo::energy at the substep's start
-  int32_t trail_ = 0;                      // ElasticAfter has summed the elements before this
+  double energy_[3] = {0, 0, 0};          // BatchIo::energy at the substep's start
+  int32_t trail_ = 0;                     // ElasticAfter has summed the elements before this
 };
 
 template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy>
@@ -557,7 +571,8 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c)
       if constexpr (kRowBackup) {
-        s.atom_pos[3 * a + c] = ws.full.backup_rows[8 * i + c], s.atom_vel[3 * a + c] = ws.full.backup_rows[8 * i + 4 + c];
+        s.atom_pos[3 * a + c] = ws.full.backup_rows[8 * i + c],
+                           s.atom_vel[3 * a + c] = ws.full.backup_rows[8 * i + 4 + c];
       } else {
         s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
       }
@@ -714,7 +729,7 @@ void ClearExtraK(Workspace& ws) {
   bool contact = false;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     const ActiveTool& at = ws.tools[t];
-    contact = contact || at.kind == ToolKind::kSphere || at.kind == ToolKind::kTweezers;
+    contact = contact || IsContactTool(at.kind);
     if (at.grasp_atom >= 0) ws.atom_extra_k[at.grasp_atom] = 0;
   }
   if (!contact) return;
@@ -735,7 +750,7 @@ double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integ
   int32_t touched_at_min = 0;
   bool contact = false;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
-    contact = contact || ws.tools[t].kind == ToolKind::kSphere || ws.tools[t].kind == ToolKind::kTweezers;
+    contact = contact || IsContactTool(ws.tools[t].kind);
   }
   if (integrator == ws.options.integrator && !contact) return dt;
   if (integrator == ws.options.integrator) {

@@ -70,9 +70,8 @@ template <Rate kRate, bool kDirectIn, bool kEnergy, class V>
 [[gnu::always_inline]] inline void ForceMultiple(const BatchIo& io, int32_t j, const V& l, const V& sx, const V& sy,
                                                  const V& sz, [[maybe_unused]] const V& dvx,
                                                  [[maybe_unused]] const V& dvy, [[maybe_unused]] const V& dvz,
-                                                 [[maybe_unused]] const V& old_len,
-                                                 [[maybe_unused]] const V& old_rate, V& mag,
-                                                 [[maybe_unused]] EnergySums<V>& energy) {
+                                                 [[maybe_unused]] const V& old_len, [[maybe_unused]] const V& old_rate,
+                                                 V& mag, [[maybe_unused]] EnergySums<V>& energy) {
   V k, leq;
   [[maybe_unused]] V b{}, rate{};
   LoadLanes(k, io.k + j), LoadLanes(leq, io.leq + j);

@@ -40,9 +40,9 @@ constexpr int32_t kMaskWords = (kBatch + 63) / 64;
 struct BatchIo {
   int32_t n;
   Real inv_t, lambda;
-  const Real *k, *b, *leq;  // (n) model values
-  const Real* s4;           // (n x 4) rows: s' = p_other - p_g; lane 3 is not read
-  const Real* dv4;          // (n x 4) rows: v_other - v_g (analytic rate)
+  const Real *k, *b, *leq;                   // (n) model values
+  const Real* s4;                            // (n x 4) rows: s' = p_other - p_g; lane 3 is not read
+  const Real* dv4;                           // (n x 4) rows: v_other - v_g (analytic rate)
   const Real *prev_len, *prev_rate, *fresh;  // (n) gathered eq. 4.6 inputs
   Real *len, *rate;                          // (n) eq. 4.6 state
   // (n) the rollback copy of len and rate, written on the way (direct input), or null.

@@ -2,12 +2,11 @@
 // spectral-radius tests behind `idms-sim stability`.
 #include "idms/sim/haptic_window.h"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <Eigen/Eigenvalues>
-#include <Eigen/LU>
 
 #include "idms/sim/check.h"
 #include "idms/sim/integrate.h"
@@ -162,8 +161,8 @@ double StabilityLimitDt(const Eigen::MatrixXd& a, Integrator integrator, double 
   return std::numeric_limits<double>::infinity();
 }
 
-std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>& stable_at, double lo,
-                                              double hi, int num_steps) {
+std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>& stable_at, double lo, double hi,
+                                              int num_steps) {
   IDMS_CHECK(num_steps >= 2 && hi > lo);
   std::vector<StabilityEdge> edges;
   const double tol = (hi - lo) * 1e-12;
@@ -174,7 +173,8 @@ std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>&
     const bool stable = stable_at(value);
     // A flip between two samples: bisect it, keeping the stable end on the stable side.
     if (stable != prev_stable) {
-      const double edge = stable ? Bisect(stable_at, value, prev_value, tol) : Bisect(stable_at, prev_value, value, tol);
+      const double edge =
+          stable ? Bisect(stable_at, value, prev_value, tol) : Bisect(stable_at, prev_value, value, tol);
       edges.push_back({edge, stable});
     }
     prev_value = value, prev_stable = stable;

@@ -88,7 +88,7 @@ void PrefillDiagonal(const Model& m, const State& s, Workspace& ws, Real T) {
   };
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     const ActiveTool& at = ws.tools[t];
-    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    if (!IsContactTool(at.kind)) continue;
     for (int32_t j = 0; j < ws.num_candidates; ++j) {
       const int32_t a = ws.candidates[j];
       if (a == at.grasp_atom || ws.atom_slot[a] < 0) continue;
@@ -211,10 +211,12 @@ void SizeImplicitBuffers(const Model& m, Workspace& ws) {
     ++num_free;
     max_degree = std::max<int64_t>(max_degree, m.atom_elem_num[a]);
   }
-  for (int32_t e = 0; e < m.num_elems; ++e) free_pairs += !m.atom_fixed[m.elem_atoms[2 * e]] && !m.atom_fixed[m.elem_atoms[2 * e + 1]];
+  for (int32_t e = 0; e < m.num_elems; ++e)
+    free_pairs += !m.atom_fixed[m.elem_atoms[2 * e]] && !m.atom_fixed[m.elem_atoms[2 * e + 1]];
   // Full mode: the whole free system. Local mode: a generous window; Step grows it if needed.
   const int64_t atoms = ws.options.full ? num_free : std::min<int64_t>(num_free, 2048);
-  const int64_t nnz = ws.options.full ? 9 * (num_free + 2 * free_pairs) : 9 * atoms * (1 + std::min<int64_t>(max_degree, 24));
+  const int64_t nnz =
+      ws.options.full ? 9 * (num_free + 2 * free_pairs) : 9 * atoms * (1 + std::min<int64_t>(max_degree, 24));
   Reserve(ws.implicit, std::max<int64_t>(atoms, 1), std::max<int64_t>(nnz, 9));
   ws.implicit.atom_dv_guess.assign(3 * static_cast<size_t>(m.num_atoms), Real(0));
 }
@@ -232,7 +234,8 @@ int32_t ImplicitEulerSubstep(const Model& m, State& s, Workspace& ws, Real T, St
   // Grow the buffers if this active system is the largest yet (the only allocation).
   int64_t need = 0;
   for (int32_t i = 0; i < n; ++i) need += 9 * RowBlocks(m, ws, ws.active[i]);
-  if (3 * static_cast<int64_t>(n) > static_cast<int64_t>(ib.rhs.size()) || need > static_cast<int64_t>(ib.values.size())) {
+  if (3 * static_cast<int64_t>(n) > static_cast<int64_t>(ib.rhs.size()) ||
+      need > static_cast<int64_t>(ib.values.size())) {
     ++s.warnings.implicit_grew;
     Reserve(ib, std::max<int64_t>(n, static_cast<int64_t>(ib.rhs.size() / 3) * 2),
             std::max<int64_t>(need, static_cast<int64_t>(ib.values.size()) * 2));

@@ -32,9 +32,9 @@ struct Key {
 };
 
 // Keyframes per script.
-constexpr Key kPalpate[] = {{0.0, 0.5, 0, kHover, false},          {0.5, 0.5, 0, kHover, false},
-                            {2.5, 0.5, 0, -kPalpateDepth, false},  {3.0, 0.5, 0, -kPalpateDepth, false},
-                            {5.0, 0.5, 0, kHover, false},          {5.5, 0.5, 0, kHover, false}};
+constexpr Key kPalpate[] = {{0.0, 0.5, 0, kHover, false},         {0.5, 0.5, 0, kHover, false},
+                            {2.5, 0.5, 0, -kPalpateDepth, false}, {3.0, 0.5, 0, -kPalpateDepth, false},
+                            {5.0, 0.5, 0, kHover, false},         {5.5, 0.5, 0, kHover, false}};
 // The strokes at the thesis's speeds (docs/thesis-comparison.md, "Stroke speeds", says how they
 // were derived: the seed has the figures' captions and text, not their plots, so the speeds are
 // the ones at which this model gives the forces the text reports): the MIO comes down between
@@ -54,9 +54,8 @@ constexpr Key kStrokeFast[] = {{0.0, 0.0, 1, kHover, false},        {1.0, 0.0, 1
 constexpr Key kStrokeGentle[] = {{0.0, 0.0, 1, kHover, false},        {1.0, 0.0, 1, kHover, false},
                                  {3.0, 0.0, 1, -kStrokeDepth, false}, {7.0, 1.0, 1, -kStrokeDepth, false},
                                  {8.0, 1.0, 1, -kStrokeDepth, false}, {9.5, 1.0, 1, kHover, false}};
-constexpr Key kPluck[] = {{0.0, 0.5, 0, kHover, false},        {0.5, 0.5, 0, kHover, false},
-                          {2.0, 0.5, 0, -kPluckDepth, true},   {3.5, 0.5, 0, kLift, true},
-                          {4.0, 0.5, 0, kLift, false},         {5.0, 0.5, 0, kLift, false}};
+constexpr Key kPluck[] = {{0.0, 0.5, 0, kHover, false}, {0.5, 0.5, 0, kHover, false}, {2.0, 0.5, 0, -kPluckDepth, true},
+                          {3.5, 0.5, 0, kLift, true},   {4.0, 0.5, 0, kLift, false},  {5.0, 0.5, 0, kLift, false}};
 
 template <size_t N>
 ScriptSample Interpolate(const Key (&keys)[N], const ScriptGeometry& g, double t) {
@@ -90,11 +89,15 @@ std::vector<std::array<double, 2>> Crossings(const Key (&keys)[N]) {
 
 std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
   switch (script) {
-    case Script::kStrokeSlow: return Crossings(kStrokeSlow);
-    case Script::kStrokeFast: return Crossings(kStrokeFast);
-    case Script::kStrokeGentle: return Crossings(kStrokeGentle);
+    case Script::kStrokeSlow:
+      return Crossings(kStrokeSlow);
+    case Script::kStrokeFast:
+      return Crossings(kStrokeFast);
+    case Script::kStrokeGentle:
+      return Crossings(kStrokeGentle);
     case Script::kPalpate:
-    case Script::kPluck: break;
+    case Script::kPluck:
+      break;
   }
   return {};
 }
@@ -137,33 +140,48 @@ ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius) {
 
 ScriptSample SampleScript(Script script, const ScriptGeometry& g, double t) {
   switch (script) {
-    case Script::kPalpate: return Interpolate(kPalpate, g, t);
-    case Script::kStrokeSlow: return Interpolate(kStrokeSlow, g, t);
-    case Script::kStrokeFast: return Interpolate(kStrokeFast, g, t);
-    case Script::kStrokeGentle: return Interpolate(kStrokeGentle, g, t);
-    case Script::kPluck: return Interpolate(kPluck, g, t);
+    case Script::kPalpate:
+      return Interpolate(kPalpate, g, t);
+    case Script::kStrokeSlow:
+      return Interpolate(kStrokeSlow, g, t);
+    case Script::kStrokeFast:
+      return Interpolate(kStrokeFast, g, t);
+    case Script::kStrokeGentle:
+      return Interpolate(kStrokeGentle, g, t);
+    case Script::kPluck:
+      return Interpolate(kPluck, g, t);
   }
   return {};
 }
 
 double ScriptDuration(Script script) {
   switch (script) {
-    case Script::kPalpate: return std::end(kPalpate)[-1].t;
-    case Script::kStrokeSlow: return std::end(kStrokeSlow)[-1].t;
-    case Script::kStrokeFast: return std::end(kStrokeFast)[-1].t;
-    case Script::kStrokeGentle: return std::end(kStrokeGentle)[-1].t;
-    case Script::kPluck: return std::end(kPluck)[-1].t;
+    case Script::kPalpate:
+      return std::end(kPalpate)[-1].t;
+    case Script::kStrokeSlow:
+      return std::end(kStrokeSlow)[-1].t;
+    case Script::kStrokeFast:
+      return std::end(kStrokeFast)[-1].t;
+    case Script::kStrokeGentle:
+      return std::end(kStrokeGentle)[-1].t;
+    case Script::kPluck:
+      return std::end(kPluck)[-1].t;
   }
   return 0;
 }
 
 const char* ScriptName(Script script) {
   switch (script) {
-    case Script::kPalpate: return "palpate";
-    case Script::kStrokeSlow: return "stroke-slow";
-    case Script::kStrokeFast: return "stroke-fast";
-    case Script::kStrokeGentle: return "stroke-gentle";
-    case Script::kPluck: return "pluck";
+    case Script::kPalpate:
+      return "palpate";
+    case Script::kStrokeSlow:
+      return "stroke-slow";
+    case Script::kStrokeFast:
+      return "stroke-fast";
+    case Script::kStrokeGentle:
+      return "stroke-gentle";
+    case Script::kPluck:
+      return "pluck";
   }
   return "?";
 }

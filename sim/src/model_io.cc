@@ -2,6 +2,8 @@
 // commit the model only when the whole file is good; writers print shortest round-trip decimals.
 #include "idms/sim/model_io.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
@@ -11,7 +13,6 @@
 #include <filesystem>
 #include <fstream>
 #include <tuple>
-#include <unistd.h>
 
 #include "text_scanner.h"
 
@@ -20,8 +21,8 @@ namespace {
 
 using internal::TextScanner;
 
-constexpr int64_t kMaxAtoms = 200'000'000;       // 3 * kMaxAtoms fits int32 positions indexing
-constexpr int64_t kMaxElems = 1'000'000'000;     // 2 * kMaxElems fits int32
+constexpr int64_t kMaxAtoms = 200'000'000;    // 3 * kMaxAtoms fits int32 positions indexing
+constexpr int64_t kMaxElems = 1'000'000'000;  // 2 * kMaxElems fits int32
 constexpr int64_t kMaxPolygonSides = 1'000'000;
 
 // Never reserve more than the text could describe: a lying header must not allocate gigabytes.
@@ -88,7 +89,8 @@ bool ParseFemAtoms(TextScanner& in, int64_t na, Model& m) {
     if (!in.ExpectEndOfLine()) return false;
     if (mass < 0) return in.Fail(mass_col, "expected mass >= 0 for " + in.Item() + ", found " + Num(mass));
     if (mass == 0 && bc == kBcFree) {
-      return in.Fail(mass_col, "expected a positive mass for free " + in.Item() + ", found 0 (only fixed atoms may be massless)");
+      return in.Fail(mass_col,
+                     "expected a positive mass for free " + in.Item() + ", found 0 (only fixed atoms may be massless)");
     }
     m.atom_pos_eq.insert(m.atom_pos_eq.end(), {x, y, z});
     m.atom_mass.push_back(mass);
@@ -107,7 +109,9 @@ bool ParseFemElements(TextScanner& in, int64_t na, int64_t ne, Model& m, std::ve
     if (!in.Int("first atom id", 0, na - 1, &a0)) return false;
     const int a1_col = (in.AtEndOfLine(), in.column());
     if (!in.Int("second atom id", 0, na - 1, &a1)) return false;
-    if (a0 == a1) return in.Fail(a1_col, in.Item() + " joins atom " + std::to_string(a0) + " to itself: expected two different atoms");
+    if (a0 == a1)
+      return in.Fail(a1_col,
+                     in.Item() + " joins atom " + std::to_string(a0) + " to itself: expected two different atoms");
     double k, b;
     const int k_col = (in.AtEndOfLine(), in.column());
     if (!in.Real("stiffness", &k)) return false;
@@ -125,7 +129,8 @@ bool ParseFemElements(TextScanner& in, int64_t na, int64_t ne, Model& m, std::ve
 }
 
 // Two elements joining the same pair of atoms (in either order) are a modelling error.
-bool CheckDuplicateElements(const Model& m, const std::vector<int32_t>& lines, std::string_view file, LoadError* error) {
+bool CheckDuplicateElements(const Model& m, const std::vector<int32_t>& lines, std::string_view file,
+                            LoadError* error) {
   std::vector<std::tuple<int32_t, int32_t, int32_t>> pairs(lines.size());
   for (size_t e = 0; e < lines.size(); ++e) {
     const int32_t a = m.elem_atoms[2 * e], b = m.elem_atoms[2 * e + 1];
@@ -151,12 +156,13 @@ void AddPolygon(const std::vector<int32_t>& ids, SurfaceMesh& mesh) {
   for (size_t i = 1; i + 1 < ids.size(); ++i) mesh.tri_verts.insert(mesh.tri_verts.end(), {ids[0], ids[i], ids[i + 1]});
 }
 
-bool CheckDistinct(TextScanner& in, const std::vector<int32_t>& ids, const std::vector<int>& cols, std::string_view which) {
+bool CheckDistinct(TextScanner& in, const std::vector<int32_t>& ids, const std::vector<int>& cols,
+                   std::string_view which) {
   for (size_t i = 0; i < ids.size(); ++i) {
     for (size_t j = 0; j < i; ++j) {
       if (ids[i] == ids[j]) {
-        return in.Fail(cols[i], std::string(which) + " repeats vertex " + std::to_string(ids[i]) +
-                                    ": expected distinct vertices");
+        return in.Fail(
+            cols[i], std::string(which) + " repeats vertex " + std::to_string(ids[i]) + ": expected distinct vertices");
       }
     }
   }
@@ -188,7 +194,8 @@ bool ParseFem(std::string_view text, std::string_view file, Model* model, LoadEr
   Model m;
   m.name = std::string(name);
   const size_t atoms = SafeReserve(na, text.size(), 12);
-  m.atom_pos_eq.reserve(3 * atoms), m.atom_mass.reserve(atoms), m.atom_fixed.reserve(atoms), m.atom_external.reserve(atoms);
+  m.atom_pos_eq.reserve(3 * atoms), m.atom_mass.reserve(atoms), m.atom_fixed.reserve(atoms),
+      m.atom_external.reserve(atoms);
   if (!ParseFemAtoms(in, na, m)) return false;
   std::vector<int32_t> lines;
   const size_t elems = SafeReserve(ne, text.size(), 8);
@@ -211,7 +218,8 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   std::string_view name;
   int64_t nv, np;
   if (!in.Word("surface name", &name)) return false;
-  if (!in.Int("number of vertices", 0, kMaxAtoms, &nv) || !in.Int("number of polygons", 0, kMaxElems, &np)) return false;
+  if (!in.Int("number of vertices", 0, kMaxAtoms, &nv) || !in.Int("number of polygons", 0, kMaxElems, &np))
+    return false;
   if (!in.ExpectEndOfLine()) return false;
 
   // Vertices.
@@ -240,7 +248,8 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
     const int sides_col = (in.AtEndOfLine(), in.column());
     if (!in.Int("number of sides", INT32_MIN, INT32_MAX, &sides)) return false;
     if (sides < 3 || sides > kMaxPolygonSides) {
-      return in.Fail(sides_col, "expected a polygon of at least 3 vertices for " + in.Item() + ", found " + std::to_string(sides));
+      return in.Fail(sides_col,
+                     "expected a polygon of at least 3 vertices for " + in.Item() + ", found " + std::to_string(sides));
     }
     ids.clear(), cols.clear();
     for (int64_t s = 0; s < sides; ++s) {
@@ -326,8 +335,8 @@ bool AttachSurface(const SurfaceMesh& mesh, std::string_view file, double tolera
     return false;
   };
   if (mesh.num_verts() != m.num_external) {
-    return fail(1, "expected " + std::to_string(m.num_external) + " vertices (one per external atom of the fem), found " +
-                       std::to_string(mesh.num_verts()));
+    return fail(1, "expected " + std::to_string(m.num_external) +
+                       " vertices (one per external atom of the fem), found " + std::to_string(mesh.num_verts()));
   }
   // Vertex i must sit where the i-th external atom rests.
   for (int32_t v = 0; v < mesh.num_verts(); ++v) {

@@ -23,8 +23,8 @@ void BuildSpatialHash(double cell, const Real* pos, int32_t num_atoms, SpatialHa
 }
 
 void UpdateSpatialHash(SpatialHash& h, int32_t atom, const Real* p) {
-  const uint64_t key = HashCellKey(HashCellCoord(p[0], h.inv_cell), HashCellCoord(p[1], h.inv_cell),
-                                   HashCellCoord(p[2], h.inv_cell));
+  const uint64_t key =
+      HashCellKey(HashCellCoord(p[0], h.inv_cell), HashCellCoord(p[1], h.inv_cell), HashCellCoord(p[2], h.inv_cell));
   const uint64_t old = h.atom_key[atom];
   if (key == old) return;
   // Unlink from the old bucket.

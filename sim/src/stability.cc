@@ -30,7 +30,7 @@ AtomBound GershgorinBound(const Model& model, int32_t atom, double extra_k, doub
 double EulerStableDt(const AtomBound& bound) {
   const double w2 = bound.omega2, c = bound.c;
   if (w2 <= 0) return c > 0 ? 2.0 / c : std::numeric_limits<double>::infinity();
-  if (c * c < 4 * w2) return c / w2;  // underdamped: |1 + lambda T|^2 = 1 - cT + w2 T^2
+  if (c * c < 4 * w2) return c / w2;                      // underdamped: |1 + lambda T|^2 = 1 - cT + w2 T^2
   return 2.0 / (0.5 * c + std::sqrt(0.25 * c * c - w2));  // overdamped: the faster real root
 }
 

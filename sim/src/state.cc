@@ -44,18 +44,9 @@ void SyncFilterToPositions(const Model& model, State& s) {
 }
 
 std::array<WarningKind, kNumWarningKinds> WarningKinds(const WarningCounters& w) {
-  return {{{"bad_tool_input", w.bad_tool_input},
-           {"substep_limit", w.substep_limit},
-           {"implicit_fallback", w.implicit_fallback},
-           {"rollback", w.rollback},
-           {"unrecovered", w.unrecovered},
-           {"state_repaired", w.state_repaired},
-           {"device_force_nonfinite", w.device_force_nonfinite},
-           {"device_force_clamped", w.device_force_clamped},
-           {"device_force_rate_limited", w.device_force_rate_limited},
-           {"cg_not_converged", w.cg_not_converged},
-           {"implicit_grew", w.implicit_grew},
-           {"workspace_resync", w.workspace_resync}}};
+#define IDMS_WARNING_KIND(name, meaning) WarningKind{#name, w.name},
+  return {{IDMS_WARNINGS(IDMS_WARNING_KIND)}};
+#undef IDMS_WARNING_KIND
 }
 
 int64_t TotalWarnings(const WarningCounters& w) {

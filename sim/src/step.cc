@@ -55,7 +55,7 @@ struct Plan {
 void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     const ActiveTool& at = ws.tools[t];
-    if (at.kind != ToolKind::kSphere && at.kind != ToolKind::kTweezers) continue;
+    if (!IsContactTool(at.kind)) continue;
     for (int32_t i = 0; i < ws.num_candidates; ++i) {
       const int32_t a = ws.candidates[i];
       const Real* p = &s.atom_pos[3 * a];

@@ -34,9 +34,9 @@ class TextScanner {
   bool Word(std::string_view what, std::string_view* out);
   bool Int(std::string_view what, int64_t lo, int64_t hi, int64_t* out);
   bool Real(std::string_view what, double* out);  // finite numbers only
-  bool AtEndOfLine();                              // skips blanks; true if nothing is left
-  bool ExpectEndOfLine();                          // error if anything but blanks remains
-  bool ExpectEndOfFile(std::string_view what);     // error if another non-blank line follows
+  bool AtEndOfLine();                             // skips blanks; true if nothing is left
+  bool ExpectEndOfLine();                         // error if anything but blanks remains
+  bool ExpectEndOfFile(std::string_view what);    // error if another non-blank line follows
   int column() const { return static_cast<int>(pos_) + 1; }
 
   // Sets the error at the current line and the given 1-based column (0 = whole line).
@@ -50,11 +50,11 @@ class TextScanner {
   std::string_view text_;
   std::string_view file_;
   LoadError* error_;
-  size_t next_ = 0;         // offset of the next line in text_
-  std::string_view line_;   // current line
+  size_t next_ = 0;        // offset of the next line in text_
+  std::string_view line_;  // current line
   int line_number_ = 0;
-  int total_lines_ = 0;     // lines consumed so far (for end-of-file messages)
-  size_t pos_ = 0;          // offset in line_
+  int total_lines_ = 0;  // lines consumed so far (for end-of-file messages)
+  size_t pos_ = 0;       // offset in line_
   const char* kind_ = nullptr;
   int64_t index_ = 0, count_ = 0;
 };

@@ -89,8 +89,8 @@ bool ValidCommand(const ToolCommand& c) {
 
 // Elements crossing the quad a blade swept from (a0, b0) to (a1, b1) become pending cuts.
 // Candidates: elements of atoms near the sweep (hash) or, in full mode, every element.
-int32_t DetectCuts(const Model& m, const State& s, Workspace& ws, const double* a0, const double* b0,
-                   const double* a1, const double* b1) {
+int32_t DetectCuts(const Model& m, const State& s, Workspace& ws, const double* a0, const double* b0, const double* a1,
+                   const double* b1) {
   int32_t cut = 0;
   auto test = [&](int32_t e) {
     if (ws.elem_cut[e]) return;

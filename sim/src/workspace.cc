@@ -43,7 +43,8 @@ void BuildAtomTriangles(const Model& m, Workspace& ws) {
 
 Workspace MakeWorkspace(const Model& m, const StepOptions& options) {
   CheckOptions(options);
-  IDMS_CHECK(static_cast<int32_t>(m.atom_mass.size()) == m.num_atoms && m.num_elems == static_cast<int32_t>(m.elem_k.size()));
+  IDMS_CHECK(static_cast<int32_t>(m.atom_mass.size()) == m.num_atoms &&
+             m.num_elems == static_cast<int32_t>(m.elem_k.size()));
   Workspace ws;
   ws.options = options;
   ws.num_atoms = m.num_atoms;

@@ -4,8 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <iostream>
 #include <ctime>
+#include <iostream>
 #include <sstream>
 
 #include "command.h"

@@ -35,14 +35,23 @@ void Setup(CLI::App& app) {
   static std::vector<std::string> inclusions;
   static std::string out;
   slab->add_option("--rows", options.rows, "Rows of the top hex grid")->required()->check(CLI::Range(2, 100000));
-  slab->add_option("--cols", options.cols, "Atoms in even rows (odd rows have one more)")->required()->check(CLI::Range(1, 100000));
-  slab->add_option("--spacing", options.spacing, "Element length of the top grid")->check(CLI::PositiveNumber)->capture_default_str();
+  slab->add_option("--cols", options.cols, "Atoms in even rows (odd rows have one more)")
+      ->required()
+      ->check(CLI::Range(1, 100000));
+  slab->add_option("--spacing", options.spacing, "Element length of the top grid")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   slab->add_option("--k", options.k, "Element stiffness")->check(CLI::NonNegativeNumber)->capture_default_str();
   slab->add_option("--b", options.b, "Element viscosity")->check(CLI::NonNegativeNumber)->capture_default_str();
   slab->add_option("--mass", options.mass, "Atom mass")->check(CLI::PositiveNumber)->capture_default_str();
-  slab->add_option("--home-k", options.home_k, "Home element stiffness")->check(CLI::NonNegativeNumber)->capture_default_str();
-  slab->add_option("--home-b", options.home_b, "Home element viscosity")->check(CLI::NonNegativeNumber)->capture_default_str();
-  slab->add_option("--decimals", options.decimals, "Round positions to this many decimals (-1: exact)")->capture_default_str();
+  slab->add_option("--home-k", options.home_k, "Home element stiffness")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  slab->add_option("--home-b", options.home_b, "Home element viscosity")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  slab->add_option("--decimals", options.decimals, "Round positions to this many decimals (-1: exact)")
+      ->capture_default_str();
   slab->add_option("--name", options.name, "Model name written in the headers")->capture_default_str();
   slab->add_option("--inclusion", inclusions, "Stiff, heavy region X,Y,Z,RADIUS,K_SCALE,MASS_SCALE (repeatable)");
   slab->add_option("--out", out, "Output prefix: writes PREFIX.fem and PREFIX.plg")->required();

@@ -5,9 +5,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <sstream>
-#include <ctime>
 
 #include "command.h"
 #include "idms/sim/edit.h"
@@ -24,8 +24,8 @@ namespace {
 struct RunArgs {
   std::string model, script = "palpate", preset = "default", integrator, tool, csv, plot, fit_plot;
   double dt = 1e-3, local_radius = 0, lambda = 1.0;  // integrator, local_radius: the preset's unless given
-  std::vector<double> plot_window;  // --plot-window T0,T1: the plot's time axis
-  int64_t max_ticks = -1;  // -1 = the whole script
+  std::vector<double> plot_window;                   // --plot-window T0,T1: the plot's time axis
+  int64_t max_ticks = -1;                            // -1 = the whole script
   bool full = false, json = false;
 };
 
@@ -122,8 +122,12 @@ void Plot(const RunArgs& a, const std::string& title) {
   if (a.plot_window.size() == 2) spec.x_range = std::array<double, 2>{a.plot_window[0], a.plot_window[1]};
   const char* columns[][2] = {{"x", "x"}, {"y", "y"}, {"z", "z"}, {"fx", "f_x"}, {"fy", "f_y"}, {"fz", "f_z"}};
   for (const auto& c : columns) {
-    spec.series.push_back({.title = c[1], .csv_path = a.csv, .x_column = "t", .y_column = c[0],
-                           .style = "lines", .options = c[0][0] == 'f' ? "lw 2" : "dt 2"});
+    spec.series.push_back({.title = c[1],
+                           .csv_path = a.csv,
+                           .x_column = "t",
+                           .y_column = c[0],
+                           .style = "lines",
+                           .options = c[0][0] == 'f' ? "lw 2" : "dt 2"});
   }
   std::string error;
   if (!PlotPng(spec, a.plot, &error)) Fail("run", "--plot: " + error);
@@ -163,7 +167,8 @@ void PlotFit(const RunArgs& a, const std::vector<std::array<double, 2>>& zf, con
   const double z0 = zf.front()[0], z1 = zf.back()[0];
   spec.series.push_back({.title = "least-squares fit",
                          .points = {{z0, fit.slope * z0 + fit.intercept}, {z1, fit.slope * z1 + fit.intercept}},
-                         .style = "lines", .options = "lw 2"});
+                         .style = "lines",
+                         .options = "lw 2"});
   std::string error;
   if (!PlotPng(spec, a.fit_plot, &error)) Fail("run", "--fit-plot: " + error);
 }
@@ -176,7 +181,8 @@ void Run(const RunArgs& a) {
   ModelPaths(a.model, &fem, &plg);
   if (!LoadModel(fem, plg, {}, &model, &load_error)) Fail("run", load_error.ToString());
   Script script;
-  if (!ParseScriptName(a.script, &script)) Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle");
+  if (!ParseScriptName(a.script, &script))
+    Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle");
   ToolCommand tool;
   tool.kind = script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   std::string error;
@@ -250,7 +256,8 @@ void Run(const RunArgs& a) {
   if (csv) std::fclose(csv);
   if (!a.plot.empty()) {
     if (a.csv.empty()) Fail("run", "--plot needs --csv (the plot is drawn from it)");
-    Plot(a, model.name + ": " + a.script + " (" + IntegratorName(options.integrator) + ", dt " + std::to_string(a.dt) + " s)");
+    Plot(a, model.name + ": " + a.script + " (" + IntegratorName(options.integrator) + ", dt " + std::to_string(a.dt) +
+                " s)");
   }
 
   // Summary.
@@ -284,35 +291,39 @@ void Run(const RunArgs& a) {
       // Full mode: the tick's CPU time (this thread's), and element updates per second at its
       // median, elements x substeps per tick / CPU time, as idms-step-throughput-bench counts.
       {"compute_cpu_us", {{"p50", Percentile(cpu_us, 0.5)}, {"p99", Percentile(cpu_us, 0.99)}}},
-      {"element_updates_per_s", ticks > 0 && Percentile(cpu_us, 0.5) > 0
-                                    ? model.num_elems * (static_cast<double>(substeps) / ticks) /
-                                          (1e-6 * Percentile(cpu_us, 0.5))
-                                    : 0.0},
-      {"compute_us", {{"p50", Percentile(compute_us, 0.5)}, {"p99", Percentile(compute_us, 0.99)},
-                      {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};
+      {"element_updates_per_s",
+       ticks > 0 && Percentile(cpu_us, 0.5) > 0
+           ? model.num_elems * (static_cast<double>(substeps) / ticks) / (1e-6 * Percentile(cpu_us, 0.5))
+           : 0.0},
+      {"compute_us",
+       {{"p50", Percentile(compute_us, 0.5)},
+        {"p99", Percentile(compute_us, 0.99)},
+        {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};
   if (a.json) {
     PrintJson(summary);
   } else {
-    std::printf("%s on %s (%s, r_l %.4g): %lld ticks, max |f| %.4g N, max f_z %.4g N, onset z %.4g, %lld warnings, "
-                "%lld fallbacks, compute p50 %.2f us p99 %.2f us\n",
-                a.script.c_str(), model.name.c_str(), IntegratorName(options.integrator),
-                options.full ? NAN : options.local_radius, static_cast<long long>(ticks), max_force, max_fz, onset_z,
-                static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
-                summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
+    std::printf(
+        "%s on %s (%s, r_l %.4g): %lld ticks, max |f| %.4g N, max f_z %.4g N, onset z %.4g, %lld warnings, "
+        "%lld fallbacks, compute p50 %.2f us p99 %.2f us\n",
+        a.script.c_str(), model.name.c_str(), IntegratorName(options.integrator),
+        options.full ? NAN : options.local_radius, static_cast<long long>(ticks), max_force, max_fz, onset_z,
+        static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
+        summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
     for (const nlohmann::json& c : crossings_json) {
-      std::printf("  crossing %.2f-%.2f s: max |f_x| %.3g N, max |f_y| %.3g N, f_z %.3g +- %.2g N (%.3g to %.3g), "
-                  "mean f_x accelerating %.3g N, decelerating %.3g N\n",
-                  c["t"][0].get<double>(), c["t"][1].get<double>(), c["max_abs_fx"].get<double>(),
-                  c["max_abs_fy"].get<double>(), c["mean_fz"].get<double>(), c["sd_fz"].get<double>(),
-                  c["fz_range"][0].get<double>(), c["fz_range"][1].get<double>(),
-                  c["mean_fx_accelerating"].get<double>(), c["mean_fx_decelerating"].get<double>());
+      std::printf(
+          "  crossing %.2f-%.2f s: max |f_x| %.3g N, max |f_y| %.3g N, f_z %.3g +- %.2g N (%.3g to %.3g), "
+          "mean f_x accelerating %.3g N, decelerating %.3g N\n",
+          c["t"][0].get<double>(), c["t"][1].get<double>(), c["max_abs_fx"].get<double>(),
+          c["max_abs_fy"].get<double>(), c["mean_fz"].get<double>(), c["sd_fz"].get<double>(),
+          c["fz_range"][0].get<double>(), c["fz_range"][1].get<double>(), c["mean_fx_accelerating"].get<double>(),
+          c["mean_fx_decelerating"].get<double>());
     }
     if (a.full) {
-      std::printf("full mode: %lld of %lld ticks in the fused pass; CPU p50 %.2f ms per tick, %.3g element updates "
-                  "per second\n",
-                  static_cast<long long>(fused_ticks), static_cast<long long>(ticks),
-                  1e-3 * summary["compute_cpu_us"]["p50"].get<double>(),
-                  summary["element_updates_per_s"].get<double>());
+      std::printf(
+          "full mode: %lld of %lld ticks in the fused pass; CPU p50 %.2f ms per tick, %.3g element updates "
+          "per second\n",
+          static_cast<long long>(fused_ticks), static_cast<long long>(ticks),
+          1e-3 * summary["compute_cpu_us"]["p50"].get<double>(), summary["element_updates_per_s"].get<double>());
     }
   }
 }
@@ -321,7 +332,10 @@ void Setup(CLI::App& app) {
   auto* cmd = app.add_subcommand("run", "Run a scripted thesis interaction offline (thesis ch. 6)");
   static RunArgs a;
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
-  cmd->add_option("--script", a.script, "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a slow stroke to watch)")->capture_default_str();
+  cmd->add_option("--script", a.script,
+                  "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a "
+                  "slow stroke to watch)")
+      ->capture_default_str();
   cmd->add_option("--preset", a.preset,
                   "default (symplectic Euler, r_l = 2 r: the error-against-run-time choice) | thesis (explicit "
                   "Euler, r_l = 1.5 r: thesis 6.2, what docs/figures use)")

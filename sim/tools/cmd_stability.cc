@@ -99,8 +99,8 @@ void RunPoint(const StabilityArgs& args, Integrator integrator) {
   for (const auto& v : report.continuous) std::cout << "  " << Complex(v) << "\n";
   std::cout << "discrete eigenvalues of A_z (z-plane):              |z|\n";
   for (const auto& v : report.discrete) std::cout << "  " << Complex(v) << "  " << Num(std::abs(v)) << "\n";
-  std::cout << "spectral radius " << Num(report.spectral_radius) << ": "
-            << (report.stable ? "stable" : "NOT stable") << " (stable means < 1 - " << kMarginalTol << ")\n";
+  std::cout << "spectral radius " << Num(report.spectral_radius) << ": " << (report.stable ? "stable" : "NOT stable")
+            << " (stable means < 1 - " << kMarginalTol << ")\n";
   // How far dt could go at these k, b, m: the exact edge, and what stability.h would predict.
   const double limit = StabilityLimitDt(HapticWindowA(p), integrator, 1e3);
   std::cout << "largest stable dt (bisection on the spectral radius): "
@@ -229,9 +229,8 @@ bool PlotLocus(const Sweep& sweep, const std::string& csv_path, const std::strin
                    .color_column = sweep.param->name,
                    .style = "points",
                    .options = "pt 7 ps 0.6"};
-  PlotSeries marks{.title = "nominal: " + FixedValues(sweep.base),
-                   .style = "points",
-                   .options = "pt 2 ps 2.5 lw 2.5 lc rgb 'red'"};
+  PlotSeries marks{
+      .title = "nominal: " + FixedValues(sweep.base), .style = "points", .options = "pt 2 ps 2.5 lw 2.5 lc rgb 'red'"};
   for (const auto& z : AnalyzeHapticWindow(sweep.base, sweep.integrator).discrete) {
     marks.points.push_back({z.real(), z.imag()});
   }
@@ -252,8 +251,8 @@ void RunSweep(const StabilityArgs& args, Integrator integrator) {
   const bool has_gershgorin = GershgorinStableDt(sweep.base, integrator).has_value();
   std::vector<StabilityEdge> g_edges;
   if (has_gershgorin) {
-    g_edges = FindStabilityEdges([&](double v) { return sweep.GershgorinStable(v); }, sweep.from, sweep.to,
-                                 sweep.steps);
+    g_edges =
+        FindStabilityEdges([&](double v) { return sweep.GershgorinStable(v); }, sweep.from, sweep.to, sweep.steps);
   }
   std::string png_error;
   const bool png_ok = PlotLocus(sweep, csv_path, png_path, &png_error);
@@ -278,7 +277,8 @@ void RunSweep(const StabilityArgs& args, Integrator integrator) {
     PrintJson(j);
   } else {
     std::cout << "swept " << name << " from " << Num(sweep.from) << " to " << Num(sweep.to) << " (" << sweep.steps
-              << " values), integrator " << IntegratorName(integrator) << ", others at " << FixedValues(sweep.base) << "\n"
+              << " values), integrator " << IntegratorName(integrator) << ", others at " << FixedValues(sweep.base)
+              << "\n"
               << "exact (eigenvalues): " << EdgesText(edges, name, sweep.ExactStable(sweep.from))
               << "; max spectral radius " << Num(max_radius) << "\n";
     if (has_gershgorin) {

@@ -29,11 +29,12 @@ nlohmann::json SummaryJson(const ModelSummary& s) {
 
 void PrintText(const std::string& name, const ModelSummary& s) {
   std::printf("model %s\n", name.c_str());
-  std::printf("  atoms          %d (%d free, %d fixed, %d external)\n", s.atoms, s.free_atoms, s.fixed_atoms, s.external_atoms);
+  std::printf("  atoms          %d (%d free, %d fixed, %d external)\n", s.atoms, s.free_atoms, s.fixed_atoms,
+              s.external_atoms);
   std::printf("  elements       %d (%d home)\n", s.elements, s.home_elements);
   std::printf("  triangles      %d\n", s.triangles);
-  std::printf("  bounding box   (%g, %g, %g) .. (%g, %g, %g)\n", s.bbox_min[0], s.bbox_min[1], s.bbox_min[2], s.bbox_max[0],
-              s.bbox_max[1], s.bbox_max[2]);
+  std::printf("  bounding box   (%g, %g, %g) .. (%g, %g, %g)\n", s.bbox_min[0], s.bbox_min[1], s.bbox_min[2],
+              s.bbox_max[0], s.bbox_max[1], s.bbox_max[2]);
   std::printf("  total mass     %g\n", s.total_mass);
   std::printf("  stiffness      %g .. %g\n", s.k_min, s.k_max);
   std::printf("  viscosity      %g .. %g\n", s.b_min, s.b_max);
@@ -49,11 +50,13 @@ void Setup(CLI::App& app) {
   cmd->add_option("fem", fem, "The .fem file (or its prefix)")->required();
   cmd->add_option("plg", plg, "The .plg or .obj surface (default: none)");
   cmd->add_option("--max-bytes", options.max_bytes, "Refuse files larger than this")->capture_default_str();
-  cmd->add_option("--tolerance", options.plg_tolerance, "Max distance between plg vertex and fem atom")->capture_default_str();
+  cmd->add_option("--tolerance", options.plg_tolerance, "Max distance between plg vertex and fem atom")
+      ->capture_default_str();
   cmd->add_flag("--json", json, "Print the summary as one JSON object");
   cmd->callback([] {
     std::string fem_path = fem, unused;
-    if (fem_path.size() < 4 || fem_path.compare(fem_path.size() - 4, 4, ".fem") != 0) ModelPaths(fem, &fem_path, &unused);
+    if (fem_path.size() < 4 || fem_path.compare(fem_path.size() - 4, 4, ".fem") != 0)
+      ModelPaths(fem, &fem_path, &unused);
     Model model;
     LoadError error;
     if (!LoadModel(fem_path, plg, options, &model, &error)) {

@@ -2,10 +2,9 @@
 // IDMS_SIM_COMMAND, so adding a subcommand touches no shared file.
 #pragma once
 
-#include <string>
-
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <string>
 
 namespace idms::tool {
 

@@ -44,8 +44,7 @@ int main(int argc, char** argv) {
   CLI::App app{"idms-sim: generate, validate, run and analyse Discrete Simulation Models (Swarup 1995)"};
   app.require_subcommand(1);
   auto& registry = idms::tool::Registry();
-  std::stable_sort(registry.begin(), registry.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::stable_sort(registry.begin(), registry.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   for (const auto& entry : registry) entry.second(app);
   CLI11_PARSE(app, argc, argv);
   return 0;

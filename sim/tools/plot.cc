@@ -81,8 +81,8 @@ bool SeriesClause(const PlotSeries& s, int i, std::string* blocks, std::string* 
   std::string with = s.label_column.empty() ? s.style : "labels";
   if (!s.options.empty()) with += " " + s.options;
   if (!s.color_column.empty() && s.label_column.empty()) with += " lc palette";
-  *clause = source + " using " + using_spec + " with " + with +
-            (s.title.empty() ? " notitle" : " title " + Quote(s.title));
+  *clause =
+      source + " using " + using_spec + " with " + with + (s.title.empty() ? " notitle" : " title " + Quote(s.title));
   return true;
 }
 
@@ -172,7 +172,8 @@ std::string Tail(const std::string& text) {
     if (line.find_first_not_of(" \t^") != std::string::npos) lines.push_back(line);
   }
   std::string out;
-  for (size_t i = lines.size() > 3 ? lines.size() - 3 : 0; i < lines.size(); ++i) out += (out.empty() ? "" : " | ") + lines[i];
+  for (size_t i = lines.size() > 3 ? lines.size() - 3 : 0; i < lines.size(); ++i)
+    out += (out.empty() ? "" : " | ") + lines[i];
   return out.empty() ? "no message" : out;
 }
 

@@ -11,14 +11,14 @@ namespace idms::tool {
 
 // One curve, from columns of a CSV file (first line a header of column names) or inline points.
 struct PlotSeries {
-  std::string title;                         // legend entry; empty = not in the legend
-  std::string csv_path;                      // comma-separated data; empty when `points` is used
-  std::string x_column, y_column;            // header names in csv_path
-  std::string color_column;                  // optional: colour by this column through the palette
-  std::string label_column;                  // optional: print this column as text at each point
+  std::string title;                          // legend entry; empty = not in the legend
+  std::string csv_path;                       // comma-separated data; empty when `points` is used
+  std::string x_column, y_column;             // header names in csv_path
+  std::string color_column;                   // optional: colour by this column through the palette
+  std::string label_column;                   // optional: print this column as text at each point
   std::vector<std::array<double, 2>> points;  // inline (x, y) data instead of a file
-  std::string style = "lines";               // gnuplot style: lines, points, linespoints, dots
-  std::string options;                       // appended after the style, e.g. "pt 2 ps 2 lc rgb 'black'"
+  std::string style = "lines";                // gnuplot style: lines, points, linespoints, dots
+  std::string options;                        // appended after the style, e.g. "pt 2 ps 2 lc rgb 'black'"
 };
 
 struct PlotSpec {
@@ -28,7 +28,7 @@ struct PlotSpec {
   bool equal_aspect = false;  // one unit on x is as long as one on y (z-plane plots)
   bool log_x = false, log_y = false;
   std::optional<std::array<double, 2>> x_range, y_range;
-  std::string key = "top left";      // gnuplot `set key` argument; "off" hides the legend
+  std::string key = "top left";       // gnuplot `set key` argument; "off" hides the legend
   std::vector<std::string> preamble;  // raw gnuplot commands, after the defaults and before `plot`
   std::vector<PlotSeries> series;
 };

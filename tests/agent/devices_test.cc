@@ -29,7 +29,8 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos) << error;
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos)
+      << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
   EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
   EXPECT_FALSE(agent::MakeDevice("udp:99999", context, &error));
@@ -103,8 +104,7 @@ TEST(Devices, TheBuiltInSceneTakesTheDefaultStepAndTheThesisStepByName) {
   EXPECT_EQ(step.integrator, Integrator::kSymplecticEuler);
   EXPECT_EQ(step.local_radius, 3.0);
   EXPECT_EQ(step.integrator, StepOptions{}.integrator) << "the sim's own default";
-  ASSERT_TRUE(agent::SceneToLoop(agent::DefaultScene("pluck", v1::PRESET_THESIS), &step, &tool, &reg, &error))
-      << error;
+  ASSERT_TRUE(agent::SceneToLoop(agent::DefaultScene("pluck", v1::PRESET_THESIS), &step, &tool, &reg, &error)) << error;
   EXPECT_EQ(step.integrator, Integrator::kExplicitEuler);
   EXPECT_EQ(step.local_radius, 2.25);
   EXPECT_EQ(tool.kind, ToolKind::kTweezers);

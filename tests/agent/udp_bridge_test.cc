@@ -17,8 +17,8 @@
 #include <nlohmann/json.hpp>
 
 #include "agent_process.h"
-#include "idms/sim/interaction_script.h"
 #include "idms/agent/setup.h"
+#include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"

@@ -56,7 +56,7 @@ TEST(Scene, DefaultsFillUnsetFields) {
   EXPECT_EQ(scene.sample_batch(), 20u);
   EXPECT_EQ(scene.preset(), v1::PRESET_DEFAULT);
   EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_SYMPLECTIC_EULER);  // the default step, as idms-sim run
-  EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_THESIS);  // the pseudo-code's law, as idms-sim run
+  EXPECT_EQ(scene.tools(0).force_law(), v1::FORCE_LAW_THESIS);     // the pseudo-code's law, as idms-sim run
   EXPECT_EQ(scene.tools(0).local_radius(), 2 * scene.tools(0).radius());
   EXPECT_EQ(scene.device().scale(), 1);
   EXPECT_EQ(scene.device().max_force(), 10);
@@ -77,7 +77,9 @@ TEST(Scene, ThesisPresetFillsTheThesisStep) {
                             "thesis.scene", &scene, &error))
       << error;
   EXPECT_EQ(scene.integrator(), v1::INTEGRATOR_RK4);
-  EXPECT_EQ(LoadError("model: \"x\"\ntools {\n  kind: KIND_SPHERE\n}\npreset: PRESET_FAST\n").rfind("test.scene:5:9: ", 0), 0u);
+  EXPECT_EQ(
+      LoadError("model: \"x\"\ntools {\n  kind: KIND_SPHERE\n}\npreset: PRESET_FAST\n").rfind("test.scene:5:9: ", 0),
+      0u);
 }
 
 TEST(Scene, SyntaxErrorsHaveLineAndColumn) {

@@ -1,13 +1,13 @@
 // A check that AllocationCount() (tests/common/alloc_counter.cc) counts every form of new.
+#include "alloc_counter.h"
+
+#include <gtest/gtest.h>
+
 #include <atomic>
 #include <cstdlib>
 #include <memory>
 #include <new>
 #include <vector>
-
-#include <gtest/gtest.h>
-
-#include "alloc_counter.h"
 
 namespace idms::test {
 namespace {

@@ -12,8 +12,8 @@
 #include "alloc_counter.h"
 #include "idms/sim/generate.h"
 #include "idms/sim/model_io.h"
-#include "idms/sim/workspace.h"
 #include "idms/sim/summary.h"
+#include "idms/sim/workspace.h"
 
 namespace idms {
 namespace {

@@ -18,7 +18,8 @@ namespace idms {
 namespace {
 
 std::pair<int32_t, int32_t> AtomsOf(const Model& m, int32_t e) {
-  return {std::min(m.elem_atoms[2 * e], m.elem_atoms[2 * e + 1]), std::max(m.elem_atoms[2 * e], m.elem_atoms[2 * e + 1])};
+  return {std::min(m.elem_atoms[2 * e], m.elem_atoms[2 * e + 1]),
+          std::max(m.elem_atoms[2 * e], m.elem_atoms[2 * e + 1])};
 }
 
 std::set<int32_t> ElementsOf(const Model& m, int32_t a) {

@@ -1,11 +1,11 @@
 // The slab generator against thesis appendix B.1.2 and figure 3-1.
 #include "idms/sim/generate.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <set>
 #include <utility>
-
-#include <gtest/gtest.h>
 
 #include "idms/sim/model_io.h"
 #include "idms/sim/summary.h"
@@ -84,7 +84,8 @@ TEST(GenerateSlab, ReproducesAppendixSurfaceExactly) {
 
   ASSERT_EQ(model.num_external, appendix.num_verts());
   for (int32_t v = 0; v < appendix.num_verts(); ++v) {
-    for (int c = 0; c < 3; ++c) EXPECT_EQ(model.atom_pos_eq[3 * model.external_atoms[v] + c], appendix.vert_pos[3 * v + c]);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_EQ(model.atom_pos_eq[3 * model.external_atoms[v] + c], appendix.vert_pos[3 * v + c]);
   }
   ASSERT_EQ(model.num_tris, appendix.num_tris());
   for (size_t i = 0; i < appendix.tri_verts.size(); ++i) {

@@ -66,10 +66,14 @@ uint64_t GoldenRun(Integrator integrator, bool full) {
 
 const char* EnumName(Integrator integrator) {
   switch (integrator) {
-    case Integrator::kExplicitEuler: return "kExplicitEuler";
-    case Integrator::kSymplecticEuler: return "kSymplecticEuler";
-    case Integrator::kRk4: return "kRk4";
-    case Integrator::kImplicitEuler: return "kImplicitEuler";
+    case Integrator::kExplicitEuler:
+      return "kExplicitEuler";
+    case Integrator::kSymplecticEuler:
+      return "kSymplecticEuler";
+    case Integrator::kRk4:
+      return "kRk4";
+    case Integrator::kImplicitEuler:
+      return "kImplicitEuler";
   }
   return "?";
 }
@@ -82,7 +86,7 @@ struct Golden {
 
 // x86-64, GCC as built by scripts/build.sh (-O2, -ffp-contract=off in libidms_sim).
 constexpr Golden kGolden[] = {
-{Integrator::kExplicitEuler, false, 0xfaa51e015ae92ecdull},
+    {Integrator::kExplicitEuler, false, 0xfaa51e015ae92ecdull},
     {Integrator::kSymplecticEuler, false, 0x0cdcd847803bec3full},
     {Integrator::kRk4, false, 0xe2be7323fb2c73f3ull},
     {Integrator::kImplicitEuler, false, 0xed123ac6b4a9addfull},

@@ -2,6 +2,7 @@
 // `idms-sim stability`, run as a real process.
 #include "idms/sim/haptic_window.h"
 
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -11,12 +12,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include "idms/sim/stability.h"
 
@@ -47,11 +46,11 @@ TEST(HapticWindowTest, AMatchesEq417) {
   const HapticWindowParams p{.k = 15, .b = 0.45, .m = 0.002, .dt_s = 0.001};
   const double km = 7500, bm = 225;
   Eigen::MatrixXd expected(6, 6);
-  expected << 0, 1, 0, 0, 0, 0,                     //
-      -3 * km, -3 * bm, km, bm, 0, 0,               //
-      0, 0, 0, 1, 0, 0,                             //
-      km, bm, -3 * km, -3 * bm, km, bm,             //
-      0, 0, 0, 0, 0, 1,                             //
+  expected << 0, 1, 0, 0, 0, 0,          //
+      -3 * km, -3 * bm, km, bm, 0, 0,    //
+      0, 0, 0, 1, 0, 0,                  //
+      km, bm, -3 * km, -3 * bm, km, bm,  //
+      0, 0, 0, 0, 0, 1,                  //
       0, 0, km, bm, -3 * km, -3 * bm;
   const Eigen::MatrixXd a = HapticWindowA(p);
   for (int i = 0; i < 6; ++i) {
@@ -203,7 +202,8 @@ TEST(HapticWindowTest, EigensolverConvergesWhereEigenDefaultsDoNot) {
 
 TEST(HapticWindowTest, UnitCircleCountsAsUnstable) {
   // k = b = 0: every pole at z = 1 (a free, drifting mass), radius exactly 1.
-  const StabilityReport r = AnalyzeHapticWindow({.k = 0, .b = 0, .m = 0.002, .dt_s = 0.001}, Integrator::kExplicitEuler);
+  const StabilityReport r =
+      AnalyzeHapticWindow({.k = 0, .b = 0, .m = 0.002, .dt_s = 0.001}, Integrator::kExplicitEuler);
   EXPECT_DOUBLE_EQ(r.spectral_radius, 1.0);
   EXPECT_FALSE(r.stable);
   EXPECT_FALSE(IsStableRadius(1.0 - kMarginalTol / 2));

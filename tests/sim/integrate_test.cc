@@ -12,8 +12,8 @@
 namespace idms {
 namespace {
 
-using test::OneSpring;
 using test::FullOptions;
+using test::OneSpring;
 
 TEST(IntegrateExplicitEuler, MatchesEquations413To415ByHand) {
   const double k = 15, b = 0.2, m = 0.002, T = 1e-4;

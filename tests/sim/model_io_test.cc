@@ -1,12 +1,12 @@
 // .fem / .plg / .obj readers and writers: round trips, and one test per malformed input.
 #include "idms/sim/model_io.h"
 
+#include <gtest/gtest.h>
+
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "idms/sim/generate.h"
 #include "idms/sim/summary.h"
@@ -113,7 +113,8 @@ TEST(ModelIo, ObjRoundTripsTheSurface) {
 TEST(ModelIo, ObjAcceptsSlashesNegativeIndicesQuadsAndComments) {
   SurfaceMesh mesh;
   LoadError error;
-  ASSERT_TRUE(ParseObj("# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0 1.0\nv 0 1 0\nvn 0 0 1\nf 1//1 2/1/1 -2 -1\n", "q.obj", &mesh, &error))
+  ASSERT_TRUE(ParseObj("# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0 1.0\nv 0 1 0\nvn 0 0 1\nf 1//1 2/1/1 -2 -1\n", "q.obj", &mesh,
+                       &error))
       << error.ToString();
   EXPECT_EQ(mesh.num_tris(), 2);
   EXPECT_EQ(mesh.tri_verts, (std::vector<int32_t>{0, 1, 2, 0, 2, 3}));
@@ -164,27 +165,32 @@ const std::string fem = kFem;
 INSTANTIATE_TEST_SUITE_P(
     ModelIo, BadFem,
     testing::Values(
-        BadCase{"Empty", "", 1, 1, "empty file"},
-        BadCase{"BlankOnly", "\n  \n", 1, 1, "empty file"},
+        BadCase{"Empty", "", 1, 1, "empty file"}, BadCase{"BlankOnly", "\n  \n", 1, 1, "empty file"},
         BadCase{"Binary", Replace(fem, "tet 5 7", std::string("tet\0 5 7", 8)), 1, 4, "binary data"},
         BadCase{"MissingCounts", Replace(fem, "tet 5 7", "tet 5"), 1, 6, "number of elements"},
-        BadCase{"CountNotANumber", Replace(fem, "tet 5 7", "tet five 7"), 1, 5, "number of atoms (an integer), found 'five'"},
+        BadCase{"CountNotANumber", Replace(fem, "tet 5 7", "tet five 7"), 1, 5,
+                "number of atoms (an integer), found 'five'"},
         BadCase{"NegativeCount", Replace(fem, "tet 5 7", "tet 5 -7"), 1, 7, "number of elements in [0,"},
         BadCase{"ZeroAtoms", Replace(fem, "tet 5 7", "tet 0 7"), 1, 5, "number of atoms in [1,"},
         BadCase{"ExtraHeaderField", Replace(fem, "tet 5 7", "tet 5 7 9"), 1, 9, "extra field '9'"},
         BadCase{"TooFewAtomsForCount", Replace(fem, "tet 5 7", "tet 6 7"), 9, 11, "boundary condition of atom 5"},
-        BadCase{"Truncated", fem.substr(0, fem.find("2 3 15")), 14, 1, "unexpected end of file: expected element 5 of 7"},
+        BadCase{"Truncated", fem.substr(0, fem.find("2 3 15")), 14, 1,
+                "unexpected end of file: expected element 5 of 7"},
         BadCase{"ExtraLine", fem + "0 2 1 1\n", 16, 1, "expected end of file after 5 atoms and 7 elements"},
         BadCase{"MissingField", Replace(fem, "0.5 0.866 0 0.002 1001 2001", "0.5 0.866 0 0.002 1001"), 5, 23,
                 "surface condition of atom 2"},
-        BadCase{"ExtraField", Replace(fem, "1 0 0 0.002 1001 2001", "1 0 0 0.002 1001 2001 7"), 4, 23, "extra field '7'"},
-        BadCase{"NotANumber", Replace(fem, "1 0 0 0.002", "1 zero 0 0.002"), 4, 3, "y of atom 1 of 5 (a number), found 'zero'"},
+        BadCase{"ExtraField", Replace(fem, "1 0 0 0.002 1001 2001", "1 0 0 0.002 1001 2001 7"), 4, 23,
+                "extra field '7'"},
+        BadCase{"NotANumber", Replace(fem, "1 0 0 0.002", "1 zero 0 0.002"), 4, 3,
+                "y of atom 1 of 5 (a number), found 'zero'"},
         BadCase{"NaN", Replace(fem, "1 0 0 0.002", "1 nan 0 0.002"), 4, 3, "a finite number"},
         BadCase{"Inf", Replace(fem, "0 1 15 0.2", "0 1 inf 0.2"), 9, 5, "a finite number"},
         BadCase{"Overflow", Replace(fem, "0 1 15 0.2", "0 1 1e999 0.2"), 9, 5, "out-of-range"},
-        BadCase{"ZeroMassFree", Replace(fem, "1 0 0 0.002 1001", "1 0 0 0 1001"), 4, 7, "positive mass for free atom 1"},
+        BadCase{"ZeroMassFree", Replace(fem, "1 0 0 0.002 1001", "1 0 0 0 1001"), 4, 7,
+                "positive mass for free atom 1"},
         BadCase{"NegativeMass", Replace(fem, "1 0 0 0.002 1001", "1 0 0 -0.002 1001"), 4, 7, "mass >= 0"},
-        BadCase{"UnknownBc", Replace(fem, "1 0 0 0.002 1001", "1 0 0 0.002 1002"), 4, 13, "boundary condition 1000 (fixed) or 1001"},
+        BadCase{"UnknownBc", Replace(fem, "1 0 0 0.002 1001", "1 0 0 0.002 1002"), 4, 13,
+                "boundary condition 1000 (fixed) or 1001"},
         BadCase{"UnknownSc", Replace(fem, "1 0 0 0.002 1001 2001", "1 0 0 0.002 1001 2002"), 4, 18,
                 "surface condition 2000 (internal) or 2001"},
         BadCase{"AtomIdOutOfRange", Replace(fem, "1 2 15 0.2", "1 5 15 0.2"), 10, 3, "in [0, 4], found 5"},
@@ -235,7 +241,8 @@ TEST(ModelIo, ObjRejectsUnknownStatementsAndBadFaces) {
   SurfaceMesh mesh;
   LoadError error;
   EXPECT_FALSE(ParseObj("v 0 0 0\nv 1 0 0\nv 0 1 0\nfoo 1\n", "x.obj", &mesh, &error));
-  EXPECT_EQ(error.ToString(), "x.obj:4:1: expected an obj statement (v, f, o, g, vn, vt, s, usemtl, mtllib), found 'foo'");
+  EXPECT_EQ(error.ToString(),
+            "x.obj:4:1: expected an obj statement (v, f, o, g, vn, vt, s, usemtl, mtllib), found 'foo'");
   EXPECT_FALSE(ParseObj("v 0 0 0\nv 1 0 0\nf 1 2\n", "x.obj", &mesh, &error));
   EXPECT_NE(error.message.find("at least 3 vertices"), std::string::npos);
   EXPECT_FALSE(ParseObj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "x.obj", &mesh, &error));
@@ -258,7 +265,9 @@ class ModelFiles : public testing::Test {
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
-  void Write(const std::string& name, const std::string& text) const { std::ofstream(Path(name), std::ios::binary) << text; }
+  void Write(const std::string& name, const std::string& text) const {
+    std::ofstream(Path(name), std::ios::binary) << text;
+  }
   std::filesystem::path dir_;
 };
 

@@ -1,11 +1,11 @@
 // idms-sim run, end to end: the real binary on the shipped hex fragment, its presets, the
 // documented CSV, and bad arguments.
+#include <gtest/gtest.h>
+
 #include <cstdio>
 #include <fstream>
-#include <string>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <string>
 
 namespace {
 
@@ -150,7 +150,9 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"),
+            std::string::npos)
+      << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
   EXPECT_NE(out.status, 0);
   EXPECT_NE(out.text.find("bad item 'r=-1'"), std::string::npos) << out.text;

@@ -64,6 +64,7 @@ inline uint64_t HashState(const State& s) {
   mix(&s.tick, sizeof(s.tick));
   mix(&s.time_s, sizeof(s.time_s));
   for (const ToolState& t : s.tools) mix(t.force_out, sizeof(t.force_out)), mix(&t.grasp_atom, sizeof(t.grasp_atom));
+  for (const WarningKind& k : WarningKinds(s.warnings)) mix(&k.count, sizeof(k.count));  // every counter
   return h;
 }
 

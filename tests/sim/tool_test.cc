@@ -56,7 +56,8 @@ TEST(ToolContact, EnergyIsThePotentialOfTheForce) {
   for (ContactLaw law : {ContactLaw::kThesis, ContactLaw::kLinear}) {
     for (double dist : {0.05, 0.3, 0.9, 1.4}) {
       const double h = 1e-6, a[3] = {0, 0, dist - h}, b[3] = {0, 0, dist + h}, c[3] = {0, 0, dist};
-      const double de = (SphereContact(law, 400, 1.5, 0.05, b).energy - SphereContact(law, 400, 1.5, 0.05, a).energy) / (2 * h);
+      const double de =
+          (SphereContact(law, 400, 1.5, 0.05, b).energy - SphereContact(law, 400, 1.5, 0.05, a).energy) / (2 * h);
       EXPECT_NEAR(-de, SphereContact(law, 400, 1.5, 0.05, c).f[2], 1e-4 * (1 + std::fabs(de))) << dist;
     }
   }
@@ -130,7 +131,8 @@ TEST(ToolTweezers, ClosingInContactGraspsTheNearestAtomAndPlucks) {
   const ToolState& ts = f.state.tools[0];
   const Real* p = &f.state.atom_pos[3 * 11];
   // The element starts compressed by the contact force it takes over: k (l_eq - l) = |f_contact|.
-  const double l = std::sqrt((p[0] - 2.5) * (p[0] - 2.5) + (p[1] - 1.732) * (p[1] - 1.732) + (p[2] - 1.3) * (p[2] - 1.3));
+  const double l =
+      std::sqrt((p[0] - 2.5) * (p[0] - 2.5) + (p[1] - 1.732) * (p[1] - 1.732) + (p[2] - 1.3) * (p[2] - 1.3));
   EXPECT_GT(ts.grasp_leq, l);
   EXPECT_LT(ts.grasp_leq, 1.5 + 1e-9);
   EXPECT_EQ(ts.grasp_k, 400);
@@ -182,7 +184,8 @@ TEST(ToolTweezers, TheHandOverFromContactToGraspIsContinuous) {
   const double before = force[close_tick - 1];
   ASSERT_GT(before, 0.3) << "pressing when the tweezers close";
   double contact_step = 0;  // the largest change the contact makes in a tick just before
-  for (int64_t n = close_tick - 200; n < close_tick; ++n) contact_step = std::max(contact_step, std::abs(force[n] - force[n - 1]));
+  for (int64_t n = close_tick - 200; n < close_tick; ++n)
+    contact_step = std::max(contact_step, std::abs(force[n] - force[n - 1]));
   EXPECT_LE(std::abs(force[close_tick] - before), contact_step) << before << " N -> " << force[close_tick] << " N";
   double peak = 0;
   for (int64_t n = close_tick; n < close_tick + 10; ++n) peak = std::max(peak, force[n]);
@@ -244,7 +247,8 @@ void ExpectCutAlongX22(bool full) {
   EXPECT_GT(removed, 5);
   ASSERT_EQ(model.num_elems, before.num_elems - removed);
   std::multiset<std::pair<int32_t, int32_t>> now;
-  for (int32_t e = 0; e < model.num_elems; ++e) now.insert(MinMax(model.elem_atoms[2 * e], model.elem_atoms[2 * e + 1]));
+  for (int32_t e = 0; e < model.num_elems; ++e)
+    now.insert(MinMax(model.elem_atoms[2 * e], model.elem_atoms[2 * e + 1]));
   EXPECT_EQ(now, kept);
   // Triangles that lost an edge are gone; every remaining triangle edge is still an element.
   EXPECT_GT(dropped, 0);

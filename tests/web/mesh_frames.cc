@@ -4,9 +4,9 @@
 // a dent moving over a large sheet for the browser bench (bench/web), as [u32 size][Envelope]...
 //   idms-web-mesh-frames OUT.jsonl
 //   idms-web-mesh-frames --sheet NX NY FRAMES OUT.bin
-#include <cstdlib>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -173,7 +173,8 @@ int main(int argc, char** argv) {
   variant("num_changed too large", [](idms::v1::MeshDelta& m) { m.set_num_changed(1000); });
   variant("num_changed disagrees", [](idms::v1::MeshDelta& m) { m.set_num_changed(m.num_changed() - 1); });
   variant("no changes but a payload", [](idms::v1::MeshDelta& m) { m.set_num_changed(0); });
-  variant("unknown compression", [](idms::v1::MeshDelta& m) { m.set_compression(static_cast<idms::v1::Compression>(7)); });
+  variant("unknown compression",
+          [](idms::v1::MeshDelta& m) { m.set_compression(static_cast<idms::v1::Compression>(7)); });
   variant("zstd claimed, raw sent", [](idms::v1::MeshDelta& m) { m.set_compression(idms::v1::COMPRESSION_ZSTD); });
   variant("bytes after the frame", [](idms::v1::MeshDelta& m) { m.mutable_payload()->append("xyz"); });
   // Raw (uncompressed) payloads, hand-made, for the varint reader's errors.

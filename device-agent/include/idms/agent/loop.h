@@ -76,7 +76,6 @@ struct LoopOptions {
   int64_t spin_ns = 0;  // sleep to deadline - spin_ns, then poll the clock to the deadline; 0 = off
 };
 
-
 // Counters the loop publishes (relaxed atomics: any thread may read them).
 struct LoopCounters {
   std::atomic<uint64_t> ticks{0};

@@ -66,16 +66,16 @@ class ModelStore {
 // One session as the index keeps it: what the session list shows, and what a resume needs.
 struct SessionRow {
   std::string id;
-  std::string state;           // "live", "ended" or "interrupted" (the server stopped under it)
+  std::string state;  // "live", "ended" or "interrupted" (the server stopped under it)
   std::string model, device, identity;
-  std::string started;         // UTC, ISO 8601
-  double duration_s = 0;       // first to last recorded sample
-  int64_t samples = 0;         // device samples recorded
-  uint64_t next_tick = 0;      // the first tick not recorded yet (a resume starts there)
-  std::string resume_sha256;   // hex digest of the agent's resume token; the token itself is never stored
-  std::string recording;       // file name under DATA/recordings/
-  std::string summary_json;    // the session's summary figures (peak force, time in contact, ...)
-  std::string scene_text;      // the agent's scene, protobuf text format
+  std::string started;        // UTC, ISO 8601
+  double duration_s = 0;      // first to last recorded sample
+  int64_t samples = 0;        // device samples recorded
+  uint64_t next_tick = 0;     // the first tick not recorded yet (a resume starts there)
+  std::string resume_sha256;  // hex digest of the agent's resume token; the token itself is never stored
+  std::string recording;      // file name under DATA/recordings/
+  std::string summary_json;   // the session's summary figures (peak force, time in contact, ...)
+  std::string scene_text;     // the agent's scene, protobuf text format
 };
 
 // The session index. Thread-safe.

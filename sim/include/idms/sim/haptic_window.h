@@ -3,12 +3,11 @@
 // Used by `idms-sim stability` and its root loci (figures 4-3 to 4-6). Not for the 1 kHz loop.
 #pragma once
 
+#include <Eigen/Core>
 #include <complex>
 #include <functional>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "idms/sim/model.h"
 #include "idms/sim/step.h"  // Integrator: the same four schemes the step runs
@@ -72,13 +71,14 @@ double StabilityLimitDt(const Eigen::MatrixXd& a, Integrator integrator, double 
 
 // Parameter values in [lo, hi] where `stable_at` changes, found on `num_steps` uniform samples
 // and refined by bisection to |hi - lo| * 1e-12. Each entry: the value, and whether the stable
-// side is above it. Misses a stable island narrower than the sample spacing. Calls stable_at O(num_steps + 40 * crossings) times.
+// side is above it. Misses a stable island narrower than the sample spacing. Calls stable_at O(num_steps + 40 *
+// crossings) times.
 struct StabilityEdge {
   double value = 0;
   bool stable_above = false;
 };
-std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>& stable_at, double lo,
-                                              double hi, int num_steps);
+std::vector<StabilityEdge> FindStabilityEdges(const std::function<bool(double)>& stable_at, double lo, double hi,
+                                              int num_steps);
 
 // Figure 4-2 as a DSM Model (3 free atoms on the x axis, 2 fixed ground atoms, 3 fixed home
 // atoms with zero-length home elements), so stability.h's Gershgorin bounds apply to it.

@@ -18,7 +18,7 @@ enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrok
 // Where a script acts: the model's surface seen from above. For the hex fragment the top lies
 // at z = 0 and the tool comes down along z (thesis figure 6-1).
 struct ScriptGeometry {
-  double center[2] = {0, 0};  // x, y of the palpation point (middle of the surface)
+  double center[2] = {0, 0};    // x, y of the palpation point (middle of the surface)
   double x_min = 0, x_max = 0;  // stroke extent along x
   double stroke_y = 0;          // stroke line (thesis: y = 1.5 on the fragment)
   double top_z = 0;             // highest external atom near the centre

@@ -32,9 +32,9 @@ struct ReadOptions {
 // than three sides are fan-triangulated on read).
 struct SurfaceMesh {
   std::string name;
-  std::vector<double> vert_pos;   // (num_verts x 3), model units
-  std::vector<int32_t> tri_verts; // (num_tris x 3), vertex ids, counter-clockwise seen from outside
-  std::vector<int32_t> vert_line; // (num_verts), 1-based source line of each vertex, for errors
+  std::vector<double> vert_pos;    // (num_verts x 3), model units
+  std::vector<int32_t> tri_verts;  // (num_tris x 3), vertex ids, counter-clockwise seen from outside
+  std::vector<int32_t> vert_line;  // (num_verts), 1-based source line of each vertex, for errors
   int32_t num_verts() const { return static_cast<int32_t>(vert_pos.size() / 3); }
   int32_t num_tris() const { return static_cast<int32_t>(tri_verts.size() / 3); }
 };
@@ -46,15 +46,14 @@ bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
 
 // Checks that `mesh` is the surface of `model` (vertex i = i-th external atom, positions within
 // tolerance) and, if so, sets the model's triangles. `file` and mesh.vert_line locate the error.
-bool AttachSurface(const SurfaceMesh& mesh, std::string_view file, double tolerance, Model* model,
-                   LoadError* error);
+bool AttachSurface(const SurfaceMesh& mesh, std::string_view file, double tolerance, Model* model, LoadError* error);
 
 // Reads a whole file, refusing it when larger than max_bytes, empty, or not text.
 bool ReadTextFile(const std::string& path, int64_t max_bytes, std::string* text, LoadError* error);
 
 // Loads FEM_PATH and, if plg_path is non-empty, its surface. FinalizeModel has been called.
-bool LoadModel(const std::string& fem_path, const std::string& plg_path, const ReadOptions& options,
-               Model* model, LoadError* error);
+bool LoadModel(const std::string& fem_path, const std::string& plg_path, const ReadOptions& options, Model* model,
+               LoadError* error);
 
 // "PREFIX" or "PREFIX.fem" -> the .fem and .plg paths of the pair.
 void ModelPaths(const std::string& prefix_or_fem, std::string* fem_path, std::string* plg_path);

@@ -17,9 +17,9 @@ namespace idms {
 // queries, but an O(N) rebuild whenever anything moves) and an octree (deeper pointer chases
 // for the same point queries).
 struct SpatialHash {
-  double cell = 1;      // cell edge, model units
+  double cell = 1;  // cell edge, model units
   double inv_cell = 1;
-  int32_t bits = 1;     // 1 << bits buckets
+  int32_t bits = 1;                  // 1 << bits buckets
   std::vector<int32_t> bucket_head;  // (1 << bits), first atom or -1
   std::vector<int32_t> atom_next;    // (num_atoms), next atom in the bucket or -1
   std::vector<int32_t> atom_prev;    // (num_atoms), previous atom in the bucket or -1

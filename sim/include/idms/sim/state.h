@@ -26,34 +26,41 @@ inline constexpr int kMaxTools = 4;
 
 // What a tool slot remembers between ticks (thesis table 5.1 plus the tweezers of 6.1.3).
 struct ToolState {
-  double pos[3] = {0, 0, 0};        // last valid device endpoint, model frame and units
-  double blade_tip[3] = {0, 0, 0};  // scalpel: last valid blade tip (the blade is pos..blade_tip)
+  double pos[3] = {0, 0, 0};         // last valid device endpoint, model frame and units
+  double blade_tip[3] = {0, 0, 0};   // scalpel: last valid blade tip (the blade is pos..blade_tip)
   double radius = 0, stiffness = 0;  // sphere/tweezers: last valid MIO r and k
-  uint8_t kind = 0;                 // ToolKind of the last valid sample
-  uint8_t has_pos = 0;              // the fields above hold a valid sample
-  uint8_t closed = 0;               // tweezers were closed last tick (grasping is edge-triggered)
+  uint8_t kind = 0;                  // ToolKind of the last valid sample
+  uint8_t has_pos = 0;               // the fields above hold a valid sample
+  uint8_t closed = 0;                // tweezers were closed last tick (grasping is edge-triggered)
   // The tweezers' grasp element (thesis 6.1.3): atom -> MIO centre. The centre is not an atom,
   // so the element lives here rather than in the Model, which stays const during a step.
-  int32_t grasp_atom = -1;  // -1 = not grasping
-  double grasp_leq = 0;     // model units: distance atom-centre when the tweezers closed
-  double grasp_k = 0;       // force / length: the MIO's k at closure
+  int32_t grasp_atom = -1;          // -1 = not grasping
+  double grasp_leq = 0;             // model units: distance atom-centre when the tweezers closed
+  double grasp_k = 0;               // force / length: the MIO's k at closure
   double force_out[3] = {0, 0, 0};  // device force sent last tick (for the rate clamp), force units
 };
 
 // Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).
+// The one list of them, as MuJoCo keeps mjtWarning: X(name, meaning) for each. WarningCounters,
+// WarningKinds, TotalWarnings and every report are made from it, so none can miss a counter.
+#define IDMS_WARNINGS(X)                                                                \
+  X(bad_tool_input, "non-finite or negative tool input; the last valid pose was held")  \
+  X(substep_limit, "predicted substeps exceeded max_substeps and no fallback allowed")  \
+  X(implicit_fallback, "a tick switched from an explicit integrator to implicit Euler") \
+  X(rollback, "an attempt failed the finiteness/energy check and was undone")           \
+  X(unrecovered, "every attempt failed: the active region was restored at rest")        \
+  X(state_repaired, "non-finite atoms found at a tick's start were reset to rest")      \
+  X(device_force_nonfinite, "device force was NaN/Inf and was zeroed")                  \
+  X(device_force_clamped, "device force magnitude hit max_device_force")                \
+  X(device_force_rate_limited, "device force change hit max_device_force_rate")         \
+  X(cg_not_converged, "implicit Euler: CG stopped at its iteration limit")              \
+  X(implicit_grew, "implicit Euler: the active system outgrew its buffers (allocated)") \
+  X(workspace_resync, "the Workspace was rebuilt from a State it had not stepped")
+
 struct WarningCounters {
-  int64_t bad_tool_input = 0;     // non-finite or negative tool input; the last valid pose was held
-  int64_t substep_limit = 0;      // predicted substeps exceeded max_substeps and no fallback allowed
-  int64_t implicit_fallback = 0;  // a tick switched from an explicit integrator to implicit Euler
-  int64_t rollback = 0;           // an attempt failed the finiteness/energy check and was undone
-  int64_t unrecovered = 0;        // every attempt failed: the active region was restored at rest
-  int64_t state_repaired = 0;     // non-finite atoms found at a tick's start were reset to rest
-  int64_t device_force_nonfinite = 0;  // device force was NaN/Inf and was zeroed
-  int64_t device_force_clamped = 0;    // device force magnitude hit max_device_force
-  int64_t device_force_rate_limited = 0;  // device force change hit max_device_force_rate
-  int64_t cg_not_converged = 0;   // implicit Euler: CG stopped at its iteration limit
-  int64_t implicit_grew = 0;      // implicit Euler: the active system outgrew its buffers (allocated)
-  int64_t workspace_resync = 0;   // the Workspace was rebuilt from a State it had not stepped
+#define IDMS_WARNING_FIELD(name, meaning) int64_t name = 0;
+  IDMS_WARNINGS(IDMS_WARNING_FIELD)
+#undef IDMS_WARNING_FIELD
 };
 
 struct State {
@@ -68,9 +75,9 @@ struct State {
   std::vector<Real> atom_vel;  // (num_atoms x 3), model units / s; 0 for fixed and inactive atoms
 
   // Eq. 4.6 filter state per element.
-  std::vector<Real> elem_len;      // (num_elems), model units: l at the last update (l_{n-1});
-                                   // exactly -1 = restart at the next update (it was degenerate)
-  std::vector<Real> elem_rate;     // (num_elems), model units / s: filtered length rate
+  std::vector<Real> elem_len;       // (num_elems), model units: l at the last update (l_{n-1});
+                                    // exactly -1 = restart at the next update (it was degenerate)
+  std::vector<Real> elem_rate;      // (num_elems), model units / s: filtered length rate
   std::vector<int64_t> elem_stamp;  // (num_elems): substep_clock at the last update
   // Every element with a free endpoint was updated at this substep or later: its stamp is
   // max(elem_stamp[e], elem_stamp_floor). The full-mode fused pass updates all of them and moves
@@ -114,7 +121,9 @@ struct WarningKind {
   const char* name;
   int64_t count;
 };
-inline constexpr int kNumWarningKinds = 12;
+#define IDMS_WARNING_ONE(name, meaning) +1
+inline constexpr int kNumWarningKinds = 0 IDMS_WARNINGS(IDMS_WARNING_ONE);
+#undef IDMS_WARNING_ONE
 std::array<WarningKind, kNumWarningKinds> WarningKinds(const WarningCounters& warnings);
 
 // The sum of all warning counters (0 in a clean run).

@@ -32,8 +32,8 @@ enum class LengthRate : uint8_t {
 
 // How a step reacts when the predicted stable step is shorter than dt.
 struct StabilityOptions {
-  bool predict = true;      // Gershgorin bound over active atoms, tool stiffness included
-  double safety = 0.9;      // substep length = safety * predicted stable step
+  bool predict = true;  // Gershgorin bound over active atoms, tool stiffness included
+  double safety = 0.9;  // substep length = safety * predicted stable step
   int32_t max_substeps = 8;
   bool implicit_fallback = true;  // beyond max_substeps, or after a failed check: implicit Euler
   // Reject a tick whose active-region energy grows (see below). Off: a tick is rejected only when
@@ -83,18 +83,18 @@ struct StepOptions {
   double settle_speed = 1e-3;     // model units / s
   double settle_distance = 1e-3;  // model units
   bool wake_neighbours = true;
-  double hash_cell = 0;        // spatial-hash cell edge, model units; 0 = local_radius
+  double hash_cell = 0;  // spatial-hash cell edge, model units; 0 = local_radius
 
   // Field forces (thesis eq. 4.2), off unless the scene asks.
   bool gravity = false;
   double gravity_accel[3] = {0, 0, -9.81};  // model units / s^2
-  double air_damping = 0;  // 1/s: f = -air_damping * m * v (the thesis writes -m x1', i.e. 1/s)
+  double air_damping = 0;                   // 1/s: f = -air_damping * m * v (the thesis writes -m x1', i.e. 1/s)
 
   double min_distance_fraction = 0.05;  // thesis contact law guard, fraction of r
 
   // Device limits: what leaves the step is clamped (the atoms still feel the unclamped force).
-  double max_device_force = 10;         // force units (PHANToM-class: ~8.5 N peak)
-  double max_device_force_rate = 1e4;   // force units / s
+  double max_device_force = 10;        // force units (PHANToM-class: ~8.5 N peak)
+  double max_device_force_rate = 1e4;  // force units / s
 
   StabilityOptions stability;
 };
@@ -113,21 +113,21 @@ struct StepReport {
   int32_t num_tools = 0;
   int32_t active_atoms = 0;
   int32_t active_elems = 0;
-  int32_t substeps = 0;               // of the accepted attempt
-  int32_t attempts = 0;               // 1 unless a check failed and the tick was retried
+  int32_t substeps = 0;  // of the accepted attempt
+  int32_t attempts = 0;  // 1 unless a check failed and the tick was retried
   Integrator integrator_used = Integrator::kExplicitEuler;
-  double predicted_dt_s = 0;          // stable step predicted for the configured integrator
-  bool fallback = false;              // the accepted attempt used implicit Euler as a fallback
-  bool unrecovered = false;           // every attempt failed; active region restored at rest
+  double predicted_dt_s = 0;  // stable step predicted for the configured integrator
+  bool fallback = false;      // the accepted attempt used implicit Euler as a fallback
+  bool unrecovered = false;   // every attempt failed; active region restored at rest
   // Full mode's fused pass computed the accepted attempt (Workspace::FullPass); false = the
   // general path did (local mode, another integrator, a pending cut, or a fused attempt that met a
   // non-finite value or failed the energy check and was retried there).
   bool fused = false;
-  int32_t cg_iterations = 0;          // implicit Euler: total over substeps
+  int32_t cg_iterations = 0;  // implicit Euler: total over substeps
   // Active region, with the tools at their new pose; 0 when stability.energy_check is off.
   double energy_before = 0, energy_after = 0;
-  int64_t new_warnings = 0;           // warnings counted during this tick
-  int32_t pending_cuts = 0;           // elements awaiting ApplyPendingEdits
+  int64_t new_warnings = 0;  // warnings counted during this tick
+  int32_t pending_cuts = 0;  // elements awaiting ApplyPendingEdits
   // Stage times, ns (steady clock).
   int64_t tools_ns = 0;       // tool validation, grasp, cut detection
   int64_t active_set_ns = 0;  // hash queries, active atoms and elements, hash update

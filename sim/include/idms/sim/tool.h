@@ -16,6 +16,10 @@ enum class ToolKind : uint8_t {
   kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
 };
 
+// Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip
+// and the tweezers); the scalpel only cuts.
+constexpr bool IsContactTool(ToolKind kind) { return kind == ToolKind::kSphere || kind == ToolKind::kTweezers; }
+
 enum class ContactLaw : uint8_t {
   kThesis,  // thesis 5.5.1 as written: f = k (r - |d|) / |d| along d^ (note the extra 1/|d|)
   kLinear,  // plain penetration: f = k (r - |d|) along d^
@@ -30,8 +34,8 @@ struct ToolCommand {
   double radius = 1.5;        // sphere/tweezers: MIO radius r, model units (thesis 6.1: 1.5)
   double stiffness = 400;     // sphere/tweezers: MIO k, force / length (thesis 6.1: 400)
   ContactLaw law = ContactLaw::kThesis;
-  bool closed = false;              // tweezers: closed this tick
-  double blade[3] = {0, 0, -1};     // scalpel: the blade runs from pos to pos + blade, model units
+  bool closed = false;           // tweezers: closed this tick
+  double blade[3] = {0, 0, -1};  // scalpel: the blade runs from pos to pos + blade, model units
 };
 
 struct ToolInput {
@@ -49,12 +53,11 @@ struct ContactForce {
   double energy = 0;        // penalty potential, force * length (0 at |d| >= r)
   bool touching = false;
 };
-ContactForce SphereContact(ContactLaw law, double k, double r, double min_distance_fraction,
-                           const double d[3]);
+ContactForce SphereContact(ContactLaw law, double k, double r, double min_distance_fraction, const double d[3]);
 
 // True when segment pq crosses triangle abc (Moller-Trumbore; grazing/parallel = no).
-bool SegmentCrossesTriangle(const double p[3], const double q[3], const double a[3],
-                            const double b[3], const double c[3]);
+bool SegmentCrossesTriangle(const double p[3], const double q[3], const double a[3], const double b[3],
+                            const double c[3]);
 
 // True when segment pq crosses the quad a0 b0 b1 a1 that a blade sweeps moving from a0b0 to a1b1.
 bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3], const double b0[3],

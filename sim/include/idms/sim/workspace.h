@@ -34,12 +34,12 @@ struct ActiveTool {
 // Linearised backward Euler on the active set: a row-major CSR matrix (viewed by Eigen through
 // Eigen::Map, so no Eigen-owned storage) and the CG vectors, all indexed by active slot.
 struct ImplicitBuffers {
-  std::vector<int32_t> outer;  // (3 * capacity_atoms + 1)
-  std::vector<int32_t> inner;  // (capacity_nnz)
-  std::vector<Real> values;    // (capacity_nnz)
+  std::vector<int32_t> outer;                       // (3 * capacity_atoms + 1)
+  std::vector<int32_t> inner;                       // (capacity_nnz)
+  std::vector<Real> values;                         // (capacity_nnz)
   std::vector<Real> rhs, dv, r, z, p, q, inv_diag;  // (3 * capacity_atoms)
-  std::vector<Real> diag_blocks;                     // (9 * capacity_atoms)
-  std::vector<Real> atom_dv_guess;  // (num_atoms x 3): last solution per atom, CG warm start
+  std::vector<Real> diag_blocks;                    // (9 * capacity_atoms)
+  std::vector<Real> atom_dv_guess;                  // (num_atoms x 3): last solution per atom, CG warm start
 };
 
 // Full mode's fused pass (full_step.cc): element forces, accumulation and integration in one
@@ -63,9 +63,9 @@ struct FullPass {
   // Elements the last fused substep found degenerate (their eq. 4.6 filters carry a restart mark);
   // -1 = unknown (the last substep was not this pass's).
   int32_t restart_marks = -1;
-  std::vector<int32_t> group_end;  // (num_atoms) by active slot: one past its last element
-  std::vector<int32_t> other;      // (num_elems) endpoint that is not the group's atom; ~id if fixed
-  std::vector<int32_t> elem_g;     // (num_elems) the group's atom (the lower free endpoint)
+  std::vector<int32_t> group_end;              // (num_atoms) by active slot: one past its last element
+  std::vector<int32_t> other;                  // (num_elems) endpoint that is not the group's atom; ~id if fixed
+  std::vector<int32_t> elem_g;                 // (num_elems) the group's atom (the lower free endpoint)
   std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
   std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / Model::atom_mass
   Real t_over_m_of = 0;                        // the substep T of atom_t_over_m; 0 = not computed
@@ -85,9 +85,9 @@ struct FullPass {
   // hundred elements in each of its ~20 streams, and each crossing can cost a page walk. The
   // contents do not change; off, or where the kernel declines, nothing else changes either.
   bool huge_pages = true;
-  bool huge_workspace_done = false;   // the workspace's arrays were advised
-  const Real* huge_state = nullptr;   // State::atom_pos.data() when the State's were advised
-  int64_t huge_bytes = 0;             // bytes the kernel moved to huge pages so far
+  bool huge_workspace_done = false;  // the workspace's arrays were advised
+  const Real* huge_state = nullptr;  // State::atom_pos.data() when the State's were advised
+  int64_t huge_bytes = 0;            // bytes the kernel moved to huge pages so far
   // Stable step of the configured integrator without tools (the minimum over free atoms), and
   // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
   double dt_free = 0;
@@ -109,12 +109,12 @@ struct Workspace {
   int64_t synced_tick = -1;
 
   // Derived from the model and options.
-  bool any_damping = false;    // some element has b > 0; else the viscous filter is skipped
+  bool any_damping = false;                    // some element has b > 0; else the viscous filter is skipped
   bool use_rk4 = false, use_implicit = false;  // which scratch exists
-  double local_radius = 0;     // effective r_l (local mode)
-  double cut_reach = 0;        // model units: half the longest element allowed for cut search
-  std::vector<double> atom_omega2;  // (num_atoms), 1/s^2: Gershgorin bound without tools
-  std::vector<double> atom_damp;    // (num_atoms), 1/s: Gershgorin damping bound without tools
+  double local_radius = 0;                     // effective r_l (local mode)
+  double cut_reach = 0;                        // model units: half the longest element allowed for cut search
+  std::vector<double> atom_omega2;             // (num_atoms), 1/s^2: Gershgorin bound without tools
+  std::vector<double> atom_damp;               // (num_atoms), 1/s: Gershgorin damping bound without tools
 
   SpatialHash hash;  // local mode only; files every atom at its State position
 
@@ -136,21 +136,21 @@ struct Workspace {
   std::vector<Real> atom_force_external;  // (num_atoms x 3) or empty, force units
 
   // Lists of this tick (buffers of full size; counts say how much is used).
-  std::vector<int32_t> active;      // (num_atoms) active free atoms
+  std::vector<int32_t> active;  // (num_atoms) active free atoms
   int32_t num_active = 0;
   std::vector<int32_t> candidates;  // (num_atoms) external atoms that may touch a tool
   int32_t num_candidates = 0;
-  std::vector<int32_t> boundary;    // (num_atoms) inactive free atoms checked by the wake pass
+  std::vector<int32_t> boundary;  // (num_atoms) inactive free atoms checked by the wake pass
   int32_t num_boundary = 0;
-  std::vector<int32_t> elems;       // (num_elems) elements with an active endpoint, not cut
+  std::vector<int32_t> elems;  // (num_elems) elements with an active endpoint, not cut
   int32_t num_elems = 0;
-  std::vector<uint8_t> elem_mark;   // (num_elems)
-  std::vector<uint8_t> elem_cut;    // (num_elems), 1 = pending cut: no force until removed
+  std::vector<uint8_t> elem_mark;     // (num_elems)
+  std::vector<uint8_t> elem_cut;      // (num_elems), 1 = pending cut: no force until removed
   std::vector<int32_t> pending_cuts;  // (num_elems)
   int32_t num_pending_cuts = 0;
 
   // Rollback copy of the active region, by active slot / active element index.
-  std::vector<Real> backup_pos, backup_vel;  // (num_atoms x 3)
+  std::vector<Real> backup_pos, backup_vel;             // (num_atoms x 3)
   std::vector<Real> backup_elem_len, backup_elem_rate;  // (num_elems)
   std::vector<int64_t> backup_elem_stamp;               // (num_elems)
 
