@@ -13,6 +13,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "idms/protocol/digest.h"
+
 namespace idms::server {
 namespace {
 
@@ -30,16 +32,6 @@ bool HexToDigest(std::string_view hex, Digest* out) {
     (*out)[i] = static_cast<uint8_t>(hi * 16 + lo);
   }
   return true;
-}
-
-std::string DigestHex(const Digest& d) {
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out(64, '0');
-  for (size_t i = 0; i < 32; ++i) {
-    out[2 * i] = kHex[d[i] >> 4];
-    out[2 * i + 1] = kHex[d[i] & 15];
-  }
-  return out;
 }
 
 // Appends `text` to `path`, creating it with mode 0600.
@@ -182,7 +174,7 @@ std::string AppendNewToken(const std::string& path, Role role, std::string* erro
     *error = "RAND_bytes failed";
     return {};
   }
-  const std::string line = std::string(RoleName(role)) + " sha256:" + DigestHex(DigestOf(token)) + "\n";
+  const std::string line = std::string(RoleName(role)) + " sha256:" + HexEncode(DigestOf(token)) + "\n";
   if (!AppendPrivate(path, line, false, error)) return {};
   return token;
 }

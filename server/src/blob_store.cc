@@ -137,19 +137,6 @@ class BlobDirectory final : public BlobStore {
 
 }  // namespace
 
-std::string Sha256Hex(std::string_view bytes) {
-  unsigned char digest[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  EVP_Digest(bytes.data(), bytes.size(), digest, &len, EVP_sha256(), nullptr);
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out(2 * len, '0');
-  for (unsigned int i = 0; i < len; ++i) {
-    out[2 * i] = kHex[digest[i] >> 4];
-    out[2 * i + 1] = kHex[digest[i] & 15];
-  }
-  return out;
-}
-
 std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error) {
   auto store = std::make_unique<BlobDirectory>(dir);
   if (!store->Init(error)) return nullptr;

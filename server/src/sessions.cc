@@ -13,6 +13,7 @@
 #include <ctime>
 #include <filesystem>
 
+#include "idms/protocol/digest.h"
 #include "idms/protocol/envelope.h"
 #include "idms/server/log.h"
 
@@ -68,10 +69,7 @@ double FrameTimeS(const v1::Envelope& e) {
 std::string RandomHex(size_t bytes) {
   std::vector<unsigned char> raw(bytes);
   RAND_bytes(raw.data(), static_cast<int>(raw.size()));
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out;
-  for (unsigned char c : raw) out += kHex[c >> 4], out += kHex[c & 15];
-  return out;
+  return HexEncode(raw);
 }
 
 std::shared_ptr<const std::string> Serialized(const v1::Envelope& e) {

@@ -16,6 +16,8 @@
 #include <string>
 #include <string_view>
 
+#include "idms/protocol/digest.h"
+
 namespace idms::agent {
 
 struct ModelFetchOptions {
@@ -39,7 +41,6 @@ bool FetchModel(std::string_view name_at_version, const ModelFetchOptions& optio
 // The default cache directory: $IDMS_CACHE_DIR, else $XDG_CACHE_HOME/idms, else ~/.cache/idms.
 std::string DefaultCacheDir();
 
-// SHA-256 of bytes, as 64 lowercase hex digits (FIPS 180-4).
-std::string Sha256Hex(std::string_view bytes);
+using ::idms::Sha256Hex;  // idms/protocol/digest.h: SHA-256 as 64 lowercase hex digits
 
 }  // namespace idms::agent

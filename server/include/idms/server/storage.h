@@ -10,6 +10,8 @@
 #include <string_view>
 #include <vector>
 
+#include "idms/protocol/digest.h"
+
 namespace idms::server {
 
 // Content-addressed files. Thread-safe.
@@ -106,7 +108,6 @@ std::unique_ptr<SessionIndex> OpenSqliteSessionIndex(const std::string& db_path,
 // The current UTC time as ISO 8601 ("2026-11-23T19:04:05Z"), as the stores write it.
 std::string UtcNow();
 
-// SHA-256 of bytes as 64 lowercase hex digits (OpenSSL).
-std::string Sha256Hex(std::string_view bytes);
+using ::idms::Sha256Hex;  // idms/protocol/digest.h: SHA-256 as 64 lowercase hex digits
 
 }  // namespace idms::server
