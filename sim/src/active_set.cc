@@ -113,10 +113,10 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
       const ActiveTool& at = ws.tools[t];
       if (at.kind == ToolKind::kNone) continue;
       if (at.kind == ToolKind::kScalpel) {
-        b.QuerySegment(at.c, at.blade_tip, ws.local_radius, linger);
+        b.QuerySegment(at.pos, at.blade_tip, ws.local_radius, linger);
         continue;
       }
-      b.QuerySphere(at.c, std::max(ws.local_radius, at.r), /*contact=*/true, linger);
+      b.QuerySphere(at.pos, std::max(ws.local_radius, at.radius), /*contact=*/true, linger);
       if (at.grasp_atom >= 0) {
         double g[3];
         for (int c = 0; c < 3; ++c) g[c] = s.atom_pos[3 * at.grasp_atom + c];

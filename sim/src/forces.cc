@@ -48,9 +48,9 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
       const int32_t a = ws.candidates[i];
       if (a == at.grasp_atom) continue;  // held by the grasp element instead
       const Real* p = &s.atom_pos[3 * a];
-      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-      if (!InsideSphere(d, at.r)) continue;
-      const ContactForce cf = SphereContact(at.law, at.k, at.r, frac, d);
+      const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      if (!InsideSphere(d, at.radius)) continue;
+      const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, frac, d);
       if (!cf.touching) continue;
       for (int c = 0; c < 3; ++c) at.eval_force[c] += cf.f[c];
       if (ws.atom_mark[a]) {
@@ -60,7 +60,7 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
     if (at.grasp_atom < 0) continue;
     // Grasp element atom -> centre: k (l - l_eq) along s^ (eq. 4.7 with the centre as atom 1).
     const Real* p = &s.atom_pos[3 * at.grasp_atom];
-    const double sv[3] = {at.c[0] - p[0], at.c[1] - p[1], at.c[2] - p[2]};
+    const double sv[3] = {at.pos[0] - p[0], at.pos[1] - p[1], at.pos[2] - p[2]};
     const double l = std::sqrt(sv[0] * sv[0] + sv[1] * sv[1] + sv[2] * sv[2]);
     if (!(l > kMinLength)) continue;
     const double mag = at.grasp_k * (l - at.grasp_leq) / l;
@@ -185,20 +185,20 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     const ActiveTool& at = ws.tools[t];
     if (!IsContactTool(at.kind)) continue;
-    const double dl = eps * (std::fabs(at.c[0]) + std::fabs(at.c[1]) + std::fabs(at.c[2]) + 1);
+    const double dl = eps * (std::fabs(at.pos[0]) + std::fabs(at.pos[1]) + std::fabs(at.pos[2]) + 1);
     for (int32_t i = 0; i < ws.num_candidates; ++i) {
       const int32_t a = ws.candidates[i];
       if (a == at.grasp_atom) continue;
       const Real* p = &s.atom_pos[3 * a];
-      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-      if (!InsideSphere(d, at.r)) continue;
-      const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+      const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      if (!InsideSphere(d, at.radius)) continue;
+      const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
       *contact += cf.energy;
       *noise += (std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]) + cf.stiffness * dl) * dl;
     }
     if (at.grasp_atom >= 0) {
       const Real* p = &s.atom_pos[3 * at.grasp_atom];
-      const double dx = at.c[0] - p[0], dy = at.c[1] - p[1], dz = at.c[2] - p[2];
+      const double dx = at.pos[0] - p[0], dy = at.pos[1] - p[1], dz = at.pos[2] - p[2];
       const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - at.grasp_leq;
       *contact += 0.5 * at.grasp_k * stretch * stretch;
       *noise += at.grasp_k * (std::fabs(stretch) + dl) * dl;

@@ -93,8 +93,8 @@ void PrefillDiagonal(const Model& m, const State& s, Workspace& ws, Real T) {
       const int32_t a = ws.candidates[j];
       if (a == at.grasp_atom || ws.atom_slot[a] < 0) continue;
       const Real* p = &s.atom_pos[3 * a];
-      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-      const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+      const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
       if (!cf.touching) continue;
       const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       const double n[3] = {len > 0 ? d[0] / len : 0, len > 0 ? d[1] / len : 0, len > 0 ? d[2] / len : 1};
@@ -105,7 +105,7 @@ void PrefillDiagonal(const Model& m, const State& s, Workspace& ws, Real T) {
       add_block(a, K);
     }
     if (at.grasp_atom >= 0) {
-      const Real centre[3] = {static_cast<Real>(at.c[0]), static_cast<Real>(at.c[1]), static_cast<Real>(at.c[2])};
+      const Real centre[3] = {static_cast<Real>(at.pos[0]), static_cast<Real>(at.pos[1]), static_cast<Real>(at.pos[2])};
       Real K[9], B[9];
       SpringBlocks(&s.atom_pos[3 * at.grasp_atom], centre, at.grasp_k, at.grasp_leq, 0, K, B);
       add_block(at.grasp_atom, K);

@@ -59,9 +59,9 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
     for (int32_t i = 0; i < ws.num_candidates; ++i) {
       const int32_t a = ws.candidates[i];
       const Real* p = &s.atom_pos[3 * a];
-      const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-      if (!internal::InsideSphere(d, at.r)) continue;
-      const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+      const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      if (!internal::InsideSphere(d, at.radius)) continue;
+      const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
       if (!cf.touching) continue;
       ++report->tools[t].contacts;
       if (a != at.grasp_atom) ws.atom_extra_k[a] += cf.stiffness;
@@ -218,15 +218,14 @@ void DeviceForces(State& s, const Workspace& ws, StepReport* report) {
       ++s.warnings.device_force_nonfinite;
       f[0] = f[1] = f[2] = mag = 0;
     }
-    const double prev = std::sqrt(ts.force_out[0] * ts.force_out[0] + ts.force_out[1] * ts.force_out[1] +
-                                  ts.force_out[2] * ts.force_out[2]);
+    const double prev = std::sqrt(ts.force[0] * ts.force[0] + ts.force[1] * ts.force[1] + ts.force[2] * ts.force[2]);
     double limit = o.max_device_force;
     if (prev + o.max_device_force_rate * o.dt_s < limit) limit = prev + o.max_device_force_rate * o.dt_s;
     if (mag > limit) {
       ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
       for (int c = 0; c < 3; ++c) f[c] *= limit / mag;
     }
-    std::copy(f, f + 3, ts.force_out);
+    std::copy(f, f + 3, ts.force);
     std::copy(f, f + 3, tr.force);
   }
 }

@@ -146,33 +146,33 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       continue;
     }
     // Valid input becomes the held pose; invalid input falls back to it (or to nothing).
-    const bool had_scalpel = ts.has_pos && ts.kind == static_cast<uint8_t>(ToolKind::kScalpel);
+    const bool had_scalpel = ts.has_pos && ts.kind == ToolKind::kScalpel;
     const double prev_base[3] = {ts.pos[0], ts.pos[1], ts.pos[2]};
     const double prev_tip[3] = {ts.blade_tip[0], ts.blade_tip[1], ts.blade_tip[2]};
     if (ValidCommand(*cmd)) {
       for (int c = 0; c < 3; ++c) ts.pos[c] = cmd->pos[c], ts.blade_tip[c] = cmd->pos[c] + cmd->blade[c];
       ts.radius = cmd->radius;
       ts.stiffness = cmd->stiffness;
-      if (ts.kind != static_cast<uint8_t>(cmd->kind)) ts.grasp_atom = -1;
-      ts.kind = static_cast<uint8_t>(cmd->kind);
-      ts.has_pos = 1;
+      if (ts.kind != cmd->kind) ts.grasp_atom = -1;
+      ts.kind = cmd->kind;
+      ts.has_pos = true;
     } else {
       ++s.warnings.bad_tool_input;
       report->tools[t].input_held = true;
-      if (!ts.has_pos || ts.kind != static_cast<uint8_t>(cmd->kind)) continue;
+      if (!ts.has_pos || ts.kind != cmd->kind) continue;
     }
     at.kind = cmd->kind;
     at.law = cmd->law;
-    at.closed = report->tools[t].input_held ? ts.closed != 0 : cmd->closed;
-    for (int c = 0; c < 3; ++c) at.c[c] = ts.pos[c], at.blade_tip[c] = ts.blade_tip[c];
-    at.r = ts.radius;
-    at.k = ts.stiffness;
+    at.closed = report->tools[t].input_held ? ts.closed : cmd->closed;
+    for (int c = 0; c < 3; ++c) at.pos[c] = ts.pos[c], at.blade_tip[c] = ts.blade_tip[c];
+    at.radius = ts.radius;
+    at.stiffness = ts.stiffness;
     at.grasp_atom = ts.grasp_atom;
     at.grasp_leq = ts.grasp_leq;
     at.grasp_k = ts.grasp_k;
     // Scalpel: the quad swept since the last tick (thesis 3.2.6: slicing removes elements).
     if (at.kind == ToolKind::kScalpel && had_scalpel) {
-      report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.c, at.blade_tip);
+      report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.pos, at.blade_tip);
     }
   }
 }
@@ -189,12 +189,12 @@ void UpdateGrasps(const Model& m, State& s, Workspace& ws, StepReport* report) {
     } else if (!ts.closed && at.grasp_atom < 0) {
       // Closing while in contact: the nearest free contact atom to the MIO centre.
       int32_t best = -1;
-      double best_d2 = at.r * at.r;
+      double best_d2 = at.radius * at.radius;
       for (int32_t i = 0; i < ws.num_candidates; ++i) {
         const int32_t a = ws.candidates[i];
         if (m.atom_fixed[a]) continue;
         double d2 = 0;
-        for (int c = 0; c < 3; ++c) d2 += (s.atom_pos[3 * a + c] - at.c[c]) * (s.atom_pos[3 * a + c] - at.c[c]);
+        for (int c = 0; c < 3; ++c) d2 += (s.atom_pos[3 * a + c] - at.pos[c]) * (s.atom_pos[3 * a + c] - at.pos[c]);
         if (d2 < best_d2) best_d2 = d2, best = a;
       }
       if (best >= 0) {
@@ -202,12 +202,12 @@ void UpdateGrasps(const Model& m, State& s, Workspace& ws, StepReport* report) {
         // connecting element's): the element starts pushing the atom out with the contact force
         // it had, k (l_eq - l) = |f_contact|, and turns to pulling as the tweezers lift.
         const Real* p = &s.atom_pos[3 * best];
-        const double d[3] = {p[0] - at.c[0], p[1] - at.c[1], p[2] - at.c[2]};
-        const ContactForce cf = SphereContact(at.law, at.k, at.r, ws.options.min_distance_fraction, d);
+        const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+        const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
         const double push = std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]);
         ts.grasp_atom = at.grasp_atom = best;
-        ts.grasp_leq = at.grasp_leq = std::sqrt(best_d2) + push / at.k;
-        ts.grasp_k = at.grasp_k = at.k;
+        ts.grasp_leq = at.grasp_leq = std::sqrt(best_d2) + push / at.stiffness;
+        ts.grasp_k = at.grasp_k = at.stiffness;
       }
     }
     ts.closed = closed;

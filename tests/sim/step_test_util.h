@@ -63,7 +63,7 @@ inline uint64_t HashState(const State& s) {
   mix(s.elem_stamp.data(), s.elem_stamp.size() * sizeof(int64_t));
   mix(&s.tick, sizeof(s.tick));
   mix(&s.time_s, sizeof(s.time_s));
-  for (const ToolState& t : s.tools) mix(t.force_out, sizeof(t.force_out)), mix(&t.grasp_atom, sizeof(t.grasp_atom));
+  for (const ToolState& t : s.tools) mix(t.force, sizeof(t.force)), mix(&t.grasp_atom, sizeof(t.grasp_atom));
   for (const WarningKind& k : WarningKinds(s.warnings)) mix(&k.count, sizeof(k.count));  // every counter
   return h;
 }

@@ -24,20 +24,31 @@ using Real = double;
 // Tools (devices) stepped at once; ToolInput and the reports hold this many slots.
 inline constexpr int kMaxTools = 4;
 
+enum class ToolKind : uint8_t {
+  kNone,      // slot unused
+  kSphere,    // fingertip MIO: penalty contact with external atoms
+  kTweezers,  // a sphere that grasps the nearest contact atom while closed
+  kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
+};
+
+// Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip
+// and the tweezers); the scalpel only cuts.
+constexpr bool IsContactTool(ToolKind kind) { return kind == ToolKind::kSphere || kind == ToolKind::kTweezers; }
+
 // What a tool slot remembers between ticks (thesis table 5.1 plus the tweezers of 6.1.3).
 struct ToolState {
   double pos[3] = {0, 0, 0};         // last valid device endpoint, model frame and units
   double blade_tip[3] = {0, 0, 0};   // scalpel: last valid blade tip (the blade is pos..blade_tip)
   double radius = 0, stiffness = 0;  // sphere/tweezers: last valid MIO r and k
-  uint8_t kind = 0;                  // ToolKind of the last valid sample
-  uint8_t has_pos = 0;               // the fields above hold a valid sample
-  uint8_t closed = 0;                // tweezers were closed last tick (grasping is edge-triggered)
+  ToolKind kind = ToolKind::kNone;   // kind of the last valid sample
+  bool has_pos = false;              // the fields above hold a valid sample
+  bool closed = false;               // tweezers were closed last tick (grasping is edge-triggered)
   // The tweezers' grasp element (thesis 6.1.3): atom -> MIO centre. The centre is not an atom,
   // so the element lives here rather than in the Model, which stays const during a step.
-  int32_t grasp_atom = -1;          // -1 = not grasping
-  double grasp_leq = 0;             // model units: distance atom-centre when the tweezers closed
-  double grasp_k = 0;               // force / length: the MIO's k at closure
-  double force_out[3] = {0, 0, 0};  // device force sent last tick (for the rate clamp), force units
+  int32_t grasp_atom = -1;      // -1 = not grasping
+  double grasp_leq = 0;         // model units: distance atom-centre when the tweezers closed
+  double grasp_k = 0;           // force / length: the MIO's k at closure
+  double force[3] = {0, 0, 0};  // device force sent last tick (for the rate clamp), force units
 };
 
 // Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).

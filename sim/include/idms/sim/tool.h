@@ -9,17 +9,6 @@
 
 namespace idms {
 
-enum class ToolKind : uint8_t {
-  kNone,      // slot unused
-  kSphere,    // fingertip MIO: penalty contact with external atoms
-  kTweezers,  // a sphere that grasps the nearest contact atom while closed
-  kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
-};
-
-// Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip
-// and the tweezers); the scalpel only cuts.
-constexpr bool IsContactTool(ToolKind kind) { return kind == ToolKind::kSphere || kind == ToolKind::kTweezers; }
-
 enum class ContactLaw : uint8_t {
   kThesis,  // thesis 5.5.1 as written: f = k (r - |d|) / |d| along d^ (note the extra 1/|d|)
   kLinear,  // plain penetration: f = k (r - |d|) along d^

@@ -16,14 +16,15 @@ namespace idms {
 
 struct Model;
 
-// A tool slot as this tick uses it: validated input plus what State remembers (grasp).
+// A tool slot as this tick uses it: validated input plus what State remembers (grasp). The
+// fields it shares with ToolCommand, ToolState and ToolReport have the same names there.
 struct ActiveTool {
   ToolKind kind = ToolKind::kNone;  // kNone: ignored this tick (unused slot or never valid)
   ContactLaw law = ContactLaw::kThesis;
-  double c[3] = {0, 0, 0};          // MIO centre / blade base, model units
-  double blade_tip[3] = {0, 0, 0};  // scalpel
-  double r = 0, k = 0;              // MIO radius and stiffness
-  bool closed = false;              // tweezers: closed this tick (held when the input was bad)
+  double pos[3] = {0, 0, 0};         // MIO centre / blade base, model units
+  double blade_tip[3] = {0, 0, 0};   // scalpel
+  double radius = 0, stiffness = 0;  // MIO r and k
+  bool closed = false;               // tweezers: closed this tick (held when the input was bad)
   int32_t grasp_atom = -1;
   double grasp_leq = 0, grasp_k = 0;
   double eval_force[3] = {0, 0, 0};  // sum of this tool's forces on atoms, current evaluation
