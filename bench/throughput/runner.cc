@@ -23,11 +23,12 @@ double StreamedBytes(const idms::Model& m, const idms::Workspace& ws) {
   // element id when the ids are not the walk order (int32), k, b, l_eq; the eq. 4.6 length and
   // rate read and written, and copied.
   const bool filter = ws.any_damping;
-  const double per_elem = 4 + 4 + (ws.full.identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
+  const double per_elem =
+      4 + 4 + (idms::GetFusedPassStatus(ws).identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
   // Per free atom: slot -> atom id and group end (int32 each), mass; position and velocity read
   // and written; the 4-wide force accumulator read and written; position and velocity copied
-  // (as two 4-wide rows where the pass writes them so: FullPass::backup_rows).
-  const double copy = ws.full.backup_rows.empty() ? 2 * 3 * r : 2 * 4 * r;
+  // (as two 4-wide rows where the pass writes them so: FusedPassStatus::row_backup).
+  const double copy = idms::GetFusedPassStatus(ws).row_backup ? 2 * 4 * r : 2 * 3 * r;
   const double per_free = 4 + 4 + r + 2 * 3 * r + 2 * 3 * r + 2 * 4 * r + copy;
   // Per fixed atom that some element ties to a free one: its position, read.
   int64_t fixed_used = 0;
@@ -51,13 +52,13 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   options.stability.energy_check = variant.energy_check;
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
-  workspace.full.enabled = variant.fused;
-  workspace.full.huge_pages = variant.huge_pages;
+  workspace.options.fused_pass = variant.fused;
   // A deformed start, so every element carries force.
   for (int32_t i = 0; i < model.num_atoms; ++i) {
     if (!model.atom_fixed[i]) state.atom_pos[3 * i + 2] += static_cast<Real>(0.01 * std::sin(0.37 * i));
   }
-  const ToolInput input;                                             // no tools: the element network alone
+  const ToolInput input;  // no tools: the element network alone
+  if (variant.huge_pages) AdviseHugePages(state, workspace);
   for (int k = 0; k < 3; ++k) Step(model, state, workspace, input);  // builds the fused pass's lists
 
   const double bytes_per_elem = StreamedBytes(model, workspace) / model.num_elems;
@@ -89,8 +90,8 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   r.elem_updates_per_s = median(rates);
   r.bound_ratio = median(ratios);
   r.triad_bytes_per_s = median(triads);
-  r.identity = workspace.full.identity;
-  r.huge_mib = static_cast<double>(workspace.full.huge_bytes) / (1 << 20);
+  r.identity = GetFusedPassStatus(workspace).identity;
+  r.huge_mib = static_cast<double>(GetFusedPassStatus(workspace).huge_bytes) / (1 << 20);
   r.bytes_per_elem = bytes_per_elem;
   return r;
 }

@@ -7,8 +7,8 @@
 // How a run is set up.
 struct ThroughputVariant {
   bool reorder = true;        // renumber the slab first (ReorderForLocality, as `idms-sim reorder`)
-  bool fused = true;          // full mode's fused pass (false: the general path, ws.full.enabled = false)
-  bool huge_pages = true;     // FullPass::huge_pages (the pass's arrays on 2 MiB pages where the kernel agrees)
+  bool fused = true;          // full mode's fused pass (false: the general path, StepOptions::fused_pass = false)
+  bool huge_pages = true;     // AdviseHugePages (the pass's arrays on 2 MiB pages where the kernel agrees)
   bool energy_check = false;  // StabilityOptions::energy_check (the pass then forms the energies)
 };
 
@@ -23,7 +23,7 @@ struct ThroughputResult {
   double triad_bytes_per_s = 0;  // median of the triads paired with the repetitions
   double ns_per_step = 0;
   bool identity = false;  // the fused pass read its element arrays without an index
-  double huge_mib = 0;    // MiB of the pass's arrays the kernel put on huge pages (FullPass::huge_bytes)
+  double huge_mib = 0;    // MiB of the pass's arrays the kernel put on huge pages (FusedPassStatus::huge_bytes)
   // Warnings counted while timed (a rollback or fallback there would time the general path).
   int64_t timed_warnings = 0;
 };

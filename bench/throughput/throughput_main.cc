@@ -166,7 +166,7 @@ int main(int argc, char** argv) {
       "each repetition against the triad taken just before it; triad = the f32 run's median paired triad, GB/s.\n"
       "f32 as-gen = the slab in generator order (element arrays read through an index); f32 gener. = the general\n"
       "path on the renumbered slab (StepOptions as above, the fused pass switched off).\n"
-      "The pass's arrays on 2 MiB pages (FullPass::huge_pages%s):%s\n",
+      "The pass's arrays on 2 MiB pages (AdviseHugePages%s):%s\n",
       huge ? "" : ", off: --no-huge-pages", huge_note.c_str());
   return 0;
 }

@@ -46,7 +46,6 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   sim.workspace = MakeWorkspace(sim.model, step_options_);
   // No madvise from the loop's first full-mode tick: huge pages pay only past the caches, far
   // beyond what a 1 kHz full-mode scene can step.
-  sim.workspace.full.huge_pages = false;
   // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5). The rest
   // copy is filed too, so a reset swaps in a workspace that needs no refiling either.
   ResyncWorkspace(sim.model, sim.state, sim.workspace);

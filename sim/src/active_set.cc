@@ -144,16 +144,10 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
     std::sort(ws.candidates.begin(), ws.candidates.begin() + ws.num_candidates);
   }
 
-  // Slots, and the list handed to the next tick.
-  for (int32_t i = 0; i < ws.num_active; ++i) {
-    ws.atom_slot[ws.active[i]] = i;
-    s.active_atoms[i] = ws.active[i];
-  }
-  s.num_active = ws.num_active;
-
   // Active elements: an active endpoint and not awaiting a cut (thesis 5.5.2, block 2).
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
+    ws.atom_slot[a] = i;
     const int32_t adr = m.atom_elem_adr[a];
     for (int32_t j = 0; j < m.atom_elem_num[a]; ++j) {
       const int32_t e = m.atom_elem[adr + j];
@@ -162,6 +156,27 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
       ws.elems[ws.num_elems++] = e;
     }
   }
+
+  // Eq. 4.6 restart marks on the elements that leave the list (an endpoint among last tick's
+  // atoms, none among this tick's) or wait for a cut: they are not updated from now on, so their
+  // filters cannot continue when they come back. What last tick listed is found from State alone,
+  // so a fresh or resynced Workspace marks the same elements.
+  if (ws.any_damping) {
+    for (int32_t i = 0; i < s.num_active; ++i) {
+      const int32_t a = s.active_atoms[i];
+      if (ws.atom_mark[a]) continue;
+      const int32_t adr = m.atom_elem_adr[a];
+      for (int32_t j = 0; j < m.atom_elem_num[a]; ++j) {
+        const int32_t e = m.atom_elem[adr + j];
+        if (!ws.elem_mark[e]) s.elem_len[e] = kFilterRestart;
+      }
+    }
+    for (int32_t i = 0; i < ws.num_pending_cuts; ++i) s.elem_len[ws.pending_cuts[i]] = kFilterRestart;
+  }
+
+  // The list handed to the next tick.
+  std::copy(ws.active.begin(), ws.active.begin() + ws.num_active, s.active_atoms.begin());
+  s.num_active = ws.num_active;
 }
 
 void WakeNeighbours(const Model& m, State& s, Workspace& ws) {

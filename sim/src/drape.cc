@@ -230,6 +230,7 @@ DrapeResult Drape(const Model& slab, const DrapeOptions& o, const std::function<
   PlaceAboveForm(m, o.form, o.gap, s);
   Workspace ws = MakeWorkspace(m, step);
   ws.atom_force_external.assign(3 * static_cast<size_t>(m.num_atoms), Real(0));
+  if (o.huge_pages) AdviseHugePages(s, ws);
 
   // Stage 2: the DSM with the form's forces until the slab rests (or time runs out).
   DrapeResult result;

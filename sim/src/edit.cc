@@ -99,7 +99,6 @@ int32_t RemoveElement(Model& m, State& s, Workspace& ws, int32_t e) {
   MoveAndPop(m.elem_home, last, e, 1);
   MoveAndPop(s.elem_len, last, e, 1);
   MoveAndPop(s.elem_rate, last, e, 1);
-  MoveAndPop(s.elem_stamp, last, e, 1);
   // Workspace element flags keep their full size; the vacated last slot is cleared.
   ws.elem_cut[e] = ws.elem_cut[last];
   ws.elem_mark[e] = ws.elem_mark[last];

@@ -98,7 +98,6 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
   const Real* vel = s.atom_vel.data();
   const uint8_t* mark = ws.atom_mark.data();
   Real* force = ws.atom_force.data();
-  const int64_t clock = s.substep_clock;
   const Real inv_t = Real(1) / T;
   for (int32_t i = 0; i < ws.num_elems; ++i) {
     const int32_t e = ws.elems[i];
@@ -111,18 +110,15 @@ void ElementForces(const Model& m, State& s, Workspace& ws, Real T, Real lambda)
     [[maybe_unused]] Real rate = 0;
     const bool degenerate = l <= kMinLength;
     if constexpr (kDamped && kFiltered) {
-      // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}; a stale filter (the
-      // element was not updated in the previous substep, or was degenerate then) restarts from
-      // rest. A degenerate element's rate would be noise (it has no direction): its filter is
-      // marked to restart, and stamped like every other listed element, so that all of them are
-      // updated every substep (what the full-mode fused pass relies on to keep one stamp).
-      const bool fresh = s.elem_stamp[e] == clock - 1 && s.elem_len[e] != kFilterRestart;
+      // eq. 4.6: lambda (l_n - l_{n-1}) / T + (1 - lambda) l'_{n-1}; a filter with a restart mark
+      // (State::elem_len) starts from rest. A degenerate element's rate would be noise (it has
+      // no direction): its filter is marked to restart.
+      const bool fresh = s.elem_len[e] != kFilterRestart;
       const Real prev_len = fresh ? s.elem_len[e] : l;
       const Real prev_rate = fresh ? s.elem_rate[e] : Real(0);
       rate = lambda * (l - prev_len) * inv_t + (Real(1) - lambda) * prev_rate;
       s.elem_len[e] = degenerate ? kFilterRestart : l;
       s.elem_rate[e] = degenerate ? Real(0) : rate;
-      s.elem_stamp[e] = clock;
     }
     if (degenerate) [[unlikely]] {
       DegenerateElement(m, ws, e, k * leq);
@@ -213,18 +209,23 @@ Energy ActiveEnergy(const Model& m, const State& s, const Workspace& ws) {
   double kinetic = 0, gravity = 0, elastic = 0, contact = 0, noise = 0;
   const double eps = 4 * std::numeric_limits<Real>::epsilon();
   bool finite = true;
+  double abs_pos = 0;  // the largest |x| + |y| + |z| of an active atom
   // Kinetic, and gravity relative to rest (so its size does not drown the other terms).
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
     const Real* p = &s.atom_pos[3 * a];
     const Real* v = &s.atom_vel[3 * a];
     finite = finite && std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+    abs_pos = std::max(abs_pos, std::fabs(double(p[0])) + std::fabs(double(p[1])) + std::fabs(double(p[2])));
     kinetic += 0.5 * m.atom_mass[a] * (double(v[0]) * v[0] + double(v[1]) * v[1] + double(v[2]) * v[2]);
     if (o.gravity) {
       for (int c = 0; c < 3; ++c) gravity -= m.atom_mass[a] * o.gravity_accel[c] * (p[c] - m.atom_pos_eq[3 * a + c]);
     }
   }
-  // Elastic: 1/2 k (l - l_eq)^2 over the active elements.
+  // Elastic: 1/2 k (l - l_eq)^2 over the active elements. Each length carries ~dl of rounding,
+  // bounded over the region by the largest position (the fused kernel bounds it the same way, so
+  // both kernels hold a gain to the same tolerance).
+  const double dl = eps * (abs_pos + 1);
   for (int32_t i = 0; i < ws.num_elems; ++i) {
     const int32_t e = ws.elems[i];
     const Real* p0 = &s.atom_pos[3 * m.elem_atoms[2 * e]];
@@ -232,7 +233,6 @@ Energy ActiveEnergy(const Model& m, const State& s, const Workspace& ws) {
     const double dx = p1[0] - p0[0], dy = p1[1] - p0[1], dz = p1[2] - p0[2];
     const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - m.elem_leq[e];
     elastic += 0.5 * m.elem_k[e] * stretch * stretch;
-    const double dl = eps * (std::fabs(double(p0[0])) + std::fabs(double(p0[1])) + std::fabs(double(p0[2])) + 1);
     noise += m.elem_k[e] * (std::fabs(stretch) + dl) * dl;
   }
   ToolEnergy(s, ws, &contact, &noise);

@@ -1,4 +1,4 @@
-// Full mode's fused pass (Workspace::FullPass): element forces (eqs. 4.3-4.9), their per-atom
+// Full mode's fused pass (Workspace::fused): element forces (eqs. 4.3-4.9), their per-atom
 // sums and the integration of each free atom (eqs. 4.13-4.15, or symplectic Euler) in one sweep,
 // with the general path's arithmetic in the general path's order, so it gives the same bits.
 #include <algorithm>
@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #if defined(__linux__)
 #include <sys/mman.h>
 #endif
@@ -101,7 +102,7 @@ inline void StreamFence() {
 #endif
 }
 
-// The per-batch temporaries, views into FullPass::scratch. s' (and v_other - v_g) is one 4-wide
+// The per-batch temporaries, views into FusedPass::scratch. s' (and v_other - v_g) is one 4-wide
 // row per element, written by phase 1 with one vector store and transposed by phase 2; the force
 // comes back by component, which phase 3 loads with three scalar loads. Rejected: components
 // for s' too (three scalar stores in phase 1; 5% slower at 10^6 atoms), and rows for the force
@@ -118,7 +119,7 @@ struct Batch {
   Real* end_len2;      // (kBatch) |s'|^2 at the tick's end, of an earlier batch (energy check)
 };
 
-Batch BatchViews(FullPass& fp) {
+Batch BatchViews(FusedPass& fp) {
   Real* p = fp.scratch.data();
   Batch b;
   b.s4 = p, b.dv4 = p + 4 * kBatch;
@@ -136,7 +137,6 @@ constexpr int32_t kScratchPerElement = 17;
 struct Progress {
   int32_t atoms = 0;
   int32_t elems = 0;
-  int32_t marks = 0;  // filters marked to restart (degenerate elements)
   bool ok = true;
   // The energy check's sums (Substep's `before` / `after`): kinetic energy at the substep's
   // start and end, elastic energy at its start (with sum k |l - l_eq| and sum k) and end, and
@@ -156,7 +156,7 @@ constexpr bool kPrefetchReal = sizeof(Real) == 8;
 inline bool WantPrefetch(const Model& m) { return kPrefetchReal && m.num_atoms >= (int32_t{1} << 16); }
 
 // Float builds on SSE write the atoms' rollback copy as two 4-wide rows per slot
-// (FullPass::backup_rows), one non-temporal vector store each.
+// (FusedPass::backup_rows), one non-temporal vector store each.
 #if defined(IDMS_SIM_REAL_FLOAT) && defined(__SSE__)
 constexpr bool kRowBackup = true;
 inline void StreamRow(Real* dst, V4 v) { _mm_stream_ps(dst, std::bit_cast<__m128>(v)); }  // dst 16-byte aligned
@@ -187,15 +187,15 @@ class Substep {
  public:
   static constexpr bool kFilter = IsFiltered(kRate);
   // Filter inputs read in place (else gathered in phase 1), outputs written in place.
-  static constexpr bool kDirectIn = kIdentity && (kRate == Rate::kFiltered || kRate == Rate::kFilteredMarked);
+  static constexpr bool kDirectIn = kIdentity && kRate == Rate::kFiltered;
   static constexpr bool kDirectOut = kIdentity;
 
   Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after)
       : m_(m),
         s_(s),
         ws_(ws),
-        fp_(ws.full),
-        b_(BatchViews(ws.full)),
+        fp_(*ws.fused),
+        b_(BatchViews(*ws.fused)),
         T_(T),
         backup_(backup),
         before_(kEnergy && before),
@@ -263,7 +263,6 @@ class Substep {
     }
     if (!Finite3(check)) return Stop(out, n);
     out.atoms = n;
-    out.marks = marks_;
     if constexpr (kEnergy) {
       FlushKinetic(kinetic, out);
       if (after_) ElasticAfter(n, ne, out);
@@ -305,8 +304,6 @@ class Substep {
     const int32_t last = last_;
     [[maybe_unused]] const int32_t* const elems = ws_.elems.data();
     [[maybe_unused]] const Real *const elem_len = s_.elem_len.data(), *const elem_rate = s_.elem_rate.data();
-    [[maybe_unused]] const int64_t* const elem_stamp = s_.elem_stamp.data();
-    [[maybe_unused]] const int64_t stamp_floor = s_.elem_stamp_floor, clock = s_.substep_clock;
     [[maybe_unused]] Real *const prev_len = b_.prev_len, *const prev_rate = b_.prev_rate, *const fresh_in = b_.fresh;
     [[maybe_unused]] Real* const backup_len = backup_ ? ws_.backup_elem_len.data() : nullptr;
     [[maybe_unused]] Real* const backup_rate = ws_.backup_elem_rate.data();
@@ -323,11 +320,7 @@ class Substep {
         const Real old_len = elem_len[e], old_rate = elem_rate[e];
         if (!(std::isfinite(old_len) && std::isfinite(old_rate))) [[unlikely]]
           return false;
-        bool fresh = old_len != kFilterRestart;
-        if constexpr (kRate == Rate::kFilteredStamped) {
-          const int64_t stamp = elem_stamp[e];
-          fresh = fresh && (stamp > stamp_floor ? stamp : stamp_floor) == clock - 1;
-        }
+        const bool fresh = old_len != kFilterRestart;
         prev_len[j] = old_len;
         prev_rate[j] = old_rate;
         fresh_in[j] = fresh ? Real(1) : Real(0);
@@ -371,7 +364,8 @@ class Substep {
         const V4 d = LoadAtom(pos, o, last) - LoadAtom(pos, group_atom[j], last);
         len2[j] = X(d) * X(d) + Y(d) * Y(d) + Z(d) * Z(d);
       }
-      out.elastic_after += BatchElastic(fp_.avx2, nb, len2, fp_.elem_k.data() + trail_, fp_.elem_leq.data() + trail_);
+      out.elastic_after +=
+          BatchElastic(ws_.options.fused_avx2, nb, len2, fp_.elem_k.data() + trail_, fp_.elem_leq.data() + trail_);
       trail_ += nb;
     }
   }
@@ -414,7 +408,7 @@ class Substep {
                      .ez = b_.ez,
                      .degenerate = degenerate_,
                      .energy = before_ ? energy_ : nullptr};
-    BatchForces(kRate, kDirectIn, fp_.avx2, io);
+    BatchForces(kRate, kDirectIn, ws_.options.fused_avx2, io);
     if constexpr (kFilter && !kDirectOut) {
       for (int32_t j = 0; j < nb; ++j) {
         const int32_t id = ws_.elems[w0 + j];
@@ -435,7 +429,6 @@ class Substep {
       // Its rate would be noise: the filter restarts at the next update (forces.cc does the same).
       s_.elem_len[e] = kFilterRestart;
       s_.elem_rate[e] = 0;
-      ++marks_;
     }
     const Real push = fp_.elem_k[w] * fp_.elem_leq[w];
     if (push <= 0) return true;
@@ -475,7 +468,7 @@ class Substep {
             fp_.atom_t_over_m.data(),
             backup_ ? ws_.backup_pos.data() : nullptr,
             ws_.backup_vel.data(),
-            backup_ ? ws_.full.backup_rows.data() : nullptr,
+            backup_ ? ws_.fused->backup_rows.data() : nullptr,
             T_,
             last_};
   }
@@ -512,18 +505,17 @@ class Substep {
   const Model& m_;
   State& s_;
   Workspace& ws_;
-  const FullPass& fp_;
+  const FusedPass& fp_;
   const Batch b_;
   const Real T_;
   const bool backup_;
   const bool before_, after_;  // form the energy check's sums at the start, at the end
   Real* const pos_ = s_.atom_pos.data();
   Real* const vel_ = s_.atom_vel.data();
-  Real* const force_ = ws_.full.force.data();
+  Real* const force_ = ws_.fused->force.data();
   const int32_t last_ = m_.num_atoms - 1;
   const bool prefetch_ = WantPrefetch(m_);
-  int32_t prefetched_ = 0;  // Prefetch has covered the atoms before this one
-  int32_t marks_ = 0;
+  int32_t prefetched_ = 0;                // Prefetch has covered the atoms before this one
   uint64_t degenerate_[kMaskWords] = {};  // the batch's degenerate elements not yet taken
   double energy_[3] = {0, 0, 0};          // BatchIo::energy at the substep's start
   int32_t trail_ = 0;                     // ElasticAfter has summed the elements before this
@@ -545,12 +537,8 @@ SubstepFn PickRate(Rate rate) {
       return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity, kEnergy>;
     case Rate::kFiltered:
       return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity, kEnergy>;
-    case Rate::kFilteredMarked:
-      return RunSubstep<kSymplectic, Rate::kFilteredMarked, kIdentity, kEnergy>;
-    case Rate::kFilteredStamped:
-      break;
   }
-  return RunSubstep<kSymplectic, Rate::kFilteredStamped, kIdentity, kEnergy>;
+  return nullptr;
 }
 
 template <bool kEnergy>
@@ -571,8 +559,8 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c)
       if constexpr (kRowBackup) {
-        s.atom_pos[3 * a + c] = ws.full.backup_rows[8 * i + c],
-                           s.atom_vel[3 * a + c] = ws.full.backup_rows[8 * i + 4 + c];
+        s.atom_pos[3 * a + c] = ws.fused->backup_rows[8 * i + c],
+                           s.atom_vel[3 * a + c] = ws.fused->backup_rows[8 * i + 4 + c];
       } else {
         s.atom_pos[3 * a + c] = ws.backup_pos[3 * i + c], s.atom_vel[3 * a + c] = ws.backup_vel[3 * i + c];
       }
@@ -588,8 +576,8 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
 // The pass's arrays from the live lists: groups by lowest free endpoint (the order
 // BuildActiveSet appends elements in), the other endpoint, model values as Real, and the
 // tool-free stable step. No allocation: every array was sized for the whole model.
-void BuildFullPass(const Model& m, Workspace& ws) {
-  FullPass& fp = ws.full;
+void BuildFusedPass(const Model& m, Workspace& ws) {
+  FusedPass& fp = *ws.fused;
   const int32_t n = ws.num_active, ne = ws.num_elems;
   std::fill(fp.group_end.begin(), fp.group_end.begin() + n, 0);
   fp.identity = true;
@@ -641,12 +629,13 @@ void BuildFullPass(const Model& m, Workspace& ws) {
 bool FusedEligible(const Model& m, const Workspace& ws) {
   const StepOptions& o = ws.options;
   const bool euler = o.integrator == Integrator::kExplicitEuler || o.integrator == Integrator::kSymplecticEuler;
-  return o.full && ws.full.enabled && euler && ws.num_pending_cuts == 0 &&
-         static_cast<int32_t>(ws.full.group_end.size()) == m.num_atoms;
+  return o.full && o.fused_pass && euler && ws.num_pending_cuts == 0 && ws.fused != nullptr &&
+         static_cast<int32_t>(ws.fused->group_end.size()) == m.num_atoms;
 }
 
-void SizeFullPass(const Model& m, Workspace& ws) {
-  FullPass& fp = ws.full;
+void SizeFusedPass(const Model& m, Workspace& ws) {
+  ws.fused.Emplace();
+  FusedPass& fp = *ws.fused;
   fp.group_end.assign(m.num_atoms, 0);
   fp.atom_t_over_m.assign(m.num_atoms, Real(0));
   fp.other.assign(m.num_elems, 0);
@@ -691,38 +680,22 @@ int64_t AdviseHuge(const std::vector<T>& v) {
 #endif
 }
 
-void AdviseHugePages(State& s, Workspace& ws) {
-  FullPass& fp = ws.full;
-  if (!fp.huge_workspace_done) {
-    fp.huge_workspace_done = true;
-    fp.huge_bytes += AdviseHuge(fp.other) + AdviseHuge(fp.elem_k) + AdviseHuge(fp.elem_b) + AdviseHuge(fp.elem_leq) +
-                     AdviseHuge(fp.force) + AdviseHuge(fp.group_end) + AdviseHuge(fp.atom_t_over_m) +
-                     AdviseHuge(ws.active) + AdviseHuge(ws.elems) + AdviseHuge(ws.backup_elem_len) +
-                     AdviseHuge(ws.backup_elem_rate) +
-                     (kRowBackup ? AdviseHuge(fp.backup_rows) : AdviseHuge(ws.backup_pos) + AdviseHuge(ws.backup_vel));
-  }
-  fp.huge_state = s.atom_pos.data();
-  fp.huge_bytes += AdviseHuge(s.atom_pos) + AdviseHuge(s.atom_vel) + AdviseHuge(s.elem_len) + AdviseHuge(s.elem_rate);
-}
-
 }  // namespace
 
 void EnsureFullLive(const Model& m, State& s, Workspace& ws) {
-  FullPass& fp = ws.full;
-  if (fp.huge_pages && fp.huge_state != s.atom_pos.data()) AdviseHugePages(s, ws);
+  FusedPass& fp = *ws.fused;
   if (fp.live && fp.topology_version == m.topology_version) return;
   EndFullLive(ws);
   BuildActiveSet(m, s, ws);
-  BuildFullPass(m, ws);
+  BuildFusedPass(m, ws);
   fp.live = true;
 }
 
 void EndFullLive(Workspace& ws) {
-  ws.full.restart_marks = -1;
-  if (!ws.full.live) return;
+  if (ws.fused == nullptr || !ws.fused->live) return;
   ClearTickScratch(ws);
-  ws.full.live = false;
-  ws.full.force_zero = false;
+  ws.fused->live = false;
+  ws.fused->force_zero = false;
 }
 
 void ClearExtraK(Workspace& ws) {
@@ -737,7 +710,7 @@ void ClearExtraK(Workspace& ws) {
 }
 
 double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integrator) {
-  const FullPass& fp = ws.full;
+  const FusedPass& fp = *ws.fused;
   const LengthRate rate = UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   const double air = ws.options.air_damping, lambda = ws.options.lambda;
   auto dt_of = [&](int32_t a, double extra_k) {
@@ -773,38 +746,28 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   const Real T = static_cast<Real>(o.dt_s / substeps);
   const bool filter = ws.any_damping && UsesFilter(o, integrator);
   const bool field = o.gravity || o.air_damping > 0 || !ws.atom_force_external.empty();
-  const int64_t clock0 = s.substep_clock, floor0 = s.elem_stamp_floor;
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
   // T / m by slot: one division per atom when T changes rather than in every substep.
-  if (ws.full.t_over_m_of != T) {
+  if (ws.fused->t_over_m_of != T) {
     for (int32_t i = 0; i < ws.num_active; ++i) {
-      ws.full.atom_t_over_m[i] = T / static_cast<Real>(m.atom_mass[ws.active[i]]);
+      ws.fused->atom_t_over_m[i] = T / static_cast<Real>(m.atom_mass[ws.active[i]]);
     }
-    ws.full.t_over_m_of = T;
+    ws.fused->t_over_m_of = T;
   }
   for (int32_t k = 0; k < substeps; ++k) {
     const int64_t t0 = NowNs();
     // Field and tool forces first, as EvaluateForces adds them; then the sweep.
-    if (field || !ws.full.force_zero) FieldForces(m, s, ws, ws.full.force.data(), 4);
-    ToolForces(s, ws, ws.full.force.data(), 4);
+    if (field || !ws.fused->force_zero) FieldForces(m, s, ws, ws.fused->force.data(), 4);
+    ToolForces(s, ws, ws.fused->force.data(), 4);
     for (int32_t t = 0; t < ws.num_tools; ++t) {
       for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
     }
-    ws.full.force_zero = false;
-    // The filter's freshness: every element's when the last substep was this pass (then only
-    // the elements it found degenerate carry a restart mark), else from the stamps.
-    Rate rate = Rate::kFilteredStamped;
-    if (!ws.any_damping) {
-      rate = Rate::kNone;
-    } else if (!filter) {
-      rate = Rate::kAnalytic;
-    } else if (s.elem_stamp_floor == s.substep_clock - 1 && ws.full.restart_marks >= 0) {
-      rate = ws.full.restart_marks == 0 ? Rate::kFiltered : Rate::kFilteredMarked;
-    }
+    ws.fused->force_zero = false;
+    const Rate rate = !ws.any_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
     // The energy check's sums: at the tick's start in the first substep, at its end in the last.
     const bool before = energy && k == 0, after = energy && k == substeps - 1;
     const SubstepFn substep =
-        PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.full.identity, before || after);
+        PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after);
     const Progress p = substep(m, s, ws, T, /*backup=*/k == 0, before, after);
     times->forces_ns += NowNs() - t0;
     if (before) {
@@ -816,28 +779,65 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       energy->noise_before = dl * p.stretch_k + dl * dl * p.sum_k;
     }
     if (after) energy->kinetic_after = p.kinetic_after, energy->elastic_after = p.elastic_after;
-    ws.full.restart_marks = p.marks;
     if (!p.ok) {
-      ws.full.restart_marks = -1;
       RestoreWritten(s, ws, k == 0 ? p.atoms : ws.num_active, k == 0 ? p.elems : ws.num_elems, filter);
-      s.substep_clock = clock0;
-      s.elem_stamp_floor = floor0;
       return false;
     }
-    if (filter) s.elem_stamp_floor = s.substep_clock;
-    ++s.substep_clock;
-    ws.full.force_zero = true;
+    ws.fused->force_zero = true;
   }
   StreamFence();
   return true;
 }
 
-void UndoFused(State& s, Workspace& ws, int64_t clock, int64_t stamp_floor) {
+void RestoreFused(State& s, Workspace& ws) {
   const bool filter = ws.any_damping && UsesFilter(ws.options, ws.options.integrator);
   RestoreWritten(s, ws, ws.num_active, ws.num_elems, filter);
-  s.substep_clock = clock;
-  s.elem_stamp_floor = stamp_floor;
-  ws.full.restart_marks = -1;
+}
+
+FusedPassPtr::FusedPassPtr() = default;
+FusedPassPtr::~FusedPassPtr() = default;
+FusedPassPtr::FusedPassPtr(const FusedPassPtr& other)
+    : p_(other.p_ ? std::make_unique<FusedPass>(*other.p_) : nullptr) {}
+FusedPassPtr::FusedPassPtr(FusedPassPtr&& other) noexcept = default;
+FusedPassPtr& FusedPassPtr::operator=(const FusedPassPtr& other) {
+  if (this != &other) p_ = other.p_ ? std::make_unique<FusedPass>(*other.p_) : nullptr;
+  return *this;
+}
+FusedPassPtr& FusedPassPtr::operator=(FusedPassPtr&& other) noexcept = default;
+void FusedPassPtr::Emplace() { p_ = std::make_unique<FusedPass>(); }
+
+bool FusedLive(const Workspace& ws) { return ws.fused != nullptr && ws.fused->live; }
+
+void ResetFused(Workspace& ws) {
+  if (ws.fused != nullptr) ws.fused->live = ws.fused->force_zero = false;
 }
 
 }  // namespace idms::internal
+
+namespace idms {
+
+FusedPassStatus GetFusedPassStatus(const Workspace& ws) {
+  FusedPassStatus status;
+  if (ws.fused == nullptr) return status;
+  status.live = ws.fused->live;
+  status.identity = ws.fused->identity;
+  status.huge_bytes = ws.fused->huge_bytes;
+  status.row_backup = internal::kRowBackup;
+  return status;
+}
+
+int64_t AdviseHugePages(const State& s, Workspace& ws) {
+  using internal::AdviseHuge;
+  if (ws.fused == nullptr) return 0;
+  internal::FusedPass& fp = *ws.fused;
+  const int64_t bytes =
+      AdviseHuge(fp.other) + AdviseHuge(fp.elem_k) + AdviseHuge(fp.elem_b) + AdviseHuge(fp.elem_leq) +
+      AdviseHuge(fp.force) + AdviseHuge(fp.group_end) + AdviseHuge(fp.atom_t_over_m) + AdviseHuge(ws.active) +
+      AdviseHuge(ws.elems) + AdviseHuge(ws.backup_elem_len) + AdviseHuge(ws.backup_elem_rate) +
+      (internal::kRowBackup ? AdviseHuge(fp.backup_rows) : AdviseHuge(ws.backup_pos) + AdviseHuge(ws.backup_vel)) +
+      AdviseHuge(s.atom_pos) + AdviseHuge(s.atom_vel) + AdviseHuge(s.elem_len) + AdviseHuge(s.elem_rate);
+  fp.huge_bytes += bytes;
+  return bytes;
+}
+
+}  // namespace idms

@@ -79,12 +79,10 @@ template <Rate kRate, bool kDirectIn, bool kEnergy, class V>
   if constexpr (kRate != Rate::kNone) LoadLanes(b, io.b + j);
   if constexpr (IsFiltered(kRate)) {
     V pl, pr;
-    if constexpr (kDirectIn && kRate == Rate::kFilteredMarked) {
+    if constexpr (kDirectIn) {
       const auto keep = old_len != kFilterRestart;
       pl = keep ? old_len : l;
       pr = keep ? old_rate : V{};
-    } else if constexpr (kDirectIn) {
-      pl = old_len, pr = old_rate;
     } else {
       V fresh, prev_len, prev_rate;
       LoadLanes(fresh, io.fresh + j), LoadLanes(prev_len, io.prev_len + j), LoadLanes(prev_rate, io.prev_rate + j);
@@ -309,13 +307,7 @@ void DispatchRate(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io)
     case Rate::kFiltered:
       return direct_in ? Dispatch<Rate::kFiltered, true, kEnergy>(allow_avx2, io)
                        : Dispatch<Rate::kFiltered, false, kEnergy>(allow_avx2, io);
-    case Rate::kFilteredMarked:
-      return direct_in ? Dispatch<Rate::kFilteredMarked, true, kEnergy>(allow_avx2, io)
-                       : Dispatch<Rate::kFilteredMarked, false, kEnergy>(allow_avx2, io);
-    case Rate::kFilteredStamped:
-      break;
   }
-  Dispatch<Rate::kFilteredStamped, false, kEnergy>(allow_avx2, io);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 
 #include <bit>
 #include <cstdint>
+#include <vector>
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -12,18 +13,51 @@
 
 namespace idms::internal {
 
-// Where the eq. 4.8 length rate comes from in this pass.
-enum class Rate : uint8_t {
-  kNone,             // no element has b > 0: no rate, no filter
-  kAnalytic,         // s^ . (v1 - v0)
-  kFiltered,         // eq. 4.6; every element was updated in the previous substep, none degenerate
-  kFilteredMarked,   // eq. 4.6; as kFiltered, but some carry a restart mark (kFilterRestart)
-  kFilteredStamped,  // eq. 4.6, freshness read from each element's stamp (first fused substep)
+// Full mode's fused kernel (full_step.cc): element forces, accumulation and integration in one
+// sweep over the elements in the order the general kernel visits them (grouped by their lowest
+// free endpoint), so each free atom is integrated as soon as its last element is done and every
+// per-atom sum is formed in the same order: the same bits as the general kernel. Built from the
+// Workspace's full-mode lists (see `live`) without allocating; arrays are in walk order unless
+// noted. The Workspace owns it (Workspace::fused); nothing outside full_step*.cc reads it.
+struct FusedPass {
+  // The lists below, and ws.active / candidates / elems with their marks, hold the full-mode
+  // sets across ticks (the between-steps invariant of the marks is suspended while live).
+  bool live = false;
+  uint64_t topology_version = 0;  // model version the arrays were built for
+  bool identity = false;          // ws.elems[w] == w: element arrays need no indirection
+  // `force` of every free atom is 0 (the pass leaves it so for the next tick).
+  bool force_zero = false;
+  std::vector<int32_t> group_end;              // (num_atoms) by active slot: one past its last element
+  std::vector<int32_t> other;                  // (num_elems) endpoint that is not the group's atom; ~id if fixed
+  std::vector<int32_t> elem_g;                 // (num_elems) the group's atom (the lower free endpoint)
+  std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
+  std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / Model::atom_mass
+  Real t_over_m_of = 0;                        // the substep T of atom_t_over_m; 0 = not computed
+  // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
+  std::vector<Real> force;
+  std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
+  // (num_elems / batch + 1) per batch of the walk: the highest active slot of a free endpoint in
+  // it or an earlier batch (the energy check forms a batch's end-of-tick lengths past it).
+  std::vector<int32_t> batch_ready;
+  // Float builds: the rollback copy of the atoms as two 4-wide rows per slot (position, velocity;
+  // lane 3 not used), written with one non-temporal vector store each (else Workspace::backup_pos
+  // and backup_vel).
+  std::vector<Real> backup_rows;
+  int64_t huge_bytes = 0;  // bytes AdviseHugePages moved to huge pages so far
+  // Stable step of the configured integrator without tools (the minimum over free atoms), and
+  // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
+  double dt_free = 0;
+  int32_t dt_free_count = 0;
 };
 
-constexpr bool IsFiltered(Rate rate) {
-  return rate == Rate::kFiltered || rate == Rate::kFilteredMarked || rate == Rate::kFilteredStamped;
-}
+// Where the eq. 4.8 length rate comes from in this pass.
+enum class Rate : uint8_t {
+  kNone,      // no element has b > 0: no rate, no filter
+  kAnalytic,  // s^ . (v1 - v0)
+  kFiltered,  // eq. 4.6, continued, or restarted where State::elem_len holds a restart mark
+};
+
+constexpr bool IsFiltered(Rate rate) { return rate == Rate::kFiltered; }
 
 // Elements per batch: the batch's temporaries (16 values per element) stay in L1. 64 rather
 // than 128: +10% in double at 10^6 atoms, float unchanged or better at 10^4 and 10^6
@@ -35,7 +69,7 @@ constexpr int32_t kMaskWords = (kBatch + 63) / 64;
 
 // Phase 2's inputs and outputs for a batch of n elements: views at the batch's first element.
 // len and rate hold the eq. 4.6 state in place (direct input; kFilterRestart marks a filter to
-// restart, looked for only with kFilteredMarked) or receive it (inputs then come gathered, with
+// restart) or receive it (inputs then come gathered, with
 // fresh = 0 restarting the filter: l_{n-1} = l, l'_{n-1} = 0).
 struct BatchIo {
   int32_t n;

@@ -123,7 +123,6 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
         break;
       }
     }
-    ++s.substep_clock;
   }
   return cg_iterations;
 }

@@ -1,7 +1,7 @@
 // MakeState: a model at rest, with every array at the fixed size the step relies on.
 #include "idms/sim/state.h"
 
-#include <cmath>
+#include <algorithm>
 
 #include "idms/sim/model.h"
 
@@ -13,34 +13,17 @@ State MakeState(const Model& model) {
   s.atom_pos.assign(model.atom_pos_eq.begin(), model.atom_pos_eq.end());
   s.atom_vel.assign(3 * static_cast<size_t>(na), Real(0));
   s.elem_len.resize(ne);
-  for (int32_t e = 0; e < ne; ++e) s.elem_len[e] = static_cast<Real>(model.elem_leq[e]);
-  s.elem_rate.assign(ne, Real(0));
-  // Stamp -1 = "updated in the substep before the first", so the first filter update is continuous.
-  s.elem_stamp.assign(ne, -1);
+  s.elem_rate.resize(ne);
   s.active_atoms.assign(na, -1);
   s.atom_linger.assign(na, 0);
+  // At rest: each filter starts at its element's length at the first update, with rate 0.
+  SyncFilterToPositions(model, s);
   return s;
 }
 
-void FoldStampFloor(const Model& model, State& s) {
-  if (s.elem_stamp_floor == kNoStamp) return;
-  for (int32_t e = 0; e < model.num_elems; ++e) {
-    const bool free_end = !model.atom_fixed[model.elem_atoms[2 * e]] || !model.atom_fixed[model.elem_atoms[2 * e + 1]];
-    if (free_end && s.elem_stamp[e] < s.elem_stamp_floor) s.elem_stamp[e] = s.elem_stamp_floor;
-  }
-  s.elem_stamp_floor = kNoStamp;
-}
-
 void SyncFilterToPositions(const Model& model, State& s) {
-  s.elem_stamp_floor = kNoStamp;
-  for (int32_t e = 0; e < model.num_elems; ++e) {
-    const Real* p0 = &s.atom_pos[3 * model.elem_atoms[2 * e]];
-    const Real* p1 = &s.atom_pos[3 * model.elem_atoms[2 * e + 1]];
-    const Real dx = p1[0] - p0[0], dy = p1[1] - p0[1], dz = p1[2] - p0[2];
-    s.elem_len[e] = std::sqrt(dx * dx + dy * dy + dz * dz);
-    s.elem_rate[e] = 0;
-    s.elem_stamp[e] = s.substep_clock - 1;
-  }
+  std::fill(s.elem_len.begin(), s.elem_len.begin() + model.num_elems, kFilterRestart);
+  std::fill(s.elem_rate.begin(), s.elem_rate.begin() + model.num_elems, Real(0));
 }
 
 std::array<WarningKind, kNumWarningKinds> WarningKinds(const WarningCounters& w) {

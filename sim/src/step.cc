@@ -43,7 +43,9 @@ bool ParseIntegratorName(std::string_view name, Integrator* integrator) {
 
 namespace {
 
-using internal::NowNs;
+using internal::Energy;
+using internal::StageTimer;
+using internal::StageTimes;
 
 struct Plan {
   Integrator integrator = Integrator::kExplicitEuler;
@@ -72,7 +74,7 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
 
 // Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
 double PredictStableDt(const Model& m, const Workspace& ws, Integrator integrator) {
-  if (ws.full.live) return internal::FullPredictStableDt(m, ws, integrator);
+  if (internal::FusedLive(ws)) return internal::FullPredictStableDt(m, ws, integrator);
   double dt = std::numeric_limits<double>::infinity();
   const LengthRate rate = internal::UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   for (int32_t i = 0; i < ws.num_active; ++i) {
@@ -128,9 +130,14 @@ bool FilterInUse(const Workspace& ws) {
   return ws.any_damping && internal::UsesFilter(ws.options, ws.options.integrator);
 }
 
+// Marks the listed elements' eq. 4.6 filters to restart: this tick did not advance them.
+void MarkListedFilters(State& s, const Workspace& ws) {
+  for (int32_t i = 0; i < ws.num_elems; ++i) s.elem_len[ws.elems[i]] = kFilterRestart;
+}
+
 // Non-finite atoms or filter states found at a tick's start (a State that came in broken) are
-// reset to rest, so that one bad value cannot poison every later tick.
-void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
+// reset to rest, so that one bad value cannot poison every later tick. True when it reset any.
+bool RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
   bool repaired = false;
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
@@ -148,15 +155,16 @@ void RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
   for (int32_t i = 0; filter && i < ws.num_elems; ++i) {
     const int32_t e = ws.elems[i];
     if (std::isfinite(s.elem_len[e]) && std::isfinite(s.elem_rate[e])) continue;
-    s.elem_len[e] = s.elem_rate[e] = 0;
-    s.elem_stamp[e] = std::numeric_limits<int64_t>::min();
+    s.elem_len[e] = kFilterRestart;
+    s.elem_rate[e] = 0;
     repaired = true;
   }
   if (repaired) ++s.warnings.state_repaired;
+  return repaired;
 }
 
-// The active region and its rollback copy: atoms by slot, elements by list index. kSave: State
-// to the copy (the tick's start); else the copy back to State.
+// The general kernel's rollback copy of the active region: atoms by slot, elements by list
+// index. kSave: State to the copy (the tick's start); else the copy back to State.
 template <bool kSave>
 void CopyRegion(State& s, Workspace& ws) {
   auto copy = [](auto& in_state, auto& in_copy) {
@@ -176,28 +184,7 @@ void CopyRegion(State& s, Workspace& ws) {
     const int32_t e = ws.elems[i];
     copy(s.elem_len[e], ws.backup_elem_len[i]);
     copy(s.elem_rate[e], ws.backup_elem_rate[i]);
-    copy(s.elem_stamp[e], ws.backup_elem_stamp[i]);
   }
-}
-
-void Backup(State& s, Workspace& ws) { CopyRegion<true>(s, ws); }
-
-void Restore(State& s, Workspace& ws, int64_t clock) {
-  CopyRegion<false>(s, ws);
-  s.substep_clock = clock;
-}
-
-// Every attempt failed: back to the tick's start, at rest, filters restarted; no device force.
-void Freeze(State& s, Workspace& ws, int64_t clock) {
-  Restore(s, ws, clock);
-  for (int32_t i = 0; i < ws.num_active; ++i) {
-    const int32_t a = ws.active[i];
-    s.atom_vel[3 * a] = s.atom_vel[3 * a + 1] = s.atom_vel[3 * a + 2] = 0;
-  }
-  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
-  for (int32_t i = 0; i < num_elems; ++i) s.elem_stamp[ws.elems[i]] = std::numeric_limits<int64_t>::min();
-  for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
-  ++s.warnings.unrecovered;
 }
 
 // Stage 5: device force = -sum of the tool's forces on atoms; zeroed when non-finite, magnitude
@@ -241,133 +228,188 @@ bool ActiveFinite(const State& s, const Workspace& ws) {
   return true;
 }
 
-// Stages 3-4 of the general path: stability plan, rollback copy, energy before (tools at their
-// new pose); integrate, check finiteness and energy, roll back and retry down the plan list;
-// every attempt failing freezes the active region.
-void GeneralTick(const Model& m, State& s, Workspace& ws, StepReport* report, internal::StageTimes* times) {
-  using namespace internal;
-  int64_t t0 = NowNs();
-  RepairActiveRegion(m, s, ws);
-  ToolStiffness(s, ws, report);
-  Plan plans[3];
-  const int32_t num_plans = MakePlans(m, s, ws, report, plans);
-  Backup(s, ws);
-  const int64_t clock = s.substep_clock;
-  const StabilityOptions& st = ws.options.stability;
-  // The energies cost two passes over the active region: only when the check is on.
-  const Energy before = st.energy_check ? ActiveEnergy(m, s, ws) : Energy{};
-  const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
-  const double excess_decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
-  double excess = s.energy_excess * excess_decay;
-  const double allowance = std::max(tolerance, s.energy_allowance * excess_decay);
-  report->checks_ns += NowNs() - t0;
+// The tick's attempts, the stability policy of thesis 4.2 over two kernels: plan (substeps as
+// predicted, implicit Euler as the fallback), keep a rollback copy and the energy before, run each
+// attempt through a kernel, check it (energy, or finiteness), and roll back and retry down the
+// plan; when every attempt fails, freeze the active region. The kernel of the first attempt is the
+// fused one when the tick can take it (full mode, the configured explicit scheme): it writes the
+// rollback copy and forms the energies on its way, and checks the tick's start state as it reads
+// it. A fused attempt that fails is run again by the general kernel, whose check decides (the
+// fused energies round differently, and the general kernel's bits are the reference); every other
+// attempt is the general kernel's.
+class Dynamics {
+ public:
+  Dynamics(const Model& m, State& s, Workspace& ws, StepReport* report, StageTimes* times)
+      : m_(m), s_(s), ws_(ws), st_(ws.options.stability), report_(report), times_(times) {}
 
-  bool accepted = false;
-  for (int32_t k = 0; k < num_plans && !accepted; ++k) {
-    if (k > 0) {
-      t0 = NowNs();
-      Restore(s, ws, clock);
-      ++s.warnings.rollback;
-      report->checks_ns += NowNs() - t0;
+  // Stages 3-4; `fused`: the tick may take the fused kernel (its lists are live).
+  void Run(bool fused) {
+    {
+      StageTimer timer(&report_->checks_ns);
+      // The general kernel is handed a repaired state; the fused one finds a broken one itself.
+      if (!fused) RepairActiveRegion(m_, s_, ws_);
+      if (substep_limit_ < 0) substep_limit_ = s_.warnings.substep_limit;
+      ToolStiffness(s_, ws_, report_);
+      num_plans_ = MakePlans(m_, s_, ws_, report_, plans_);
+      fused = fused && plans_[0].integrator == ws_.options.integrator;
+      decay_ = std::exp(-ws_.options.dt_s / st_.energy_memory_s);
+      if (fused) {
+        // Tools and gravity here; the pass forms the kinetic and elastic terms.
+        if (st_.energy_check) internal::ToolAndGravityEnergy(m_, s_, ws_, &before_);
+      } else {
+        GeneralStart();
+      }
     }
-    IDMS_CHECK(plans[k].integrator != Integrator::kRk4 || ws.use_rk4);
-    report->cg_iterations = RunIntegrator(m, s, ws, plans[k].integrator, plans[k].substeps, times);
-    t0 = NowNs();
-    if (st.energy_check) {
-      report->energy_after = ActiveEnergy(m, s, ws).h;
-      const double gain = report->energy_after - before.h;
-      excess = std::max(0.0, s.energy_excess * excess_decay + gain);
-      accepted = gain <= tolerance && excess <= allowance;  // false for NaN
-    } else {
-      accepted = ActiveFinite(s, ws);
+    bool accepted = false;
+    for (int32_t k = 0; k < num_plans_ && !accepted; ++k) {
+      const Plan& plan = plans_[k];
+      if (k > 0) {
+        StageTimer timer(&report_->checks_ns);
+        CopyRegion<false>(s_, ws_);
+        ++s_.warnings.rollback;
+      }
+      if (k == 0 && fused) {
+        accepted = FusedAttempt(plan);
+        report_->fused = accepted;
+        if (!accepted) {
+          if (HandOver()) {
+            // The state came in broken: repaired, the tick is planned again from it.
+            Run(false);
+            return;
+          }
+          // The general kernel is the judge: the same attempt again (same bits; its energies
+          // round differently), then the rest of the plan as usual.
+          accepted = GeneralAttempt(plan);
+        }
+      } else {
+        accepted = GeneralAttempt(plan);
+      }
+      report_->attempts = k + 1;
+      report_->substeps = plan.substeps;
+      report_->integrator_used = plan.integrator;
+      report_->fallback = plan.fallback;
     }
-    report->attempts = k + 1;
-    report->substeps = plans[k].substeps;
-    report->integrator_used = plans[k].integrator;
-    report->fallback = plans[k].fallback;
-    report->checks_ns += NowNs() - t0;
+    StageTimer timer(&report_->checks_ns);
+    if (!accepted) Freeze();
+    // Filters the accepted attempt did not advance cannot continue next tick.
+    if (ws_.any_damping && !(accepted && internal::UsesFilter(ws_.options, report_->integrator_used))) {
+      MarkListedFilters(s_, ws_);
+    }
+    report_->energy_before = before_.h;
   }
-  t0 = NowNs();
-  s.energy_excess = accepted && std::isfinite(excess) ? excess : s.energy_excess * excess_decay;
-  if (std::isfinite(allowance)) s.energy_allowance = allowance;
-  if (!accepted) {
-    Freeze(s, ws, clock);
-    report->unrecovered = true;
-    report->fallback = false;
-    if (st.energy_check) report->energy_after = ActiveEnergy(m, s, ws).h;
-  }
-  report->energy_before = before.h;
-  report->checks_ns += NowNs() - t0;
-}
 
-// Stages 3-4 through full mode's fused pass: the plan's first attempt, when it is the configured
-// explicit scheme, with the rollback copy written on the way and, when the energy check is on,
-// the energies formed on the way too and checked as GeneralTick checks them. False = not taken,
-// stopped at a non-finite value, or the check failed, with the State restored: the caller then
-// runs GeneralTick, so this undoes what GeneralTick does again (tool stiffness, contacts, a
-// substep-limit warning), and a failed check is met again there, rolled back, retried and
-// counted as the general path does.
-bool FusedTick(const Model& m, State& s, Workspace& ws, StepReport* report, internal::StageTimes* times) {
-  using namespace internal;
-  int64_t t0 = NowNs();
-  ToolStiffness(s, ws, report);
-  const int64_t substep_limit = s.warnings.substep_limit;
-  Plan plans[3];
-  MakePlans(m, s, ws, report, plans);
-  const StabilityOptions& st = ws.options.stability;
-  const int64_t clock = s.substep_clock, stamp_floor = s.elem_stamp_floor;
-  // The tools' and gravity's energies at the tick's start (tools at their new pose); the pass
-  // forms the kinetic and elastic ones.
-  Energy before, after;
-  if (st.energy_check) ToolAndGravityEnergy(m, s, ws, &before);
-  report->checks_ns += NowNs() - t0;
-  const Plan& plan = plans[0];
-  FusedEnergy fe;
-  bool accepted = plan.integrator == ws.options.integrator &&
-                  RunFused(m, s, ws, plan.integrator, plan.substeps, times, st.energy_check ? &fe : nullptr);
-  t0 = NowNs();
-  const double decay = std::exp(-ws.options.dt_s / st.energy_memory_s);
-  double excess = s.energy_excess * decay, allowance = std::max(st.energy_abs_tol, s.energy_allowance * decay);
-  if (accepted && st.energy_check) {
-    // GeneralTick's test on the same terms.
-    before.h += fe.kinetic_before + fe.elastic_before;
-    before.scale += fe.kinetic_before + fe.elastic_before;
-    before.noise += fe.noise_before;
-    ToolAndGravityEnergy(m, s, ws, &after);
+ private:
+  // The general kernel's rollback copy and energy at the tick's start (tools at their new pose).
+  void GeneralStart() {
+    CopyRegion<true>(s_, ws_);
+    // The energies cost two passes over the active region: only when the check is on.
+    before_ = st_.energy_check ? internal::ActiveEnergy(m_, s_, ws_) : Energy{};
+  }
+
+  // The fused kernel's attempt, checked as the general one's. A failure leaves the State at the
+  // tick's start.
+  bool FusedAttempt(const Plan& plan) {
+    internal::FusedEnergy fe;
+    if (!internal::RunFused(m_, s_, ws_, plan.integrator, plan.substeps, times_, st_.energy_check ? &fe : nullptr)) {
+      return false;
+    }
+    StageTimer timer(&report_->checks_ns);
+    if (!st_.energy_check) return Accept(0, 0, true);
+    before_.h += fe.kinetic_before + fe.elastic_before;
+    before_.scale += fe.kinetic_before + fe.elastic_before;
+    before_.noise += fe.noise_before;
+    Energy after;
+    internal::ToolAndGravityEnergy(m_, s_, ws_, &after);
     after.h += fe.kinetic_after + fe.elastic_after;
-    const double tolerance = st.energy_rel_tol * before.scale + st.energy_abs_tol + 4 * before.noise;
-    const double gain = after.h - before.h;
-    allowance = std::max(tolerance, s.energy_allowance * decay);
-    excess = std::max(0.0, s.energy_excess * decay + gain);
-    accepted = gain <= tolerance && excess <= allowance;  // false for NaN
-    if (!accepted) UndoFused(s, ws, clock, stamp_floor);
+    if (Accept(after.h - before_.h, after.h, false)) return true;
+    internal::RestoreFused(s_, ws_);
+    return false;
   }
-  if (accepted) {
-    s.energy_excess = std::isfinite(excess) ? excess : s.energy_excess * decay;
-    if (std::isfinite(allowance)) s.energy_allowance = allowance;
-    report->energy_before = before.h;
-    report->energy_after = after.h;
-    report->attempts = 1;
-    report->substeps = plan.substeps;
-    report->integrator_used = plan.integrator;
-    report->fused = true;
-    report->checks_ns += NowNs() - t0;
-    return true;
+
+  // After a failed fused attempt (State at the tick's start): the general kernel takes the rest
+  // of the plan, with its own rollback copy and energies. True when the tick's start state was
+  // broken and has been repaired: then the tick is planned again.
+  bool HandOver() {
+    StageTimer timer(&report_->checks_ns);
+    if (RepairActiveRegion(m_, s_, ws_)) {
+      internal::ClearExtraK(ws_);
+      for (ToolReport& tr : report_->tools) tr.contacts = 0;
+      s_.warnings.substep_limit = substep_limit_;
+      before_ = Energy{};
+      return true;
+    }
+    GeneralStart();
+    return false;
   }
-  ClearExtraK(ws);
-  for (ToolReport& tr : report->tools) tr.contacts = 0;
-  s.warnings.substep_limit = substep_limit;
-  report->predicted_dt_s = 0;
-  report->checks_ns += NowNs() - t0;
-  return false;
-}
+
+  bool GeneralAttempt(const Plan& plan) {
+    IDMS_CHECK(plan.integrator != Integrator::kRk4 || ws_.use_rk4);
+    report_->cg_iterations = internal::RunIntegrator(m_, s_, ws_, plan.integrator, plan.substeps, times_);
+    StageTimer timer(&report_->checks_ns);
+    if (!st_.energy_check) return Accept(0, 0, ActiveFinite(s_, ws_));
+    const double after = internal::ActiveEnergy(m_, s_, ws_).h;
+    return Accept(after - before_.h, after, true);
+  }
+
+  // The energy check (StabilityOptions) on an attempt that gained `gain`; without it, `finite`
+  // decides. An accepted attempt's excess and allowance are kept.
+  bool Accept(double gain, double energy_after, bool finite) {
+    report_->energy_after = energy_after;
+    const double allowance = std::max(Tolerance(), s_.energy_allowance * decay_);
+    const double excess =
+        st_.energy_check ? std::max(0.0, s_.energy_excess * decay_ + gain) : s_.energy_excess * decay_;
+    const bool ok = st_.energy_check ? gain <= tolerance_ && excess <= allowance : finite;  // false for NaN
+    if (ok) Keep(excess, allowance);
+    return ok;
+  }
+
+  // The tolerance a gain is held to (energy_abs_tol when the check is off: before_ is zero).
+  double Tolerance() {
+    tolerance_ = st_.energy_rel_tol * before_.scale + st_.energy_abs_tol + 4 * before_.noise;
+    return tolerance_;
+  }
+
+  void Keep(double excess, double allowance) {
+    s_.energy_excess = std::isfinite(excess) ? excess : s_.energy_excess * decay_;
+    if (std::isfinite(allowance)) s_.energy_allowance = allowance;
+  }
+
+  // Every attempt failed: back to the tick's start, at rest (the filters are marked to restart
+  // by Run); no device force.
+  void Freeze() {
+    CopyRegion<false>(s_, ws_);
+    for (int32_t i = 0; i < ws_.num_active; ++i) {
+      const int32_t a = ws_.active[i];
+      s_.atom_vel[3 * a] = s_.atom_vel[3 * a + 1] = s_.atom_vel[3 * a + 2] = 0;
+    }
+    for (int32_t t = 0; t < ws_.num_tools; ++t) std::fill(ws_.tools[t].tick_force, ws_.tools[t].tick_force + 3, 0.0);
+    ++s_.warnings.unrecovered;
+    Keep(s_.energy_excess * decay_, std::max(Tolerance(), s_.energy_allowance * decay_));
+    report_->unrecovered = true;
+    report_->fallback = false;
+    if (st_.energy_check) report_->energy_after = internal::ActiveEnergy(m_, s_, ws_).h;
+  }
+
+  const Model& m_;
+  State& s_;
+  Workspace& ws_;
+  const StabilityOptions& st_;
+  StepReport* report_;
+  StageTimes* times_;
+  Plan plans_[3];
+  int32_t num_plans_ = 0;
+  Energy before_;
+  double tolerance_ = 0;
+  double decay_ = 1;
+  int64_t substep_limit_ = -1;  // warnings.substep_limit at the tick's start
+};
 
 }  // namespace
 
 StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input) {
   using namespace internal;
   StepReport report;
-  const int64_t t_start = NowNs();
+  StageTimer total(&report.total_ns);
   IDMS_CHECK(ws.num_atoms == m.num_atoms && ws.topology_version == m.topology_version);
   IDMS_CHECK(static_cast<int32_t>(s.atom_pos.size()) == 3 * m.num_atoms &&
              static_cast<int32_t>(s.elem_len.size()) == m.num_elems);
@@ -378,66 +420,64 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   }
 
   // 1. Tools: validated input, scalpel sweeps -> pending cuts.
-  int64_t t0 = NowNs();
-  ResolveTools(m, s, ws, input, &report);
-  report.tools_ns = NowNs() - t0;
-
-  // 2. Active set (haptic window), then the tweezers, which need its contact candidates. Full
-  // mode's fused pass keeps its lists from tick to tick; every other tick builds them, after
-  // folding the fused pass's element stamp back into the State.
-  t0 = NowNs();
-  bool fused = FusedEligible(m, ws);
-  if (fused) {
-    EnsureFullLive(m, s, ws);
-  } else {
-    EndFullLive(ws);
-    FoldStampFloor(m, s);
-    BuildActiveSet(m, s, ws);
+  {
+    StageTimer timer(&report.tools_ns);
+    ResolveTools(m, s, ws, input, &report);
   }
-  report.active_set_ns = NowNs() - t0;
-  t0 = NowNs();
-  UpdateGrasps(m, s, ws, &report);
-  report.tools_ns += NowNs() - t0;
 
-  // 3-4. Plan, integrate, check, roll back and retry: fused when it can, else (or when the
-  // fused attempt met a non-finite value) the general path.
+  // 2. Active set (haptic window), then the tweezers, which need its contact candidates. The
+  // fused kernel keeps its full-mode lists from tick to tick; every other tick builds them.
+  const bool fused = FusedEligible(m, ws);
+  {
+    StageTimer timer(&report.active_set_ns);
+    if (fused) {
+      EnsureFullLive(m, s, ws);
+    } else {
+      EndFullLive(ws);
+      BuildActiveSet(m, s, ws);
+    }
+  }
+  {
+    StageTimer timer(&report.tools_ns);
+    UpdateGrasps(m, s, ws, &report);
+  }
+
+  // 3-4. Dynamics: plan, integrate, check, roll back and retry.
   StageTimes times;
-  if (fused && !FusedTick(m, s, ws, &report, &times)) {
-    fused = false;
-    FoldStampFloor(m, s);
-  }
-  if (!fused) GeneralTick(m, s, ws, &report, &times);
+  Dynamics(m, s, ws, &report, &times).Run(fused);
   if (report.fallback) ++s.warnings.implicit_fallback;
   report.forces_ns = times.forces_ns;
   report.integrate_ns = times.integrate_ns;
 
   // 5. Device force.
-  t0 = NowNs();
-  DeviceForces(s, ws, &report);
-  report.checks_ns += NowNs() - t0;
+  {
+    StageTimer timer(&report.checks_ns);
+    DeviceForces(s, ws, &report);
+  }
 
   // Refile the atoms that moved (local mode: nothing else can have moved).
-  t0 = NowNs();
-  if (!ws.options.full) {
-    for (int32_t i = 0; i < ws.num_active; ++i) UpdateSpatialHash(ws.hash, ws.active[i], &s.atom_pos[3 * ws.active[i]]);
+  {
+    StageTimer timer(&report.active_set_ns);
+    if (!ws.options.full) {
+      for (int32_t i = 0; i < ws.num_active; ++i)
+        UpdateSpatialHash(ws.hash, ws.active[i], &s.atom_pos[3 * ws.active[i]]);
+    }
+    WakeNeighbours(m, s, ws);
+    report.active_atoms = ws.num_active;
+    report.active_elems = ws.num_elems;
+    report.pending_cuts = ws.num_pending_cuts;
+    if (report.fused) {
+      ClearExtraK(ws);  // the lists stay live for the next tick
+    } else {
+      EndFullLive(ws);
+      ClearTickScratch(ws);
+    }
   }
-  WakeNeighbours(m, s, ws);
-  report.active_atoms = ws.num_active;
-  report.active_elems = ws.num_elems;
-  report.pending_cuts = ws.num_pending_cuts;
-  if (fused) {
-    ClearExtraK(ws);  // the lists stay live for the next tick
-  } else {
-    EndFullLive(ws);
-    ClearTickScratch(ws);
-  }
-  report.active_set_ns += NowNs() - t0;
 
   ++s.tick;
   s.time_s += ws.options.dt_s;
   ws.synced_tick = s.tick;
   report.new_warnings = TotalWarnings(s.warnings) - warnings_before;
-  report.total_ns = NowNs() - t_start;
   return report;
 }
 

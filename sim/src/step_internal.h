@@ -20,15 +20,25 @@ inline int64_t NowNs() {
 // Below this length an element has no direction (eq. 4.5 would divide by ~0).
 inline constexpr Real kMinLength = sizeof(Real) == 4 ? Real(1e-6) : Real(1e-12);
 
-// State::elem_len of an element whose eq. 4.6 filter restarts at its next update (it was
-// degenerate at the last one). Lengths are never negative.
-inline constexpr Real kFilterRestart = Real(-1);
-
 inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 // SphereContact's own first test, inline: the loops over full mode's contact candidates (every
 // external atom) skip the call for the atoms a tool cannot touch.
 inline bool InsideSphere(const double d[3], double r) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < r * r; }
+
+// Adds the steady-clock time from its construction to its end to *sink: the one idiom for the
+// stage times of StepReport.
+class StageTimer {
+ public:
+  explicit StageTimer(int64_t* sink) : sink_(sink), t0_(NowNs()) {}
+  ~StageTimer() { *sink_ += NowNs() - t0_; }
+  StageTimer(const StageTimer&) = delete;
+  StageTimer& operator=(const StageTimer&) = delete;
+
+ private:
+  int64_t* sink_;
+  int64_t t0_;
+};
 
 struct StageTimes {
   int64_t forces_ns = 0;
@@ -97,7 +107,7 @@ int32_t ImplicitEulerSubstep(const Model& model, State& state, Workspace& ws, Re
 // implicit.cc — sizes the implicit buffers (MakeWorkspace).
 void SizeImplicitBuffers(const Model& model, Workspace& ws);
 
-// full_step.cc — the full-mode fused pass (Workspace::FullPass).
+// full_step.cc — the full-mode fused pass (Workspace::fused).
 // True when this tick can take it: full mode, explicit or symplectic Euler, no cut pending, and
 // a model with elements. Evaluated after ResolveTools.
 bool FusedEligible(const Model& model, const Workspace& ws);
@@ -106,8 +116,8 @@ bool FusedEligible(const Model& model, const Workspace& ws);
 void EnsureFullLive(const Model& model, State& state, Workspace& ws);
 // Restores the between-steps invariant of the marks before a general-path tick.
 void EndFullLive(Workspace& ws);
-// Sizes FullPass (MakeWorkspace, full mode).
-void SizeFullPass(const Model& model, Workspace& ws);
+// Makes and sizes the fused kernel (MakeWorkspace, full mode).
+void SizeFusedPass(const Model& model, Workspace& ws);
 
 // The part of [data, data + bytes) that whole 2 MiB pages cover: {begin, length}, length 0 if none.
 struct HugeRange {
@@ -131,9 +141,13 @@ struct FusedEnergy {
 // not null, receives the energy check's terms (one more gather per element, from cache).
 bool RunFused(const Model& model, State& state, Workspace& ws, Integrator integrator, int32_t substeps,
               StageTimes* times, FusedEnergy* energy);
-// Takes back a tick RunFused completed (its energy check failed): the State back at the tick's
-// start from the rollback copy, substep_clock and elem_stamp_floor as they were before it.
-void UndoFused(State& state, Workspace& ws, int64_t clock, int64_t stamp_floor);
+// Takes back an attempt RunFused completed: the State back at the tick's start from the pass's
+// rollback copy.
+void RestoreFused(State& state, Workspace& ws);
+// The fused kernel's lists are live (full mode, kept from tick to tick).
+bool FusedLive(const Workspace& ws);
+// Forgets the fused kernel's lists and cached zero forces (ResyncWorkspace).
+void ResetFused(Workspace& ws);
 // Zeroes atom_extra_k where ToolStiffness may have set it (candidates and grasped atoms).
 void ClearExtraK(Workspace& ws);
 

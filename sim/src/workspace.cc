@@ -95,7 +95,6 @@ Workspace MakeWorkspace(const Model& m, const StepOptions& options) {
   ws.backup_vel.assign(3 * na, Real(0));
   ws.backup_elem_len.assign(ne, Real(0));
   ws.backup_elem_rate.assign(ne, Real(0));
-  ws.backup_elem_stamp.assign(ne, 0);
 
   // Integrator scratch only where it can be used (implicit also serves as the fallback).
   ws.use_rk4 = options.integrator == Integrator::kRk4;
@@ -107,7 +106,7 @@ Workspace MakeWorkspace(const Model& m, const StepOptions& options) {
     ws.rk_dv.assign(3 * na, Real(0));
   }
   if (ws.use_implicit) internal::SizeImplicitBuffers(m, ws);
-  if (options.full) internal::SizeFullPass(m, ws);
+  if (options.full) internal::SizeFusedPass(m, ws);
 
   BuildAtomTriangles(m, ws);
   return ws;
@@ -130,8 +129,7 @@ void ResyncWorkspace(const Model& m, const State& s, Workspace& ws) {
   std::fill(ws.atom_extra_k.begin(), ws.atom_extra_k.end(), 0.0);
   std::fill(ws.elem_mark.begin(), ws.elem_mark.end(), 0);
   ws.num_active = ws.num_candidates = ws.num_elems = ws.num_boundary = 0;
-  ws.full.live = ws.full.force_zero = false;
-  ws.full.restart_marks = -1;
+  internal::ResetFused(ws);
   ws.synced_tick = s.tick;
 }
 

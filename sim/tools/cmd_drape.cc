@@ -109,6 +109,7 @@ void Run(DrapeArgs& a) {
          "use --integrator symplectic)");
   }
   o.step.dt_s = a.dt > 0 ? a.dt : std::min(1e-3, 0.9 * stable);
+  o.huge_pages = true;  // a command-line generation run: large slabs pay back the system calls
   if (o.step.dt_s > stable) {
     Fail("drape", "--dt " + std::to_string(a.dt) + " s exceeds the stable step " + std::to_string(stable) +
                       " s for this slab, form and integrator (omit --dt to use 90% of it)");
@@ -119,7 +120,7 @@ void Run(DrapeArgs& a) {
   auto last_print = start;
   double next_fraction = 0;
   // Stage 2's CPU time per tick, from its first progress report after tick 0 to its last (the
-  // first ticks build full mode's lists and ask for huge pages), or from tick 0 when there is no
+  // first ticks build full mode's lists), or from tick 0 when there is no
   // such report in between.
   struct Mark {
     int64_t tick = 0;

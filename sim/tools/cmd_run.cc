@@ -208,6 +208,8 @@ void Run(const RunArgs& a) {
   // Step through the script, a CSV row per tick.
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
+  // Full mode streams the whole model every tick: past the caches, huge pages save page walks.
+  if (options.full) AdviseHugePages(state, workspace);
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
   const int64_t script_ticks = std::llround(ScriptDuration(script) / a.dt);
   const int64_t ticks = a.max_ticks >= 0 ? std::min(a.max_ticks, script_ticks) : script_ticks;

@@ -37,7 +37,6 @@ void ExpectConsistent(const Model& m, const State& s, const Workspace& ws) {
   EXPECT_EQ(m.elem_leq, fresh.elem_leq);
   EXPECT_EQ(m.elem_home, fresh.elem_home);
   EXPECT_EQ(static_cast<int32_t>(s.elem_len.size()), m.num_elems);
-  EXPECT_EQ(static_cast<int32_t>(s.elem_stamp.size()), m.num_elems);
   EXPECT_EQ(m.num_tris * 3, static_cast<int32_t>(m.tri_atoms.size()));
   for (int32_t t = 0; t < m.num_tris; ++t) {
     for (int c = 0; c < 3; ++c) {

@@ -56,10 +56,9 @@ uint64_t GoldenRun(Integrator integrator, bool full) {
       fnv.Mix(s.atom_pos.data(), s.atom_pos.size() * sizeof(s.atom_pos[0]));
       fnv.Mix(s.atom_vel.data(), s.atom_vel.size() * sizeof(s.atom_vel[0]));
     }
-    FoldStampFloor(model, s);
     for (int32_t e = 0; e < model.num_elems; ++e) {
       // What the next update reads: a restart (l_{n-1} = l, rate 0) whatever the stored values.
-      const bool restarts = s.elem_stamp[e] != s.substep_clock - 1 || s.elem_len[e] == Real(-1);
+      const bool restarts = s.elem_len[e] == kFilterRestart;
       const Real filter[2] = {restarts ? Real(-1) : s.elem_len[e], restarts ? Real(0) : s.elem_rate[e]};
       fnv.Mix(filter, sizeof(filter));
     }

@@ -77,8 +77,8 @@ TEST(Reorder, GivesTheFusedPassItsWalkOrderAndLocality) {
     State s = MakeState(r);
     Workspace ws = MakeWorkspace(r, o);
     Step(r, s, ws, ToolInput{});
-    EXPECT_TRUE(ws.full.live);
-    EXPECT_TRUE(ws.full.identity) << "atoms renumbered: " << atoms;
+    EXPECT_TRUE(GetFusedPassStatus(ws).live);
+    EXPECT_TRUE(GetFusedPassStatus(ws).identity) << "atoms renumbered: " << atoms;
   }
   // The generator's order ties top atoms to home and apex atoms a third of the model away.
   EXPECT_LT(4 * Bandwidth(ReorderForLocality(m)), Bandwidth(m));

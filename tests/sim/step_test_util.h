@@ -58,9 +58,12 @@ inline uint64_t HashState(const State& s) {
   };
   mix(s.atom_pos.data(), s.atom_pos.size() * sizeof(Real));
   mix(s.atom_vel.data(), s.atom_vel.size() * sizeof(Real));
-  mix(s.elem_len.data(), s.elem_len.size() * sizeof(Real));
-  mix(s.elem_rate.data(), s.elem_rate.size() * sizeof(Real));
-  mix(s.elem_stamp.data(), s.elem_stamp.size() * sizeof(int64_t));
+  // The eq. 4.6 filter as its next update reads it: a restart mark whatever the stored rate.
+  for (size_t e = 0; e < s.elem_len.size(); ++e) {
+    const bool restarts = s.elem_len[e] == kFilterRestart;
+    const Real filter[2] = {s.elem_len[e], restarts ? Real(0) : s.elem_rate[e]};
+    mix(filter, sizeof(filter));
+  }
   mix(&s.tick, sizeof(s.tick));
   mix(&s.time_s, sizeof(s.time_s));
   for (const ToolState& t : s.tools) mix(t.force, sizeof(t.force)), mix(&t.grasp_atom, sizeof(t.grasp_atom));

@@ -68,6 +68,9 @@ struct DrapeOptions {
   double settle_speed = 1e-3;    // model units / s
   double settle_hold_s = 0.1;
   double progress_every_s = 0.05;  // simulated seconds between progress reports
+  // Ask for huge pages for the step's arrays (AdviseHugePages: one system call per array, for
+  // large slabs; `idms-sim drape` asks).
+  bool huge_pages = false;
   // Stage 3.
   double home_k = 15.0;  // stiffness of the added home elements
   double home_b = 0.2;   // viscosity of the added home elements

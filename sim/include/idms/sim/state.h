@@ -5,7 +5,6 @@
 
 #include <array>
 #include <cstdint>
-#include <limits>
 #include <vector>
 
 namespace idms {
@@ -77,24 +76,18 @@ struct WarningCounters {
 struct State {
   double time_s = 0;  // simulated time
   int64_t tick = 0;   // completed steps
-  // Substeps taken so far; the eq. 4.6 filter of an element is continuous only when it was
-  // last updated in the previous substep (elem_stamp == substep_clock - 1).
-  int64_t substep_clock = 0;
 
   // Thesis 4.1: x1 (held as the absolute position p of eq. 4.15) and x2.
   std::vector<Real> atom_pos;  // (num_atoms x 3), model units
   std::vector<Real> atom_vel;  // (num_atoms x 3), model units / s; 0 for fixed and inactive atoms
 
-  // Eq. 4.6 filter state per element.
-  std::vector<Real> elem_len;       // (num_elems), model units: l at the last update (l_{n-1});
-                                    // exactly -1 = restart at the next update (it was degenerate)
-  std::vector<Real> elem_rate;      // (num_elems), model units / s: filtered length rate
-  std::vector<int64_t> elem_stamp;  // (num_elems): substep_clock at the last update
-  // Every element with a free endpoint was updated at this substep or later: its stamp is
-  // max(elem_stamp[e], elem_stamp_floor). The full-mode fused pass updates all of them and moves
-  // this floor instead of writing 16 bytes per element per substep; the other paths fold it back
-  // into elem_stamp first (FoldStampFloor). kNoStamp = none.
-  int64_t elem_stamp_floor = std::numeric_limits<int64_t>::min();
+  // Eq. 4.6 filter state per element: l_{n-1} and l'_{n-1}, continued at the next update. An
+  // element whose filter cannot continue (not updated in the last substep: outside the active
+  // region, the last tick ran a scheme without the filter, it was degenerate, or it was just
+  // restarted by hand) carries a restart mark, elem_len = kFilterRestart: its next update starts
+  // from rest (l_{n-1} = l, l'_{n-1} = 0).
+  std::vector<Real> elem_len;   // (num_elems), model units: l at the last update, or kFilterRestart
+  std::vector<Real> elem_rate;  // (num_elems), model units / s: filtered length rate
 
   // Local simulation (thesis 5.5.2): the atoms integrated last tick, in order. The buffer has
   // num_atoms entries; the first num_active are meaningful. atom_linger counts the ticks an atom
@@ -114,16 +107,14 @@ struct State {
   WarningCounters warnings;
 };
 
-inline constexpr int64_t kNoStamp = std::numeric_limits<int64_t>::min();
-
-// Folds elem_stamp_floor into elem_stamp (O(elements) when a floor is set, else nothing). The
-// floor covers the elements with a free endpoint: those the fused pass updates.
-void FoldStampFloor(const Model& model, State& state);
+// State::elem_len of an element whose eq. 4.6 filter restarts at its next update (lengths are
+// never negative).
+inline constexpr Real kFilterRestart = Real(-1);
 
 // A model at rest: p = p_eq, v = 0, element lengths at their current (rest) value. Allocates.
 State MakeState(const Model& model);
 
-// Restarts the eq. 4.6 filters at the current positions (l_{n-1} = l, rate 0): call after
+// Marks every eq. 4.6 filter to restart at its next update (l_{n-1} = l, rate 0): call after
 // setting positions by hand (initial conditions, draping), so the first step sees no jump.
 void SyncFilterToPositions(const Model& model, State& state);
 

@@ -97,6 +97,13 @@ struct StepOptions {
   double max_device_force_rate = 1e4;  // force units / s
 
   StabilityOptions stability;
+
+  // Full mode with explicit or symplectic Euler takes the fused kernel (see Step); off = the
+  // general kernel always (tests and benches compare the two). May change between steps.
+  bool fused_pass = true;
+  // The fused kernel may use the AVX2 build of its vectorised phase where the CPU has AVX2 (the
+  // same bits; off lets a test cover the baseline x86-64 code on any machine).
+  bool fused_avx2 = true;
 };
 
 struct ToolReport {
@@ -119,7 +126,7 @@ struct StepReport {
   double predicted_dt_s = 0;  // stable step predicted for the configured integrator
   bool fallback = false;      // the accepted attempt used implicit Euler as a fallback
   bool unrecovered = false;   // every attempt failed; active region restored at rest
-  // Full mode's fused pass computed the accepted attempt (Workspace::FullPass); false = the
+  // Full mode's fused pass computed the accepted attempt (internal::FusedPass); false = the
   // general path did (local mode, another integrator, a pending cut, or a fused attempt that met a
   // non-finite value or failed the energy check and was retried there).
   bool fused = false;
@@ -150,7 +157,7 @@ struct StepReport {
 // tools), independent of model size; full mode O(model). The first Step after MakeWorkspace,
 // or after the State was replaced (snapshot restore), refiles the spatial hash from the State:
 // O(atoms) once — call ResyncWorkspace before a real-time loop starts to keep that out of it.
-// Full mode with explicit or symplectic Euler takes a fused pass (Workspace::FullPass): forces,
+// Full mode with explicit or symplectic Euler takes a fused pass (internal::FusedPass): forces,
 // sums and integration in one sweep, the same bits as the general path at a fraction of its
 // memory traffic, with the energy check's energies formed on the way (a tick whose check fails
 // is taken back and run by the general path, which rolls back and retries as always; the

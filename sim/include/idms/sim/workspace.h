@@ -4,7 +4,9 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "idms/sim/spatial_hash.h"
@@ -43,57 +45,29 @@ struct ImplicitBuffers {
   std::vector<Real> atom_dv_guess;                  // (num_atoms x 3): last solution per atom, CG warm start
 };
 
-// Full mode's fused pass (full_step.cc): element forces, accumulation and integration in one
-// sweep over the elements in the order the general path visits them (grouped by their lowest
-// free endpoint), so each free atom is integrated as soon as its last element is done and every
-// per-atom sum is formed in the same order: the same bits as the general path. Built from the
-// live lists (see `live`) without allocating; arrays are in walk order unless noted.
-struct FullPass {
-  // Off = every full-mode tick takes the general path (tests and benches compare the two).
-  bool enabled = true;
-  // May use the AVX2 build of its vectorised phase where the CPU has AVX2 (the same bits; off
-  // lets a test cover the baseline x86-64 code on any machine).
-  bool avx2 = true;
-  // The lists below, and ws.active / candidates / elems with their marks, hold the full-mode
-  // sets across ticks (the between-steps invariant of the marks is suspended while live).
-  bool live = false;
-  uint64_t topology_version = 0;  // model version the arrays were built for
-  bool identity = false;          // ws.elems[w] == w: element arrays need no indirection
-  // `force` of every free atom is 0 (the fused pass leaves it so for the next tick).
-  bool force_zero = false;
-  // Elements the last fused substep found degenerate (their eq. 4.6 filters carry a restart mark);
-  // -1 = unknown (the last substep was not this pass's).
-  int32_t restart_marks = -1;
-  std::vector<int32_t> group_end;              // (num_atoms) by active slot: one past its last element
-  std::vector<int32_t> other;                  // (num_elems) endpoint that is not the group's atom; ~id if fixed
-  std::vector<int32_t> elem_g;                 // (num_elems) the group's atom (the lower free endpoint)
-  std::vector<Real> elem_k, elem_b, elem_leq;  // (num_elems) model values, as Real
-  std::vector<Real> atom_t_over_m;             // (num_atoms) by active slot: T / Model::atom_mass
-  Real t_over_m_of = 0;                        // the substep T of atom_t_over_m; 0 = not computed
-  // The pass's force accumulator, (num_atoms x 4) with a zero 4th lane: one vector per atom.
-  std::vector<Real> force;
-  std::vector<Real> scratch;  // per-batch temporaries (full_step.cc)
-  // (num_elems / batch + 1) per batch of the walk: the highest active slot of a free endpoint in
-  // it or an earlier batch (the energy check forms a batch's end-of-tick lengths past it).
-  std::vector<int32_t> batch_ready;
-  // Float builds: the rollback copy of the atoms as two 4-wide rows per slot (position, velocity;
-  // lane 3 not used), written with one non-temporal vector store each (else Workspace::backup_pos
-  // and backup_vel).
-  std::vector<Real> backup_rows;
-  // May ask the kernel (Linux, madvise MADV_COLLAPSE) to back the 2 MiB-aligned inside of the
-  // arrays the pass streams, the State's included, with huge pages, once when the pass goes live
-  // and again when the State's arrays move: a 10^6-atom pass crosses a 4 KiB page every few
-  // hundred elements in each of its ~20 streams, and each crossing can cost a page walk. The
-  // contents do not change; off, or where the kernel declines, nothing else changes either.
-  bool huge_pages = true;
-  bool huge_workspace_done = false;  // the workspace's arrays were advised
-  const Real* huge_state = nullptr;  // State::atom_pos.data() when the State's were advised
-  int64_t huge_bytes = 0;            // bytes the kernel moved to huge pages so far
-  // Stable step of the configured integrator without tools (the minimum over free atoms), and
-  // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
-  double dt_free = 0;
-  int32_t dt_free_count = 0;
+namespace internal {
+struct FusedPass;  // full mode's fused kernel: its lists, caches and buffers (full_step.cc)
+
+// Owns a FusedPass, or none; copies deeply, so a Workspace stays a value (the agent keeps a rest
+// copy). Defined in full_step.cc, the one file that sees inside a FusedPass.
+class FusedPassPtr {
+ public:
+  FusedPassPtr();
+  ~FusedPassPtr();
+  FusedPassPtr(const FusedPassPtr& other);
+  FusedPassPtr(FusedPassPtr&& other) noexcept;
+  FusedPassPtr& operator=(const FusedPassPtr& other);
+  FusedPassPtr& operator=(FusedPassPtr&& other) noexcept;
+  void Emplace();  // a new, empty FusedPass (allocates)
+  FusedPass* get() const { return p_.get(); }
+  FusedPass* operator->() const { return p_.get(); }
+  FusedPass& operator*() const { return *p_; }
+  bool operator==(std::nullptr_t) const { return p_ == nullptr; }
+
+ private:
+  std::unique_ptr<FusedPass> p_;
 };
+}  // namespace internal
 
 struct Workspace {
   // Why the options live here and not in a Step argument: the buffers below are sized for them
@@ -119,8 +93,8 @@ struct Workspace {
 
   SpatialHash hash;  // local mode only; files every atom at its State position
 
-  // Per-atom scratch. Invariant between steps: marks 0, slots -1, extra_k 0 (except while
-  // full.live: then marks and slots describe every free atom).
+  // Per-atom scratch. Invariant between steps: marks 0, slots -1, extra_k 0 (except while the
+  // fused kernel's lists are live: then marks and slots describe every free atom).
   std::vector<uint8_t> atom_mark;    // (num_atoms), 1 = active this tick, 2 = checked by the wake pass
   std::vector<uint8_t> atom_cand;    // (num_atoms), 1 = contact candidate this tick
   std::vector<int32_t> atom_slot;    // (num_atoms), index into the active list or -1
@@ -153,14 +127,13 @@ struct Workspace {
   // Rollback copy of the active region, by active slot / active element index.
   std::vector<Real> backup_pos, backup_vel;             // (num_atoms x 3)
   std::vector<Real> backup_elem_len, backup_elem_rate;  // (num_elems)
-  std::vector<int64_t> backup_elem_stamp;               // (num_elems)
 
   // RK4 scratch by active slot (only when use_rk4).
   std::vector<Real> rk_x0, rk_v0, rk_dx, rk_dv;  // (num_atoms x 3)
 
   ImplicitBuffers implicit;  // only when use_implicit
 
-  FullPass full;  // sized only in full mode
+  internal::FusedPassPtr fused;  // full mode only
 
   // Surface adjacency for the Edit API: triangles of atom i are
   // atom_tri[atom_tri_adr[i] .. + atom_tri_num[i]) (holes allowed after removals).
@@ -178,5 +151,22 @@ Workspace MakeWorkspace(const Model& model, const StepOptions& options);
 // counts warnings.workspace_resync) when the state is not the one it stepped last, e.g. after
 // restoring a snapshot. O(atoms), does not allocate.
 void ResyncWorkspace(const Model& model, const State& state, Workspace& workspace);
+
+// What full mode's fused kernel is doing, for tests and benches.
+struct FusedPassStatus {
+  bool live = false;        // its lists are built and kept from tick to tick
+  bool identity = false;    // the model's element order is the walk's (renumbered, reorder.h)
+  bool row_backup = false;  // the rollback copy of the atoms is two 4-wide rows per atom (float on SSE)
+  int64_t huge_bytes = 0;   // bytes AdviseHugePages moved to huge pages so far
+};
+FusedPassStatus GetFusedPassStatus(const Workspace& workspace);
+
+// Opt-in, for benches and model generation (the step itself makes no system call): asks the
+// kernel (Linux, madvise MADV_COLLAPSE) to back the 2 MiB-aligned inside of the arrays full
+// mode's fused pass streams, the State's included, with huge pages. A 10^6-atom pass crosses a
+// 4 KiB page every few hundred elements in each of its ~20 streams, and each crossing can cost a
+// page walk. Contents do not change; where the kernel declines, nothing else changes either.
+// Call again if the State's arrays move. Returns the bytes moved (0 in local mode or off Linux).
+int64_t AdviseHugePages(const State& state, Workspace& workspace);
 
 }  // namespace idms
