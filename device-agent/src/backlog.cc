@@ -10,6 +10,7 @@ namespace idms::agent {
 Backlog::Backlog(int64_t capacity) : capacity_(static_cast<size_t>(std::max<int64_t>(capacity, 1))) {}
 
 void Backlog::Accept(const TickSample& s) {
+  thread_.Check("Backlog::Accept");
   IDMS_CHECK(samples_.empty() || s.tick > samples_.back().tick);
   samples_.push_back(s);
   if (samples_.size() <= capacity_) return;
@@ -25,6 +26,7 @@ void Backlog::Accept(const TickSample& s) {
 }
 
 void Backlog::MarkSent(size_t n) {
+  thread_.Check("Backlog::MarkSent");
   IDMS_CHECK(n <= num_unsent());
   for (size_t i = cursor_; i < cursor_ + n; ++i) {
     const uint64_t tick = samples_[i].tick;
@@ -39,6 +41,7 @@ void Backlog::MarkSent(size_t n) {
 }
 
 uint64_t Backlog::ResumeAt(uint64_t next_tick) {
+  thread_.Check("Backlog::ResumeAt");
   // Lost: [next_tick, first kept) among the sent-then-evicted ticks, not counted before. The
   // ticks evicted unsent lie above every sent-then-evicted one and were counted by Accept.
   uint64_t lost = 0;
@@ -58,6 +61,7 @@ uint64_t Backlog::ResumeAt(uint64_t next_tick) {
 }
 
 uint64_t Backlog::TakeUnreportedDrops() {
+  thread_.Check("Backlog::TakeUnreportedDrops");
   const uint64_t n = unreported_;
   unreported_ = 0;
   return n;

@@ -1,6 +1,6 @@
 // The uplink's bounded backlog of tick samples: each is kept after it is sent, so that a resumed
 // session can resend from the server's next_tick, until the capacity pushes it out, oldest first.
-// Pure (no I/O, no clock, no protobuf); I/O thread only.
+// Pure (no I/O, no clock, no protobuf); I/O thread only (the first to call owns it: ThreadOwner).
 #pragma once
 
 #include <cstddef>
@@ -8,6 +8,7 @@
 #include <deque>
 
 #include "idms/agent/loop.h"
+#include "idms/agent/thread_owner.h"
 
 namespace idms::agent {
 
@@ -54,6 +55,8 @@ class Backlog {
   uint64_t evicted_sent_end_ = 0;
   // Ticks below this are accounted for: a loss there was counted already.
   uint64_t counted_end_ = 0;
+  // Off the 1 kHz loop: a call from another thread aborts in every build, as IDMS_CHECK does.
+  ThreadOwner thread_{"the uplink's backlog", ThreadOwner::OnViolation::kAbort};
 };
 
 }  // namespace idms::agent

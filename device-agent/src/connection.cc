@@ -25,6 +25,7 @@ Connection::Connection(asio::io_context& io, const ConnectionOptions& options, C
     : options_(options), handler_(&handler), resolver_(io), ws_(io) {}
 
 void Connection::Start() {
+  thread_.Check("Connection::Start");
   resolver_.async_resolve(options_.host, options_.port,
                           beast::bind_front_handler(&Connection::OnResolve, shared_from_this()));
 }
@@ -79,6 +80,7 @@ void Connection::OnRead(const beast::error_code& ec, size_t) {
 }
 
 void Connection::Write(std::string& frame) {
+  thread_.Check("Connection::Write");
   IDMS_CHECK(!writing_);
   writing_ = true;
   out_.swap(frame);
@@ -92,6 +94,7 @@ void Connection::OnWrite(const beast::error_code& ec, size_t) {
 }
 
 void Connection::Close() {
+  thread_.Check("Connection::Close");
   closing_ = true;
   ws_.async_close(websocket::close_code::normal, beast::bind_front_handler(&Connection::OnClose, shared_from_this()));
 }
@@ -104,6 +107,7 @@ void Connection::OnClose(const beast::error_code& ec) {
 }
 
 void Connection::Abandon() {
+  thread_.Check("Connection::Abandon");
   handler_ = nullptr;
   beast::error_code ignored;
   beast::get_lowest_layer(ws_).socket().close(ignored);

@@ -13,6 +13,8 @@
 #include <string>
 #include <string_view>
 
+#include "idms/agent/thread_owner.h"
+
 namespace idms::agent {
 
 struct ConnectionOptions {
@@ -69,6 +71,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::string out_;  // the frame being written
   bool writing_ = false;
   bool closing_ = false;
+  // The thread running its io_context; off the 1 kHz loop, so a call from another aborts.
+  ThreadOwner thread_{"a connection of the uplink", ThreadOwner::OnViolation::kAbort};
 };
 
 }  // namespace idms::agent

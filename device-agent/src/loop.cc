@@ -67,12 +67,17 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
 
 Loop::~Loop() {
   if (dma_latency_fd_ >= 0) close(dma_latency_fd_);
+  if (wrong_thread_calls() > 0) {
+    std::fprintf(stderr, "idms-agent: BUG: %llu calls to the loop from a thread that does not own them\n",
+                 static_cast<unsigned long long>(wrong_thread_calls()));
+  }
   // Rest sets never applied, and replaced ones never collected.
   reset_ready_.consume_all([](SimSet* set) { delete set; });
   reset_spent_.consume_all([](SimSet* set) { delete set; });
 }
 
 bool Loop::PushCommand(const LoopCommand& command) {
+  io_thread_.Check("Loop::PushCommand");
   if (command.kind != LoopCommand::kReset) return commands_.push(command);
   // Room for both first: this thread is the only producer, so the room cannot shrink meanwhile,
   // and no prepared set is left behind without its command.
@@ -85,6 +90,7 @@ bool Loop::PushCommand(const LoopCommand& command) {
 }
 
 int Loop::CollectResets() {
+  io_thread_.Check("Loop::CollectResets");
   return static_cast<int>(reset_spent_.consume_all([this](SimSet* set) {
     delete set;
     --resets_in_flight_;
@@ -137,6 +143,7 @@ void Loop::SetUpThread() {
 }
 
 void Loop::Run() {
+  tick_thread_.Check("Loop::Run");
   SetUpThread();
   PrefaultStack();
 
@@ -162,6 +169,7 @@ void Loop::Run() {
 }
 
 void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
+  tick_thread_.Check("Loop::Tick");
   // Commands first: a reset replaces the set stepped below.
   ApplyCommands();
   Model& model = sim_->model;

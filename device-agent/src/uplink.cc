@@ -16,6 +16,7 @@
 #include "backlog.h"
 #include "connection.h"
 #include "frame_order.h"
+#include "idms/agent/thread_owner.h"
 #include "idms/protocol/envelope.h"
 #include "idms/protocol/mesh_codec.h"
 
@@ -72,6 +73,7 @@ struct Uplink::Impl final : ConnectionHandler {
   // Start, poll, finish.
 
   bool Run() {
+    io_thread.Check("Uplink::Run");
     // Signals stop the loop; the uplink then flushes and closes.
     WaitSignal();
     Poll();
@@ -97,6 +99,7 @@ struct Uplink::Impl final : ConnectionHandler {
   }
 
   void Poll() {
+    io_thread.Check("Uplink poll");
     Drain();
     const auto now = Clock::now();
     if (!loop_finished && loop.finished()) {
@@ -200,6 +203,7 @@ struct Uplink::Impl final : ConnectionHandler {
   }
 
   void OnOpen() override {
+    io_thread.Check("Uplink::OnOpen");
     phase = Phase::kHello;
     v1::Envelope envelope;
     v1::Hello* hello = envelope.mutable_hello();
@@ -219,6 +223,7 @@ struct Uplink::Impl final : ConnectionHandler {
   }
 
   void OnMessage(std::string_view payload) override {
+    io_thread.Check("Uplink::OnMessage");
     if (phase == Phase::kHello) return OnWelcomeFrame(payload);
     v1::Envelope envelope;
     std::string error;
@@ -296,6 +301,7 @@ struct Uplink::Impl final : ConnectionHandler {
   // retried.
   void OnFailed(const beast::error_code& ec, const char* what,
                 const beast::websocket::response_type& upgrade) override {
+    io_thread.Check("Uplink::OnFailed");
     const std::string step = what;
     const unsigned status = upgrade.result_int();
     if (step == "WebSocket upgrade") {
@@ -486,6 +492,7 @@ struct Uplink::Impl final : ConnectionHandler {
   }
 
   void OnWritten() override {
+    io_thread.Check("Uplink::OnWritten");
     write_in_flight = false;
     if (phase == Phase::kClosing) return conn->Close();
     MaybeWrite();  // nothing while the Hello waits for its Welcome (phase kHello)
@@ -503,12 +510,16 @@ struct Uplink::Impl final : ConnectionHandler {
   }
 
   void OnClosed(const beast::error_code& ec) override {
+    io_thread.Check("Uplink::OnClosed");
     stats.ended_cleanly = !ec;
     if (ec) std::fprintf(stderr, "idms-agent: closing the session: %s\n", ec.message().c_str());
     Done();
   }
 
   // ------------------------------------------------------------------------------------------
+  // The thread that calls Run owns the uplink: its io_context, connection, backlog and encoder.
+  // Off the 1 kHz loop, so a call from another thread aborts in every build.
+  ThreadOwner io_thread{"the uplink", ThreadOwner::OnViolation::kAbort};
   Loop& loop;
   UplinkOptions opt;
   ConnectionOptions connection_options;

@@ -11,6 +11,7 @@
 #include "idms/protocol/recording.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
+#include "warning_guard.h"
 
 namespace idms::test {
 namespace {
@@ -127,6 +128,7 @@ TEST(Devices, HumanHandIsStableInContact) {
   agent::LoopOptions options;
   options.realtime = false;
   agent::Loop loop(model, step, tool, reg, *device, options);
+  WarningGuard warnings(loop.state());  // the loop is never reset here: the State stays put
   const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
   double max_force = 0, max_lag = 0, lag_at_press = 0, fz_at_press = 0;
   for (int i = 0; i < 5500; ++i) {
@@ -150,7 +152,6 @@ TEST(Devices, HumanHandIsStableInContact) {
   // Giving way, the hand presses less deep than the rigid script, whose peak is 1.667 N.
   EXPECT_LT(max_force, 1.667);
   EXPECT_LT(max_lag, 2 * lag_at_press);
-  EXPECT_EQ(TotalWarnings(loop.state().warnings), 0);
 }
 
 // Writes a recording with `n` ticks of palpation at 1 kHz on /device, 20 samples per frame.

@@ -13,6 +13,7 @@
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
 #include "step_test_util.h"
+#include "warning_guard.h"
 
 namespace idms {
 namespace {
@@ -77,6 +78,7 @@ TEST(Edit, RemovingElementsKeepsEverythingInStep) {
 TEST(Edit, ApplyPendingEditsBumpsTheVersionOnlyWhenSomethingChanged) {
   Model m = GenerateSlab(SlabOptions{});
   State s = MakeState(m);
+  test::WarningGuard warnings(s);
   Workspace ws = MakeWorkspace(m, StepOptions{});
   EXPECT_FALSE(ApplyPendingEdits(m, s, ws).topology_changed);
   EXPECT_EQ(m.topology_version, 0u);
@@ -99,7 +101,6 @@ TEST(Edit, ApplyPendingEditsBumpsTheVersionOnlyWhenSomethingChanged) {
   ExpectConsistent(m, s, ws);
   // Stepping continues on the edited model.
   for (int i = 0; i < 500; ++i) Step(m, s, ws, test::SphereAt(1.5, 1.732, 2.0 - 0.8 * i / 500));
-  EXPECT_EQ(TotalWarnings(s.warnings), 0);
 }
 
 TEST(EditDeathTest, AStaleWorkspaceIsABug) {

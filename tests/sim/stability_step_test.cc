@@ -16,6 +16,7 @@
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
 #include "step_test_util.h"
+#include "warning_guard.h"
 
 namespace idms {
 namespace {
@@ -104,6 +105,14 @@ TEST_P(StepStabilitySweep, FiniteBoundedAndWarnedWhereItFellBack) {
   o.integrator = integrator;
   o.max_device_force = kMaxForce;
   State s;
+  // What a sweep to these extremes may count: fallbacks, retries and unrecovered ticks (held to
+  // the ticks below) and the device limits; not bad input, a stalled CG or grown buffers.
+  test::WarningGuard warnings(s);
+  warnings.Allow(&WarningCounters::implicit_fallback)
+      .Allow(&WarningCounters::rollback)
+      .Allow(&WarningCounters::unrecovered)
+      .Allow(&WarningCounters::device_force_clamped)
+      .Allow(&WarningCounters::device_force_rate_limited);
   const RunStats st = RunCase(model, o, ContactLaw::kThesis, &s);
   EXPECT_TRUE(st.finite);
   EXPECT_LE(st.max_force, kMaxForce * (1 + 1e-12));
@@ -119,9 +128,6 @@ TEST_P(StepStabilitySweep, FiniteBoundedAndWarnedWhereItFellBack) {
   if (integrator == Integrator::kExplicitEuler && b == 0) {
     EXPECT_GT(st.fallback_ticks, 0);
   }
-  EXPECT_EQ(s.warnings.bad_tool_input, 0);
-  EXPECT_EQ(s.warnings.cg_not_converged, 0);
-  EXPECT_EQ(s.warnings.implicit_grew, 0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Sweep, StepStabilitySweep,

@@ -14,6 +14,7 @@
 #include "idms/agent/histogram.h"
 #include "idms/agent/realtime.h"
 #include "idms/agent/registration.h"
+#include "idms/agent/thread_owner.h"
 #include "idms/sim/model.h"
 #include "idms/sim/state.h"
 #include "idms/sim/step.h"
@@ -112,16 +113,30 @@ class Loop {
   // sleeping. Loop thread; does not allocate.
   void Tick(int64_t wake_ns, int64_t deadline_ns);
 
+  // Two threads use a Loop: the loop thread (Run, Tick) and one I/O thread (the ring ends, commands
+  // and resets below). Each side belongs to the first thread that calls it; a call from another
+  // thread is a bug, caught by ThreadOwner (debug builds abort; release builds count it in
+  // wrong_thread_calls and the destructor says so on stderr).
+
   // Any thread, async-signal-safe: finish the current tick and stop.
   void RequestStop() { stop_.store(true, std::memory_order_relaxed); }
   // True once Run has returned its device released and its final frame published (acquire).
   bool finished() const { return finished_.load(std::memory_order_acquire); }
 
   // I/O thread side of the rings (single consumer / single producer for commands).
-  boost::lockfree::spsc_queue<TickSample>& samples() { return samples_; }
+  boost::lockfree::spsc_queue<TickSample>& samples() {
+    io_thread_.Check("Loop::samples");
+    return samples_;
+  }
   // Indices into slot(): full ones to read, then hand back with ReleaseMeshSlot.
-  bool PopMeshSlot(int32_t* index) { return mesh_full_.pop(*index); }
-  void ReleaseMeshSlot(int32_t index) { mesh_free_.push(index); }
+  bool PopMeshSlot(int32_t* index) {
+    io_thread_.Check("Loop::PopMeshSlot");
+    return mesh_full_.pop(*index);
+  }
+  void ReleaseMeshSlot(int32_t index) {
+    io_thread_.Check("Loop::ReleaseMeshSlot");
+    mesh_free_.push(index);
+  }
   const MeshSlot& slot(int32_t index) const { return slots_[static_cast<size_t>(index)]; }
   // I/O thread (the single producer). A kReset first copies the rest model, state and workspace
   // on the calling thread (allocates, O(model)) and queues the copy ahead of the command; the tick
@@ -135,6 +150,8 @@ class Loop {
 
   const LoopOptions& options() const { return options_; }
   const LoopCounters& counters() const { return counters_; }
+  // Calls from a thread that does not own their side (0 unless there is a bug; any thread).
+  uint64_t wrong_thread_calls() const { return tick_thread_.violations() + io_thread_.violations(); }
   bool realtime() const { return realtime_.load(std::memory_order_relaxed); }
 
   // Loop-thread data: read only after finished() (or from the loop thread), or before Run. The
@@ -191,6 +208,12 @@ class Loop {
   boost::lockfree::spsc_queue<SimSet*> reset_ready_;
   boost::lockfree::spsc_queue<SimSet*> reset_spent_;
   int resets_in_flight_ = 0;  // I/O thread: sets pushed to reset_ready_ and not yet collected
+
+  // Who may call what: Run, Tick and everything they call; the rings' other ends, PushCommand and
+  // CollectResets. The default policy: a wrong call may come from the loop thread itself, which
+  // must not abort in a release build.
+  ThreadOwner tick_thread_{"the loop's tick side (Run, Tick)"};
+  ThreadOwner io_thread_{"the loop's I/O side (sample and mesh rings, commands, resets)"};
 
   LoopCounters counters_;
   std::atomic<bool> stop_{false};
