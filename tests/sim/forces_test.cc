@@ -62,8 +62,8 @@ TEST(Forces, ElementForceIsEquations43To49WithTheExactRate) {
   EvaluateForces(m, s, ws, /*filtered=*/false, 1e-3);
   ExpectForce(ws, 0, 31.1 * 0.6, 31.1 * 0.8, 0);
   ExpectForce(ws, 1, -31.1 * 0.6, -31.1 * 0.8, 0);
-  // The exact rate leaves the filter's state alone.
-  EXPECT_EQ(s.elem_len[0], 2);
+  // The exact rate leaves the filter's state alone (MakeState's restart mark).
+  EXPECT_EQ(s.elem_len[0], kFilterRestart);
   EXPECT_EQ(s.elem_rate[0], 0);
   // Compressed to l = 1 along -z, closing at 4 units/s: k (1 - 2) + b (-4) = -12 along s^ = -z.
   s.atom_pos[3] = 0, s.atom_pos[4] = 0, s.atom_pos[5] = -1;
