@@ -22,7 +22,7 @@ double StreamedBytes(const idms::Model& m, const idms::Workspace& ws) {
   // Per element of the walk: its two endpoints (the group's atom and the other, int32 each),
   // element id when the ids are not the walk order (int32), k, b, l_eq; the eq. 4.6 length and
   // rate read and written, and copied.
-  const bool filter = ws.any_damping;
+  const bool filter = m.has_damping;
   const double per_elem =
       4 + 4 + (idms::GetFusedPassStatus(ws).identity ? 0 : 4) + 3 * r + (filter ? 2 * 2 * r + 2 * r : 0);
   // Per free atom: slot -> atom id and group end (int32 each), mass; position and velocity read

@@ -161,7 +161,7 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
   // atoms, none among this tick's) or wait for a cut: they are not updated from now on, so their
   // filters cannot continue when they come back. What last tick listed is found from State alone,
   // so a fresh or resynced Workspace marks the same elements.
-  if (ws.any_damping) {
+  if (m.has_damping) {
     for (int32_t i = 0; i < s.num_active; ++i) {
       const int32_t a = s.active_atoms[i];
       if (ws.atom_mark[a]) continue;

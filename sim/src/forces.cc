@@ -150,7 +150,7 @@ void EvaluateForces(const Model& m, State& s, Workspace& ws, bool filtered, Real
   FieldForces(m, s, ws, ws.atom_force.data(), 3);
   ToolForces(s, ws, ws.atom_force.data(), 3);
   const Real lambda = static_cast<Real>(ws.options.lambda);
-  if (!ws.any_damping) {
+  if (!m.has_damping) {
     ElementForces<false, false>(m, s, ws, T, lambda);
   } else if (filtered) {
     ElementForces<true, true>(m, s, ws, T, lambda);

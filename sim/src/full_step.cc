@@ -611,8 +611,8 @@ void BuildFusedPass(const Model& m, Workspace& ws) {
   fp.dt_free_count = 0;
   for (int32_t i = 0; i < n; ++i) {
     const int32_t a = ws.active[i];
-    const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
-                          ws.atom_damp[a] + ws.options.air_damping};
+    const AtomBound bound{m.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
+                          m.atom_damp[a] + ws.options.air_damping};
     const double dt = StableDt(integrator, bound, rate, ws.options.lambda);
     if (dt < fp.dt_free) {
       fp.dt_free = dt, fp.dt_free_count = 1;
@@ -714,7 +714,7 @@ double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integ
   const LengthRate rate = UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   const double air = ws.options.air_damping, lambda = ws.options.lambda;
   auto dt_of = [&](int32_t a, double extra_k) {
-    const AtomBound bound{ws.atom_omega2[a] + extra_k / m.atom_mass[a], ws.atom_damp[a] + air};
+    const AtomBound bound{m.atom_omega2[a] + extra_k / m.atom_mass[a], m.atom_damp[a] + air};
     return StableDt(integrator, bound, rate, lambda);
   };
   // Only atoms a tool stiffens (candidates, which include grasped atoms) differ from the cache;
@@ -744,7 +744,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
               FusedEnergy* energy) {
   const StepOptions& o = ws.options;
   const Real T = static_cast<Real>(o.dt_s / substeps);
-  const bool filter = ws.any_damping && UsesFilter(o, integrator);
+  const bool filter = m.has_damping && UsesFilter(o, integrator);
   const bool field = o.gravity || o.air_damping > 0 || !ws.atom_force_external.empty();
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
   // T / m by slot: one division per atom when T changes rather than in every substep.
@@ -763,7 +763,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
     }
     ws.fused->force_zero = false;
-    const Rate rate = !ws.any_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
+    const Rate rate = !m.has_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
     // The energy check's sums: at the tick's start in the first substep, at its end in the last.
     const bool before = energy && k == 0, after = energy && k == substeps - 1;
     const SubstepFn substep =
@@ -789,8 +789,8 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   return true;
 }
 
-void RestoreFused(State& s, Workspace& ws) {
-  const bool filter = ws.any_damping && UsesFilter(ws.options, ws.options.integrator);
+void RestoreFused(const Model& m, State& s, Workspace& ws) {
+  const bool filter = m.has_damping && UsesFilter(ws.options, ws.options.integrator);
   RestoreWritten(s, ws, ws.num_active, ws.num_elems, filter);
 }
 

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "idms/sim/check.h"
+#include "idms/sim/stability.h"
 
 namespace idms {
 namespace {
@@ -66,13 +67,30 @@ void FinalizeModel(Model& m) {
     m.atom_elem[fill[m.elem_atoms[2 * e]]++] = e;
     m.atom_elem[fill[m.elem_atoms[2 * e + 1]]++] = e;
   }
+
+  // Step constants: bounds per free atom, the longest element, damping present.
+  m.max_leq = 0;
+  m.has_damping = false;
+  for (int32_t e = 0; e < m.num_elems; ++e) {
+    m.max_leq = std::max(m.max_leq, m.elem_leq[e]);
+    m.has_damping = m.has_damping || m.elem_b[e] > 0;
+  }
+  m.atom_omega2.assign(m.num_atoms, 0.0);
+  m.atom_damp.assign(m.num_atoms, 0.0);
+  for (int32_t a = 0; a < m.num_atoms; ++a) {
+    if (m.atom_fixed[a] || !(m.atom_mass[a] > 0)) continue;  // a massless free atom is refused by MakeWorkspace
+    const AtomBound bound = GershgorinBound(m, a);
+    m.atom_omega2[a] = bound.omega2;
+    m.atom_damp[a] = bound.c;
+  }
 }
 
 int64_t ModelBytes(const Model& m) {
   return Bytes(m.atom_pos_eq) + Bytes(m.atom_mass) + Bytes(m.atom_fixed) + Bytes(m.atom_external) +
          Bytes(m.elem_atoms) + Bytes(m.elem_k) + Bytes(m.elem_b) + Bytes(m.elem_leq) + Bytes(m.elem_home) +
          Bytes(m.external_atoms) + Bytes(m.atom_external_id) + Bytes(m.tri_atoms) + Bytes(m.atom_elem_adr) +
-         Bytes(m.atom_elem_num) + Bytes(m.atom_elem) + static_cast<int64_t>(m.name.capacity());
+         Bytes(m.atom_elem_num) + Bytes(m.atom_elem) + Bytes(m.atom_omega2) + Bytes(m.atom_damp) +
+         static_cast<int64_t>(m.name.capacity());
 }
 
 }  // namespace idms

@@ -79,8 +79,8 @@ double PredictStableDt(const Model& m, const Workspace& ws, Integrator integrato
   const LengthRate rate = internal::UsesFilter(ws.options, integrator) ? LengthRate::kFiltered : LengthRate::kAnalytic;
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
-    const AtomBound bound{ws.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
-                          ws.atom_damp[a] + ws.options.air_damping};
+    const AtomBound bound{m.atom_omega2[a] + ws.atom_extra_k[a] / m.atom_mass[a],
+                          m.atom_damp[a] + ws.options.air_damping};
     dt = std::min(dt, StableDt(integrator, bound, rate, ws.options.lambda));
   }
   return dt;
@@ -126,8 +126,8 @@ int32_t MakePlans(const Model& m, State& s, Workspace& ws, StepReport* report, P
 // Whether this tick's attempts can change the eq. 4.6 filter state: only the configured scheme
 // reads it (the implicit fallback uses the analytic rate), and only when some b > 0. When not,
 // the filter arrays need no rollback copy (leave out what the scene does not need).
-bool FilterInUse(const Workspace& ws) {
-  return ws.any_damping && internal::UsesFilter(ws.options, ws.options.integrator);
+bool FilterInUse(const Model& m, const Workspace& ws) {
+  return m.has_damping && internal::UsesFilter(ws.options, ws.options.integrator);
 }
 
 // Marks the listed elements' eq. 4.6 filters to restart: this tick did not advance them.
@@ -151,7 +151,7 @@ bool RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
     repaired = true;
   }
   // The filter state only where the configured scheme reads it (an unused one stays as it is).
-  const bool filter = FilterInUse(ws);
+  const bool filter = FilterInUse(m, ws);
   for (int32_t i = 0; filter && i < ws.num_elems; ++i) {
     const int32_t e = ws.elems[i];
     if (std::isfinite(s.elem_len[e]) && std::isfinite(s.elem_rate[e])) continue;
@@ -166,7 +166,7 @@ bool RepairActiveRegion(const Model& m, State& s, Workspace& ws) {
 // The general kernel's rollback copy of the active region: atoms by slot, elements by list
 // index. kSave: State to the copy (the tick's start); else the copy back to State.
 template <bool kSave>
-void CopyRegion(State& s, Workspace& ws) {
+void CopyRegion(const Model& m, State& s, Workspace& ws) {
   auto copy = [](auto& in_state, auto& in_copy) {
     if constexpr (kSave) {
       in_copy = in_state;
@@ -179,7 +179,7 @@ void CopyRegion(State& s, Workspace& ws) {
     for (int c = 0; c < 3; ++c)
       copy(s.atom_pos[3 * a + c], ws.backup_pos[3 * i + c]), copy(s.atom_vel[3 * a + c], ws.backup_vel[3 * i + c]);
   }
-  const int32_t num_elems = FilterInUse(ws) ? ws.num_elems : 0;
+  const int32_t num_elems = FilterInUse(m, ws) ? ws.num_elems : 0;
   for (int32_t i = 0; i < num_elems; ++i) {
     const int32_t e = ws.elems[i];
     copy(s.elem_len[e], ws.backup_elem_len[i]);
@@ -265,7 +265,7 @@ class Dynamics {
       const Plan& plan = plans_[k];
       if (k > 0) {
         StageTimer timer(&report_->checks_ns);
-        CopyRegion<false>(s_, ws_);
+        CopyRegion<false>(m_, s_, ws_);
         ++s_.warnings.rollback;
       }
       if (k == 0 && fused) {
@@ -292,7 +292,7 @@ class Dynamics {
     StageTimer timer(&report_->checks_ns);
     if (!accepted) Freeze();
     // Filters the accepted attempt did not advance cannot continue next tick.
-    if (ws_.any_damping && !(accepted && internal::UsesFilter(ws_.options, report_->integrator_used))) {
+    if (m_.has_damping && !(accepted && internal::UsesFilter(ws_.options, report_->integrator_used))) {
       MarkListedFilters(s_, ws_);
     }
     report_->energy_before = before_.h;
@@ -301,7 +301,7 @@ class Dynamics {
  private:
   // The general kernel's rollback copy and energy at the tick's start (tools at their new pose).
   void GeneralStart() {
-    CopyRegion<true>(s_, ws_);
+    CopyRegion<true>(m_, s_, ws_);
     // The energies cost two passes over the active region: only when the check is on.
     before_ = st_.energy_check ? internal::ActiveEnergy(m_, s_, ws_) : Energy{};
   }
@@ -322,7 +322,7 @@ class Dynamics {
     internal::ToolAndGravityEnergy(m_, s_, ws_, &after);
     after.h += fe.kinetic_after + fe.elastic_after;
     if (Accept(after.h - before_.h, after.h, false)) return true;
-    internal::RestoreFused(s_, ws_);
+    internal::RestoreFused(m_, s_, ws_);
     return false;
   }
 
@@ -377,7 +377,7 @@ class Dynamics {
   // Every attempt failed: back to the tick's start, at rest (the filters are marked to restart
   // by Run); no device force.
   void Freeze() {
-    CopyRegion<false>(s_, ws_);
+    CopyRegion<false>(m_, s_, ws_);
     for (int32_t i = 0; i < ws_.num_active; ++i) {
       const int32_t a = ws_.active[i];
       s_.atom_vel[3 * a] = s_.atom_vel[3 * a + 1] = s_.atom_vel[3 * a + 2] = 0;

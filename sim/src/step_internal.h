@@ -143,7 +143,7 @@ bool RunFused(const Model& model, State& state, Workspace& ws, Integrator integr
               StageTimes* times, FusedEnergy* energy);
 // Takes back an attempt RunFused completed: the State back at the tick's start from the pass's
 // rollback copy.
-void RestoreFused(State& state, Workspace& ws);
+void RestoreFused(const Model& model, State& state, Workspace& ws);
 // The fused kernel's lists are live (full mode, kept from tick to tick).
 bool FusedLive(const Workspace& ws);
 // Forgets the fused kernel's lists and cached zero forces (ResyncWorkspace).

@@ -109,10 +109,13 @@ int32_t DetectCuts(const Model& m, const State& s, Workspace& ws, const double* 
     return cut;
   }
   // Each element is tested once: elem_mark + the (still unused) ws.elems list undo the marks.
+  // An element crossing a blade's sweep has an endpoint within half its length of the crossing;
+  // the longest rest length covers elements stretched up to twice it.
+  const double reach = std::max(m.max_leq, 1e-6);
   double lo[3], hi[3];
   for (int c = 0; c < 3; ++c) {
-    lo[c] = std::min({a0[c], b0[c], a1[c], b1[c]}) - ws.cut_reach;
-    hi[c] = std::max({a0[c], b0[c], a1[c], b1[c]}) + ws.cut_reach;
+    lo[c] = std::min({a0[c], b0[c], a1[c], b1[c]}) - reach;
+    hi[c] = std::max({a0[c], b0[c], a1[c], b1[c]}) + reach;
   }
   int32_t num_seen = 0;
   ForEachAtomInBox(ws.hash, lo, hi, [&](int32_t a) {

@@ -51,24 +51,8 @@ Workspace MakeWorkspace(const Model& m, const StepOptions& options) {
   ws.topology_version = m.topology_version;
   const size_t na = static_cast<size_t>(m.num_atoms), ne = static_cast<size_t>(m.num_elems);
 
-  // Model-derived constants: damping present, longest element, per-atom stable-step bounds.
-  double max_leq = 0;
-  for (size_t e = 0; e < ne; ++e) {
-    ws.any_damping = ws.any_damping || m.elem_b[e] > 0;
-    max_leq = std::max(max_leq, m.elem_leq[e]);
-  }
-  // An element crossing a blade's sweep has an endpoint within half its length of the crossing;
-  // max_leq covers elements stretched up to twice the longest rest length.
-  ws.cut_reach = std::max(max_leq, 1e-6);
-  ws.atom_omega2.assign(na, 0.0);
-  ws.atom_damp.assign(na, 0.0);
-  for (int32_t a = 0; a < m.num_atoms; ++a) {
-    if (m.atom_fixed[a]) continue;
-    IDMS_CHECK(m.atom_mass[a] > 0);
-    const AtomBound bound = GershgorinBound(m, a);
-    ws.atom_omega2[a] = bound.omega2;
-    ws.atom_damp[a] = bound.c;
-  }
+  IDMS_CHECK(static_cast<int32_t>(m.atom_omega2.size()) == m.num_atoms);  // FinalizeModel ran
+  for (int32_t a = 0; a < m.num_atoms; ++a) IDMS_CHECK(m.atom_fixed[a] || m.atom_mass[a] > 0);
 
   // Local simulation: the hash files every atom (fixed ones too: they can touch a tool).
   if (!options.full) {

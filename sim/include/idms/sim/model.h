@@ -47,12 +47,20 @@ struct Model {
   std::vector<int32_t> atom_elem_num;  // (num_atoms)
   std::vector<int32_t> atom_elem;      // (2 * num_elems), element ids
 
+  // Step constants (derived): each free atom's Gershgorin bound of the element network (thesis
+  // 4.2; the stable-step prediction adds the tools' stiffness), 0 for fixed atoms; the longest
+  // rest length; whether any element is damped. Upper bounds: removing elements keeps them.
+  std::vector<double> atom_omega2;  // (num_atoms), 1/s^2: sum of the atom's row of K / m
+  std::vector<double> atom_damp;    // (num_atoms), 1/s: the same for the dashpots
+  double max_leq = 0;               // model units
+  bool has_damping = false;         // some element has b > 0 (else the viscous terms are skipped)
+
   // Bumped by every topology edit (cut, grasp, glue); viewers follow it.
   uint64_t topology_version = 0;
 };
 
-// Derives num_*, elem_leq, elem_home, external_atoms, atom_external_id and the CSR adjacency
-// from the stored arrays. Call after filling atoms, elements and triangles. Allocates.
+// Derives num_*, elem_leq, elem_home, external_atoms, atom_external_id, the CSR adjacency and
+// the step constants from the stored arrays. Call after filling atoms, elements and triangles. Allocates.
 // A home element joins an external atom to a fixed atom at the same rest position (thesis 3.1).
 void FinalizeModel(Model& model);
 

@@ -83,13 +83,9 @@ struct Workspace {
   // Step (so a State edited before its first step, e.g. in a test, is picked up).
   int64_t synced_tick = -1;
 
-  // Derived from the model and options.
-  bool any_damping = false;                    // some element has b > 0; else the viscous filter is skipped
+  // Derived from the options (the model's own constants are the Model's).
   bool use_rk4 = false, use_implicit = false;  // which scratch exists
   double local_radius = 0;                     // effective r_l (local mode)
-  double cut_reach = 0;                        // model units: half the longest element allowed for cut search
-  std::vector<double> atom_omega2;             // (num_atoms), 1/s^2: Gershgorin bound without tools
-  std::vector<double> atom_damp;               // (num_atoms), 1/s: Gershgorin damping bound without tools
 
   SpatialHash hash;  // local mode only; files every atom at its State position
 
