@@ -755,26 +755,28 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     ws.fused->t_over_m_of = T;
   }
   for (int32_t k = 0; k < substeps; ++k) {
-    const int64_t t0 = NowNs();
-    // Field and tool forces first, as EvaluateForces adds them; then the sweep.
-    if (field || !ws.fused->force_zero) FieldForces(m, s, ws, ws.fused->force.data(), 4);
-    ToolForces(s, ws, ws.fused->force.data(), 4);
-    for (int32_t t = 0; t < ws.num_tools; ++t) {
-      for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
-    }
-    ws.fused->force_zero = false;
-    const Rate rate = !m.has_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
     // The energy check's sums: at the tick's start in the first substep, at its end in the last.
     const bool before = energy && k == 0, after = energy && k == substeps - 1;
-    const SubstepFn substep =
-        PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after);
-    const Progress p = substep(m, s, ws, T, /*backup=*/k == 0, before, after);
-    times->forces_ns += NowNs() - t0;
+    Progress p;
+    {
+      StageTimer timer(&times->forces_ns);
+      // Field and tool forces first, as EvaluateForces adds them; then the sweep.
+      if (field || !ws.fused->force_zero) FieldForces(m, s, ws, ws.fused->force.data(), 4);
+      ToolForces(s, ws, ws.fused->force.data(), 4);
+      for (int32_t t = 0; t < ws.num_tools; ++t) {
+        for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
+      }
+      ws.fused->force_zero = false;
+      const Rate rate = !m.has_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
+      const SubstepFn substep =
+          PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after);
+      p = substep(m, s, ws, T, /*backup=*/k == 0, before, after);
+    }
     if (before) {
       energy->kinetic_before = p.kinetic_before;
       energy->elastic_before = p.elastic_before;
-      // ActiveEnergy's rounding noise, sum of k (|l - l_eq| + dl) dl with dl = eps (|p0|_1 + 1),
-      // bounded with the largest |p|_1 of a free atom (a fixed endpoint lies within an element).
+      // ActiveEnergy's rounding noise, sum of k (|l - l_eq| + dl) dl with dl = eps (|p|_1 + 1) for
+      // the largest |p|_1 of a free atom, as ActiveEnergy bounds it.
       const double dl = 4 * std::numeric_limits<Real>::epsilon() * (p.abs_pos + 1);
       energy->noise_before = dl * p.stretch_k + dl * dl * p.sum_k;
     }

@@ -223,10 +223,11 @@ void SizeImplicitBuffers(const Model& m, Workspace& ws) {
 
 int32_t ImplicitEulerSubstep(const Model& m, State& s, Workspace& ws, Real T, StageTimes* times) {
   // Forces at (x(n), v(n)) with the analytic length rate.
-  int64_t t0 = NowNs();
-  EvaluateForces(m, s, ws, /*filtered=*/false, T);
-  times->forces_ns += NowNs() - t0;
-  t0 = NowNs();
+  {
+    StageTimer timer(&times->forces_ns);
+    EvaluateForces(m, s, ws, /*filtered=*/false, T);
+  }
+  StageTimer timer(&times->integrate_ns);
   const int32_t n = ws.num_active;
   if (n == 0) return 0;
   ImplicitBuffers& ib = ws.implicit;
@@ -262,7 +263,6 @@ int32_t ImplicitEulerSubstep(const Model& m, State& s, Workspace& ws, Real T, St
       s.atom_pos[3 * a + c] += T * s.atom_vel[3 * a + c];
     }
   }
-  times->integrate_ns += NowNs() - t0;
   return iterations;
 }
 

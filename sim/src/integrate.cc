@@ -15,12 +15,11 @@ namespace {
 
 // Forces at the current state, timed; adds weight * each tool's reaction to its tick force.
 void Forces(const Model& m, State& s, Workspace& ws, bool filtered, Real T, double weight, StageTimes* times) {
-  const int64_t t0 = NowNs();
+  StageTimer timer(&times->forces_ns);
   EvaluateForces(m, s, ws, filtered, T);
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += weight * ws.tools[t].eval_force[c];
   }
-  times->forces_ns += NowNs() - t0;
 }
 
 // Eqs. 4.13-4.15: x(n+1) = x(n) + T v(n), v(n+1) = v(n) + T a(n); p is stored absolute.
@@ -63,7 +62,7 @@ void Rk4Substep(const Model& m, State& s, Workspace& ws, Real T, int32_t substep
   const Real advance[4] = {T / 2, T / 2, T, 0};  // where the next stage is evaluated
   for (int stage = 0; stage < 4; ++stage) {
     Forces(m, s, ws, /*filtered=*/false, T, weight[stage] / (6.0 * substeps), times);
-    const int64_t t0 = NowNs();
+    StageTimer timer(&times->integrate_ns);
     for (int32_t i = 0; i < n; ++i) {
       const int32_t a = ws.active[i];
       const Real inv_m = Real(1) / static_cast<Real>(m.atom_mass[a]);
@@ -77,9 +76,8 @@ void Rk4Substep(const Model& m, State& s, Workspace& ws, Real T, int32_t substep
         }
       }
     }
-    times->integrate_ns += NowNs() - t0;
   }
-  const int64_t t0 = NowNs();
+  StageTimer timer(&times->integrate_ns);
   for (int32_t i = 0; i < n; ++i) {
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c) {
@@ -87,7 +85,6 @@ void Rk4Substep(const Model& m, State& s, Workspace& ws, Real T, int32_t substep
       s.atom_vel[3 * a + c] = ws.rk_v0[3 * i + c] + T / 6 * ws.rk_dv[3 * i + c];
     }
   }
-  times->integrate_ns += NowNs() - t0;
 }
 
 }  // namespace
@@ -103,13 +100,12 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
       case Integrator::kExplicitEuler:
       case Integrator::kSymplecticEuler: {
         Forces(m, s, ws, filtered, T, 1.0 / substeps, times);
-        const int64_t t0 = NowNs();
+        StageTimer timer(&times->integrate_ns);
         if (integrator == Integrator::kExplicitEuler) {
           ExplicitEulerUpdate(m, s, ws, T);
         } else {
           SymplecticEulerUpdate(m, s, ws, T);
         }
-        times->integrate_ns += NowNs() - t0;
         break;
       }
       case Integrator::kRk4:
