@@ -355,19 +355,17 @@ class Dynamics {
   // decides. An accepted attempt's excess and allowance are kept.
   bool Accept(double gain, double energy_after, bool finite) {
     report_->energy_after = energy_after;
-    const double allowance = std::max(Tolerance(), s_.energy_allowance * decay_);
+    const double tolerance = Tolerance();
+    const double allowance = std::max(tolerance, s_.energy_allowance * decay_);
     const double excess =
         st_.energy_check ? std::max(0.0, s_.energy_excess * decay_ + gain) : s_.energy_excess * decay_;
-    const bool ok = st_.energy_check ? gain <= tolerance_ && excess <= allowance : finite;  // false for NaN
+    const bool ok = st_.energy_check ? gain <= tolerance && excess <= allowance : finite;  // false for NaN
     if (ok) Keep(excess, allowance);
     return ok;
   }
 
   // The tolerance a gain is held to (energy_abs_tol when the check is off: before_ is zero).
-  double Tolerance() {
-    tolerance_ = st_.energy_rel_tol * before_.scale + st_.energy_abs_tol + 4 * before_.noise;
-    return tolerance_;
-  }
+  double Tolerance() const { return st_.energy_rel_tol * before_.scale + st_.energy_abs_tol + 4 * before_.noise; }
 
   void Keep(double excess, double allowance) {
     s_.energy_excess = std::isfinite(excess) ? excess : s_.energy_excess * decay_;
@@ -399,7 +397,6 @@ class Dynamics {
   Plan plans_[3];
   int32_t num_plans_ = 0;
   Energy before_;
-  double tolerance_ = 0;
   double decay_ = 1;
   int64_t substep_limit_ = -1;  // warnings.substep_limit at the tick's start
 };

@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "alloc_counter.h"
+#include "hex_loop.h"
 #include "idms/agent/device.h"
 #include "idms/agent/loop.h"
 #include "idms/agent/setup.h"
@@ -41,25 +42,7 @@ TEST(LoopRt, WaitUntilNeverReturnsEarlyAndAllocatesNothing) {
   EXPECT_GE(agent::WaitUntil(past_ns, 50000), past_ns + kPeriodNs);
 }
 
-// A loop over the hex fragment with the palpation scene, driven tick by tick.
-std::unique_ptr<Loop> HexLoop(Model* model, std::unique_ptr<agent::Device>* device) {
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
-  LoadError load_error;
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", ReadOptions{}, model, &load_error)) << load_error.ToString();
-  StepOptions step;
-  ToolCommand tool;
-  agent::Registration registration;
-  std::string error;
-  EXPECT_TRUE(agent::SceneToLoop(agent::DefaultScene("palpate"), &step, &tool, &registration, &error)) << error;
-  agent::DeviceContext context;
-  context.model = model;
-  context.registration = registration;
-  *device = agent::MakeDevice("scripted:palpate", context, &error);
-  EXPECT_TRUE(*device) << error;
-  agent::LoopOptions options;
-  options.realtime = false;
-  return std::make_unique<Loop>(*model, step, tool, registration, **device, options);
-}
+using test::HexLoop;
 
 TEST(LoopRt, WakeUpsAPeriodLateAreCountedAgainstTheSchedule) {
   Model model;

@@ -10,6 +10,7 @@
 
 #include "alloc_counter.h"
 #include "backlog.h"
+#include "hex_loop.h"
 #include "idms/agent/device.h"
 #include "idms/agent/loop.h"
 #include "idms/agent/setup.h"
@@ -79,24 +80,7 @@ TEST(ThreadOwnerDeathTest, TheBacklogBelongsToTheIoThread) {
       "BUG: Backlog::Accept called from a thread that does not own the uplink's backlog");
 }
 
-std::unique_ptr<agent::Loop> HexLoop(Model* model, std::unique_ptr<agent::Device>* device) {
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
-  LoadError load_error;
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", ReadOptions{}, model, &load_error)) << load_error.ToString();
-  StepOptions step;
-  ToolCommand tool;
-  agent::Registration registration;
-  std::string error;
-  EXPECT_TRUE(agent::SceneToLoop(agent::DefaultScene("palpate"), &step, &tool, &registration, &error)) << error;
-  agent::DeviceContext context;
-  context.model = model;
-  context.registration = registration;
-  *device = agent::MakeDevice("scripted:palpate", context, &error);
-  EXPECT_TRUE(*device) << error;
-  agent::LoopOptions options;
-  options.realtime = false;
-  return std::make_unique<agent::Loop>(*model, step, tool, registration, **device, options);
-}
+using test::HexLoop;
 
 // A tick from a thread other than the loop's, and the I/O side's rings from a thread other than
 // the I/O thread's, are caught: counted in a release build (the loop must not abort), fatal in a

@@ -22,17 +22,7 @@ using internal::EvaluateForces;
 
 // Two free atoms joined by one element: rest at (0,0,0) and (2,0,0), so l_eq = 2.
 Model TwoAtoms(double k, double b, double mass = 0.5) {
-  Model m;
-  m.name = "pair";
-  m.atom_pos_eq = {0, 0, 0, 2, 0, 0};
-  m.atom_mass = {mass, mass};
-  m.atom_fixed = {0, 0};
-  m.atom_external = {1, 1};
-  m.elem_atoms = {0, 1};
-  m.elem_k = {k};
-  m.elem_b = {b};
-  FinalizeModel(m);
-  return m;
+  return test::TwoAtomModel({.name = "pair", .end = {2, 0, 0}, .first_fixed = false, .external = {1, 1}}, k, b, mass);
 }
 
 // The model's Workspace in full mode with its lists built (every free atom active).

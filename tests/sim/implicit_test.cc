@@ -26,17 +26,7 @@ constexpr double kAxis[3] = {1.0 / 3, 2.0 / 3, 2.0 / 3};
 
 // Atom 0 fixed at the origin, atom 1 free at l_eq = 1 along kAxis.
 Model ObliqueSpring(double k, double b, double mass) {
-  Model m;
-  m.name = "oblique";
-  m.atom_pos_eq = {0, 0, 0, kAxis[0], kAxis[1], kAxis[2]};
-  m.atom_mass = {mass, mass};
-  m.atom_fixed = {1, 0};
-  m.atom_external = {0, 0};
-  m.elem_atoms = {0, 1};
-  m.elem_k = {k};
-  m.elem_b = {b};
-  FinalizeModel(m);
-  return m;
+  return test::TwoAtomModel({.name = "oblique", .end = {kAxis[0], kAxis[1], kAxis[2]}, .external = {0, 0}}, k, b, mass);
 }
 
 StepOptions ImplicitOptions(double T, bool full = true) {

@@ -12,19 +12,30 @@
 
 namespace idms::test {
 
-// Atom 0 fixed at the origin, atom 1 free at (leq, 0, 0), one element between them.
-inline Model OneSpring(double k, double b, double mass, double leq = 1.0) {
+// Two atoms of `mass` joined by one element (k, b): atom 0 at the origin, atom 1 at `end`.
+struct SpringPair {
+  const char* name = "spring";
+  double end[3] = {1, 0, 0};
+  bool first_fixed = true;       // atom 0 immobile
+  uint8_t external[2] = {0, 1};  // surface condition of each atom
+};
+inline Model TwoAtomModel(const SpringPair& pair, double k, double b, double mass) {
   Model m;
-  m.name = "spring";
-  m.atom_pos_eq = {0, 0, 0, leq, 0, 0};
+  m.name = pair.name;
+  m.atom_pos_eq = {0, 0, 0, pair.end[0], pair.end[1], pair.end[2]};
   m.atom_mass = {mass, mass};
-  m.atom_fixed = {1, 0};
-  m.atom_external = {0, 1};
+  m.atom_fixed = {static_cast<uint8_t>(pair.first_fixed), 0};
+  m.atom_external = {pair.external[0], pair.external[1]};
   m.elem_atoms = {0, 1};
   m.elem_k = {k};
   m.elem_b = {b};
   FinalizeModel(m);
   return m;
+}
+
+// Atom 0 fixed at the origin, atom 1 free at (leq, 0, 0), one element between them.
+inline Model OneSpring(double k, double b, double mass, double leq = 1.0) {
+  return TwoAtomModel({.name = "spring", .end = {leq, 0, 0}}, k, b, mass);
 }
 
 // Full mode (local simulation off) with the given integrator and step.
