@@ -205,9 +205,11 @@ bool RecordingReader::Next(RecordedMessage* out, std::string* error) {
   if (selected_.empty()) return false;
   McapMessage m;
   while (mcap_.Next(&m, error)) {
-    // Before the seek time only /mesh frames, from the keyframe on, are replayed.
+    // Before the seek time the /mesh frames from the keyframe on are replayed, and the /device
+    // samples since that keyframe: a viewer that seeks sees the tool where it was and the force
+    // that led there, not only the surface.
     const bool before = m.log_time_ns < seek_ns_;
-    if (before && m.channel_id != mesh_channel_) continue;
+    if (before && m.channel_id != mesh_channel_ && (m.channel_id != device_channel_ || awaiting_keyframe_)) continue;
     if (!Parse(m, out, error)) return false;
     if (awaiting_keyframe_ && m.channel_id == mesh_channel_) {
       if (!out->envelope.has_mesh_keyframe()) continue;

@@ -209,14 +209,23 @@ TEST(Recording, SeekRebuildsTheMeshFromTheLatestKeyframe) {
     ASSERT_TRUE(reader.Seek(t, &error)) << error;
     const std::vector<RecordedMessage> read = ReadAll(reader, &error);
     ASSERT_EQ(error, "");
-    // Catch-up: a keyframe, then deltas, all /mesh before t; then everything from t on.
+    // Catch-up: a keyframe, then the deltas and the /device samples since it, all before t; then
+    // everything from t on.
     size_t n = 0;
+    std::vector<std::string> caught_samples, expected_samples;
     while (n < read.size() && read[n].catch_up) {
-      EXPECT_EQ(read[n].topic, RecordingTopic::kMesh);
+      EXPECT_TRUE(read[n].topic == RecordingTopic::kMesh || read[n].topic == RecordingTopic::kDevice);
       EXPECT_LT(read[n].log_time_ns, t);
       EXPECT_EQ(read[n].envelope.has_mesh_keyframe(), n == 0);
+      if (read[n].topic == RecordingTopic::kDevice) SerializeEnvelope(read[n].envelope, &caught_samples.emplace_back());
       ++n;
     }
+    for (const Frame& f : written) {
+      if (n > 0 && f.topic == RecordingTopic::kDevice && f.log_ns >= read[0].log_time_ns && f.log_ns < t) {
+        expected_samples.push_back(f.envelope);
+      }
+    }
+    EXPECT_EQ(caught_samples, expected_samples) << "t = " << t_s;
     std::vector<std::string> after, expected_after;
     for (size_t i = n; i < read.size(); ++i) {
       EXPECT_GE(read[i].log_time_ns, t);

@@ -111,9 +111,10 @@ class RecordingReader {
   const McapReader& mcap() const { return mcap_; }
 
   // Positions reading at log time t_ns: with /mesh selected, the next messages are the latest
-  // keyframe at or before t_ns and the deltas after it up to t_ns (catch_up = true); then every
-  // selected topic from t_ns on. Without a keyframe at or before t_ns, reading simply starts at
-  // t_ns. Reads the chunks back from t_ns to find the keyframe (keyframes come every few seconds).
+  // keyframe at or before t_ns and the deltas after it up to t_ns, with the /device samples
+  // logged since that keyframe (catch_up = true); then every selected topic from t_ns on. Without a keyframe at or
+  // before t_ns, reading simply starts at t_ns. Reads the chunks back from t_ns to find the keyframe (keyframes come
+  // every few seconds).
   bool Seek(uint64_t t_ns, std::string* error);
   // The next message; false at the end (*error empty) or on malformed data (*error says where).
   bool Next(RecordedMessage* out, std::string* error);
