@@ -212,7 +212,9 @@ std::optional<double> GershgorinStableDt(const HapticWindowParams& params, Integ
   const Model model = HapticWindowModel(params);
   double dt = std::numeric_limits<double>::infinity();
   for (int32_t i = 0; i < model.num_atoms; ++i) {
-    if (!model.atom_fixed[i]) dt = std::min(dt, StableDt(integrator, GershgorinBound(model, i), LengthRate::kAnalytic));
+    if (!model.atom_fixed[i])
+      dt = std::min(dt,
+                    StableDt(integrator, AtomBound{model.atom_omega2[i], model.atom_damp[i]}, LengthRate::kAnalytic));
   }
   return dt;
 }

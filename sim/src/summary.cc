@@ -37,7 +37,7 @@ ModelSummary Summarize(const Model& m) {
   double dt_euler = inf, dt_symplectic = inf;
   for (int32_t i = 0; i < m.num_atoms; ++i) {
     if (m.atom_fixed[i]) continue;
-    const AtomBound bound = GershgorinBound(m, i);
+    const AtomBound bound{m.atom_omega2[i], m.atom_damp[i]};  // FinalizeModel's Gershgorin bound
     // The thesis's scheme: explicit Euler with the eq. 4.6 backward-difference rate (lambda = 1).
     dt_euler = std::min(dt_euler, StableDt(Integrator::kExplicitEuler, bound, LengthRate::kFiltered, 1.0));
     dt_symplectic = std::min(dt_symplectic, StableDt(Integrator::kSymplecticEuler, bound, LengthRate::kAnalytic, 1.0));
