@@ -44,8 +44,9 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
     ActiveTool& at = ws.tools[t];
     at.eval_force[0] = at.eval_force[1] = at.eval_force[2] = 0;
     if (!IsContactTool(at.kind)) continue;
-    for (int32_t i = 0; i < ws.num_candidates; ++i) {
-      const int32_t a = ws.candidates[i];
+    const AtomList atoms = ToolAtoms(ws);
+    for (int32_t i = 0; i < atoms.n; ++i) {
+      const int32_t a = atoms.ids[i];
       if (a == at.grasp_atom) continue;  // held by the grasp element instead
       const Real* p = &s.atom_pos[3 * a];
       const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
@@ -182,8 +183,9 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
     const ActiveTool& at = ws.tools[t];
     if (!IsContactTool(at.kind)) continue;
     const double dl = eps * (std::fabs(at.pos[0]) + std::fabs(at.pos[1]) + std::fabs(at.pos[2]) + 1);
-    for (int32_t i = 0; i < ws.num_candidates; ++i) {
-      const int32_t a = ws.candidates[i];
+    const AtomList atoms = ToolAtoms(ws);
+    for (int32_t i = 0; i < atoms.n; ++i) {
+      const int32_t a = atoms.ids[i];
       if (a == at.grasp_atom) continue;
       const Real* p = &s.atom_pos[3 * a];
       const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};

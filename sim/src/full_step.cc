@@ -96,6 +96,16 @@ inline bool Finite3(V4 diff) {
 #endif
 }
 
+// Lane-wise max(acc, |d|): how far the atoms integrated so far moved, per component.
+inline V4 MaxAbs(V4 acc, V4 d) {
+#if defined(IDMS_SIM_REAL_FLOAT) || defined(__AVX__)
+  const V4 a = d < 0 ? -d : d;
+  return acc > a ? acc : a;
+#else
+  return V4{std::max(acc.x, std::fabs(d.x)), std::max(acc.y, std::fabs(d.y)), std::max(acc.z, std::fabs(d.z))};
+#endif
+}
+
 inline void StreamFence() {
 #if defined(__SSE2__)
   _mm_sfence();
@@ -144,6 +154,8 @@ struct Progress {
   double kinetic_before = 0, kinetic_after = 0;
   double elastic_before = 0, stretch_k = 0, sum_k = 0, elastic_after = 0;
   double abs_pos = 0;
+  // A bound on how far any atom moved in the substep (|p_new - p|), for Workspace::reach_slack.
+  double moved = 0;
 };
 
 // The pass reads each atom's position and force accumulator first at the front of its window,
@@ -217,6 +229,7 @@ class Substep {
     int32_t g = active[0];
     V4 acc = Load4(force + 4 * g);  // g's sum so far: field, tools, earlier groups
     V4 check = Make4(0, 0, 0);      // the integrated atoms' x - x: 0 while every result is finite
+    V4 moved = Make4(0, 0, 0);      // the largest |p_new - p| so far, per component
     [[maybe_unused]] Kinetic kinetic;
     for (int32_t w0 = 0; w0 < ne; w0 += kBatch) {
       const int32_t nb = std::min(kBatch, ne - w0), w_end = w0 + nb;
@@ -240,7 +253,7 @@ class Substep {
         }
         if (j == nb) break;
         if (group_end[slot] - w0 <= j) {
-          Integrate(atom_io, slot, g, acc, check, kinetic);
+          Integrate(atom_io, slot, g, acc, check, moved, kinetic);
           g = active[++slot];
           acc = Load4(force + 4 * g);
           continue;
@@ -256,13 +269,14 @@ class Substep {
     }
     // The last group, and free atoms after it whose elements all lie in earlier groups.
     for (;;) {
-      Integrate(atom_io, slot, g, acc, check, kinetic);
+      Integrate(atom_io, slot, g, acc, check, moved, kinetic);
       if (++slot == n) break;
       g = active[slot];
       acc = Load4(force + 4 * g);
     }
     if (!Finite3(check)) return Stop(out, n);
     out.atoms = n;
+    out.moved = std::sqrt(double(X(moved)) * X(moved) + double(Y(moved)) * Y(moved) + double(Z(moved)) * Z(moved));
     if constexpr (kEnergy) {
       FlushKinetic(kinetic, out);
       if (after_) ElasticAfter(n, ne, out);
@@ -451,7 +465,7 @@ class Substep {
 
   // Eqs. 4.13-4.15 (or symplectic Euler) for atom g of slot i, with its rollback copy. check
   // collects x - x of the results, for Run to test once per batch (a test and branch per atom
-  // cost 3%).
+  // cost 3%); moved the largest displacement per component (the tools' reach, Workspace::reach).
   // Integrate's arrays and constants, as locals of Run (see there).
   struct AtomIo {
     Real *pos, *vel, *force;
@@ -473,7 +487,8 @@ class Substep {
             last_};
   }
 
-  static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check, [[maybe_unused]] Kinetic& k) {
+  static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check, V4& moved,
+                        [[maybe_unused]] Kinetic& k) {
     const V4 p = LoadAtom(io.pos, g, io.last), v = LoadAtom(io.vel, g, io.last);
     const Real t_over_m = io.t_over_m[i];
     V4 np, nv;
@@ -485,6 +500,7 @@ class Substep {
       nv = v + t_over_m * acc;
     }
     check += (np - np) + (nv - nv);
+    moved = MaxAbs(moved, np - p);
     if constexpr (kEnergy) {
       const Real m_over_t = Real(1) / t_over_m;
       k.before += m_over_t * (X(v) * X(v) + Y(v) * Y(v) + Z(v) * Z(v));
@@ -706,7 +722,7 @@ void ClearExtraK(Workspace& ws) {
     if (at.grasp_atom >= 0) ws.atom_extra_k[at.grasp_atom] = 0;
   }
   if (!contact) return;
-  for (int32_t i = 0; i < ws.num_candidates; ++i) ws.atom_extra_k[ws.candidates[i]] = 0;
+  for (int32_t i = 0; i < ws.num_reach; ++i) ws.atom_extra_k[ws.reach[i]] = 0;
 }
 
 double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integrator) {
@@ -717,7 +733,7 @@ double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integ
     const AtomBound bound{m.atom_omega2[a] + extra_k / m.atom_mass[a], m.atom_damp[a] + air};
     return StableDt(integrator, bound, rate, lambda);
   };
-  // Only atoms a tool stiffens (candidates, which include grasped atoms) differ from the cache;
+  // Only atoms a tool stiffens (within reach, which include grasped atoms) differ from the cache;
   // the cached minimum stands when some untouched atom still reaches it.
   double dt = fp.dt_free;
   int32_t touched_at_min = 0;
@@ -727,8 +743,8 @@ double FullPredictStableDt(const Model& m, const Workspace& ws, Integrator integ
   }
   if (integrator == ws.options.integrator && !contact) return dt;
   if (integrator == ws.options.integrator) {
-    for (int32_t i = 0; i < ws.num_candidates; ++i) {
-      const int32_t a = ws.candidates[i];
+    for (int32_t i = 0; i < ws.num_reach; ++i) {
+      const int32_t a = ws.reach[i];
       if (ws.atom_extra_k[a] == 0 || m.atom_fixed[a]) continue;
       touched_at_min += dt_of(a, 0.0) == fp.dt_free;
       dt = std::min(dt, dt_of(a, ws.atom_extra_k[a]));
@@ -781,6 +797,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       energy->noise_before = dl * p.stretch_k + dl * dl * p.sum_k;
     }
     if (after) energy->kinetic_after = p.kinetic_after, energy->elastic_after = p.elastic_after;
+    ws.reach_slack -= p.moved;  // the tools' next loops see whether an atom may have come in
     if (!p.ok) {
       RestoreWritten(s, ws, k == 0 ? p.atoms : ws.num_active, k == 0 ? p.elems : ws.num_elems, filter);
       return false;

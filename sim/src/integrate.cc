@@ -94,6 +94,7 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
   const Real T = static_cast<Real>(ws.options.dt_s / substeps);
   const bool filtered = UsesFilter(ws.options, integrator);
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+  ws.reach_slack = -1;  // these kernels do not measure how far they move atoms: every candidate
   int32_t cg_iterations = 0;
   for (int32_t k = 0; k < substeps; ++k) {
     switch (integrator) {

@@ -53,23 +53,46 @@ struct Plan {
   bool fallback = false;
 };
 
-// Tool stiffness felt by each atom this tick (contact normal stiffness, grasp k), and contacts.
+// Tool stiffness felt by each atom this tick (contact normal stiffness, grasp k), contacts, and
+// the atoms within the tools' reach (Workspace::reach), in one pass over the candidates: for each
+// atom the tools in order, as a pass per tool would add them.
 void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
+  ws.num_reach = 0;
+  ws.reach_slack = -1;
+  double slack = std::numeric_limits<double>::infinity();
+  bool grasp_seen[kMaxTools] = {};
   for (int32_t t = 0; t < ws.num_tools; ++t) {
-    const ActiveTool& at = ws.tools[t];
-    if (!IsContactTool(at.kind)) continue;
-    for (int32_t i = 0; i < ws.num_candidates; ++i) {
-      const int32_t a = ws.candidates[i];
-      const Real* p = &s.atom_pos[3 * a];
+    if (IsContactTool(ws.tools[t].kind)) slack = std::min(slack, 0.5 * ws.tools[t].radius);
+  }
+  if (slack == std::numeric_limits<double>::infinity()) return;  // no contact tool
+  for (int32_t i = 0; i < ws.num_candidates; ++i) {
+    const int32_t a = ws.candidates[i];
+    const Real* p = &s.atom_pos[3 * a];
+    bool near = false;
+    for (int32_t t = 0; t < ws.num_tools; ++t) {
+      const ActiveTool& at = ws.tools[t];
+      if (!IsContactTool(at.kind)) continue;
+      if (a == at.grasp_atom) {
+        near = grasp_seen[t] = true;
+        ws.atom_extra_k[a] += at.grasp_k;
+        // Its contact is counted (it is not felt: the grasp element holds it).
+      }
       const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      near = near || internal::InsideSphere(d, 2 * at.radius);
       if (!internal::InsideSphere(d, at.radius)) continue;
       const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
       if (!cf.touching) continue;
       ++report->tools[t].contacts;
       if (a != at.grasp_atom) ws.atom_extra_k[a] += cf.stiffness;
     }
-    if (at.grasp_atom >= 0) ws.atom_extra_k[at.grasp_atom] += at.grasp_k;
+    if (near) ws.reach[ws.num_reach++] = a;
   }
+  // A grasped atom that is not a candidate (the list changed since the grasp) is held all the same.
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    const ActiveTool& at = ws.tools[t];
+    if (IsContactTool(at.kind) && at.grasp_atom >= 0 && !grasp_seen[t]) ws.atom_extra_k[at.grasp_atom] += at.grasp_k;
+  }
+  ws.reach_slack = slack;
 }
 
 // Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
@@ -474,6 +497,7 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   ++s.tick;
   s.time_s += ws.options.dt_s;
   ws.synced_tick = s.tick;
+  ws.reach_slack = -1;  // the caller may move atoms before the next tick
   report.new_warnings = TotalWarnings(s.warnings) - warnings_before;
   return report;
 }

@@ -77,6 +77,16 @@ void EvaluateForces(const Model& model, State& state, Workspace& ws, bool filter
 void FieldForces(const Model& model, const State& state, Workspace& ws, Real* force, int stride);
 void ToolForces(const State& state, Workspace& ws, Real* force, int stride);
 
+// The atoms a tool loop visits: Workspace::reach while atoms cannot have moved in from outside it
+// (reach_slack > 0), else every candidate. Either gives the same sums in the same order.
+struct AtomList {
+  const int32_t* ids;
+  int32_t n;
+};
+inline AtomList ToolAtoms(const Workspace& ws) {
+  return ws.reach_slack > 0 ? AtomList{ws.reach.data(), ws.num_reach} : AtomList{ws.candidates.data(), ws.num_candidates};
+}
+
 // forces.cc — energy of the active region (see StabilityOptions::energy_rel_tol).
 struct Energy {
   double h = 0;      // NaN when any active atom is non-finite
@@ -148,7 +158,7 @@ void RestoreFused(const Model& model, State& state, Workspace& ws);
 bool FusedLive(const Workspace& ws);
 // Forgets the fused kernel's lists and cached zero forces (ResyncWorkspace).
 void ResetFused(Workspace& ws);
-// Zeroes atom_extra_k where ToolStiffness may have set it (candidates and grasped atoms).
+// Zeroes atom_extra_k where ToolStiffness may have set it (Workspace::reach).
 void ClearExtraK(Workspace& ws);
 
 // True when the resolved eq. 4.6 mode for `integrator` is the filter.

@@ -70,6 +70,7 @@ Workspace MakeWorkspace(const Model& m, const StepOptions& options) {
   ws.atom_force.assign(3 * na, Real(0));
   ws.active.assign(na, -1);
   ws.candidates.assign(na, -1);
+  ws.reach.assign(na, -1);
   ws.boundary.assign(na, -1);
   ws.elems.assign(ne, -1);
   ws.elem_mark.assign(ne, 0);
@@ -112,7 +113,8 @@ void ResyncWorkspace(const Model& m, const State& s, Workspace& ws) {
   std::fill(ws.atom_slot.begin(), ws.atom_slot.end(), -1);
   std::fill(ws.atom_extra_k.begin(), ws.atom_extra_k.end(), 0.0);
   std::fill(ws.elem_mark.begin(), ws.elem_mark.end(), 0);
-  ws.num_active = ws.num_candidates = ws.num_elems = ws.num_boundary = 0;
+  ws.num_active = ws.num_candidates = ws.num_elems = ws.num_boundary = ws.num_reach = 0;
+  ws.reach_slack = -1;
   internal::ResetFused(ws);
   ws.synced_tick = s.tick;
 }

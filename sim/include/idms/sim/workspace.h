@@ -111,6 +111,15 @@ struct Workspace {
   int32_t num_active = 0;
   std::vector<int32_t> candidates;  // (num_atoms) external atoms that may touch a tool
   int32_t num_candidates = 0;
+  // The candidates a tool can reach this tick, in candidate order (ToolStiffness, at the tick's
+  // start): those within twice a contact tool's radius of its centre, and grasped atoms. The tool
+  // loops visit these instead of every candidate while reach_slack > 0: how much farther any atom
+  // may still move before one from outside could touch a tool (half the smallest radius at the
+  // start; the fused kernel takes off what it moves atoms; < 0 once a kernel moved them without
+  // measuring, and between ticks). Atoms with atom_extra_k set are among them.
+  std::vector<int32_t> reach;  // (num_atoms)
+  int32_t num_reach = 0;
+  double reach_slack = -1;
   std::vector<int32_t> boundary;  // (num_atoms) inactive free atoms checked by the wake pass
   int32_t num_boundary = 0;
   std::vector<int32_t> elems;  // (num_elems) elements with an active endpoint, not cut
