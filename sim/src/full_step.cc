@@ -474,6 +474,7 @@ class Substep {
     Real* backup_rows;              // by slot, 8 each (kRowBackup); null as backup_pos
     Real T;
     int32_t last;
+    bool before, after;  // form the kinetic sums at the substep's start, at its end (kEnergy)
   };
   AtomIo MakeAtomIo() const {
     return {pos_,
@@ -484,7 +485,9 @@ class Substep {
             ws_.backup_vel.data(),
             backup_ ? ws_.fused->backup_rows.data() : nullptr,
             T_,
-            last_};
+            last_,
+            before_,
+            after_};
   }
 
   static void Integrate(const AtomIo& io, int32_t i, int32_t g, V4 acc, V4& check, V4& moved,
@@ -502,10 +505,13 @@ class Substep {
     check += (np - np) + (nv - nv);
     moved = MaxAbs(moved, np - p);
     if constexpr (kEnergy) {
+      // Only the sums this substep needs (a tick of two substeps needs one in each).
       const Real m_over_t = Real(1) / t_over_m;
-      k.before += m_over_t * (X(v) * X(v) + Y(v) * Y(v) + Z(v) * Z(v));
-      k.after += m_over_t * (X(nv) * X(nv) + Y(nv) * Y(nv) + Z(nv) * Z(nv));
-      k.abs_pos = std::max(k.abs_pos, std::fabs(X(p)) + std::fabs(Y(p)) + std::fabs(Z(p)));
+      if (io.before) {
+        k.before += m_over_t * (X(v) * X(v) + Y(v) * Y(v) + Z(v) * Z(v));
+        k.abs_pos = std::max(k.abs_pos, std::fabs(X(p)) + std::fabs(Y(p)) + std::fabs(Z(p)));
+      }
+      if (io.after) k.after += m_over_t * (X(nv) * X(nv) + Y(nv) * Y(nv) + Z(nv) * Z(nv));
     }
     if constexpr (kRowBackup) {
       if (io.backup_rows) StreamRow(io.backup_rows + 8 * i, p), StreamRow(io.backup_rows + 8 * i + 4, v);

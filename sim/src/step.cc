@@ -56,6 +56,7 @@ struct Plan {
 // Tool stiffness felt by each atom this tick (contact normal stiffness, grasp k), contacts, and
 // the atoms within the tools' reach (Workspace::reach), in one pass over the candidates: for each
 // atom the tools in order, as a pass per tool would add them.
+constexpr int32_t kToolPrefetch = 16;  // candidates ahead
 void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
   ws.num_reach = 0;
   ws.reach_slack = -1;
@@ -65,8 +66,11 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
     if (IsContactTool(ws.tools[t].kind)) slack = std::min(slack, 0.5 * ws.tools[t].radius);
   }
   if (slack == std::numeric_limits<double>::infinity()) return;  // no contact tool
-  for (int32_t i = 0; i < ws.num_candidates; ++i) {
+  const int32_t n = ws.num_candidates;
+  for (int32_t i = 0; i < n; ++i) {
     const int32_t a = ws.candidates[i];
+    // The loads wait on memory (the pass before streamed the whole model through the caches).
+    if (i + kToolPrefetch < n) __builtin_prefetch(&s.atom_pos[3 * ws.candidates[i + kToolPrefetch]]);
     const Real* p = &s.atom_pos[3 * a];
     bool near = false;
     for (int32_t t = 0; t < ws.num_tools; ++t) {

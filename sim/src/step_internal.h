@@ -84,7 +84,8 @@ struct AtomList {
   int32_t n;
 };
 inline AtomList ToolAtoms(const Workspace& ws) {
-  return ws.reach_slack > 0 ? AtomList{ws.reach.data(), ws.num_reach} : AtomList{ws.candidates.data(), ws.num_candidates};
+  return ws.reach_slack > 0 ? AtomList{ws.reach.data(), ws.num_reach}
+                            : AtomList{ws.candidates.data(), ws.num_candidates};
 }
 
 // forces.cc — energy of the active region (see StabilityOptions::energy_rel_tol).
