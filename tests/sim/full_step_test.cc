@@ -205,6 +205,56 @@ TEST(FusedPass, SubstepsFromThePredictionMatchToo) {
   EXPECT_EQ(fused.force_bits, general.force_bits);
 }
 
+// The tools' loops visit only the candidates within reach of a tool at the tick's start
+// (Workspace::reach) while the pass's measured displacement says no other atom can have come in.
+// An atom thrown from outside the reach into the sphere within one substep must still be felt in
+// the next one, as the general path (which visits every candidate) feels it.
+TEST(FusedPass, AnAtomThrownIntoTheToolWithinATickIsFeltAlike) {
+  SlabOptions so;
+  so.rows = 7, so.cols = 8;
+  so.k = so.home_k = 400;  // several substeps a tick
+  const Model model = GenerateSlab(so);
+  StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  // The sphere hovers above the slab's middle, touching nothing; the thrown atom is a free
+  // external one at least four radii away.
+  const double r = 0.5, centre[3] = {3.0, 3.0, 4.0};
+  const ToolInput sphere = test::SphereAt(centre[0], centre[1], centre[2], r);
+  int32_t thrown = -1;
+  for (int32_t a = 0; a < model.num_atoms && thrown < 0; ++a) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c)
+      d2 += (model.atom_pos_eq[3 * a + c] - centre[c]) * (model.atom_pos_eq[3 * a + c] - centre[c]);
+    if (model.atom_external[a] && !model.atom_fixed[a] && d2 > 16 * r * r) thrown = a;
+  }
+  ASSERT_GE(thrown, 0);
+  Workspace probe = MakeWorkspace(model, o);
+  State probe_state = MakeState(model);
+  const int32_t substeps = Step(model, probe_state, probe, sphere).substeps;
+  ASSERT_GT(substeps, 1);
+  // Aimed so that its first substep (T = dt / substeps) takes it to the sphere's centre.
+  const double T = o.dt_s / substeps;
+  State start = MakeState(model);
+  for (int c = 0; c < 3; ++c)
+    start.atom_vel[3 * thrown + c] = static_cast<Real>((centre[c] - start.atom_pos[3 * thrown + c]) / T);
+  double force[2][3] = {};
+  uint64_t hash[2] = {};
+  for (int fused = 0; fused < 2; ++fused) {
+    State s = start;
+    Workspace ws = MakeWorkspace(model, o);
+    ws.options.fused_pass = fused == 1;
+    const StepReport rep = Step(model, s, ws, sphere);
+    EXPECT_EQ(rep.fused, fused == 1);
+    EXPECT_EQ(rep.substeps, substeps);
+    EXPECT_EQ(rep.tools[0].contacts, 0) << "no contact at the tick's start";
+    std::copy(rep.tools[0].force_raw, rep.tools[0].force_raw + 3, force[fused]);
+    hash[fused] = test::HashState(s);
+  }
+  // The atom is felt: the reaction on the device is not zero, and the same bits either way.
+  EXPECT_GT(std::fabs(force[0][0]) + std::fabs(force[0][1]) + std::fabs(force[0][2]), 0.0);
+  for (int c = 0; c < 3; ++c) EXPECT_EQ(force[1][c], force[0][c]) << "axis " << c;
+  EXPECT_EQ(hash[1], hash[0]);
+}
+
 TEST(FusedPass, IsTakenAndReportsTheWholeModel) {
   const Model model = Slab();
   State s = Deformed(model);
