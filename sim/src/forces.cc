@@ -12,13 +12,11 @@
 namespace idms {
 namespace internal {
 
-// Eq. 4.2: gravity m g and air resistance -c m v on every active atom, and the caller's
-// external forces when given; clears the accumulator (atom a's force at force[stride * a]).
+// Eq. 4.2: gravity m g and air resistance -c m v on every active atom; clears the accumulator
+// (atom a's force at force[stride * a]).
 void FieldForces(const Model& m, const State& s, Workspace& ws, Real* force, int stride) {
   const StepOptions& o = ws.options;
   const bool gravity = o.gravity, air = o.air_damping > 0;
-  const Real* external = ws.atom_force_external.empty() ? nullptr : ws.atom_force_external.data();
-  if (external) IDMS_CHECK(static_cast<int32_t>(ws.atom_force_external.size()) == 3 * m.num_atoms);
   for (int32_t i = 0; i < ws.num_active; ++i) {
     const int32_t a = ws.active[i];
     Real* f = force + stride * a;
@@ -30,11 +28,26 @@ void FieldForces(const Model& m, const State& s, Workspace& ws, Real* force, int
       const Real ca = static_cast<Real>(o.air_damping * m.atom_mass[a]);
       for (int c = 0; c < 3; ++c) f[c] -= ca * s.atom_vel[3 * a + c];
     }
-    if (external) {
-      for (int c = 0; c < 3; ++c) f[c] += external[3 * a + c];
-    }
   }
 }
+
+const Real* ExternalForces(const Model& m, const Workspace& ws) {
+  if (ws.atom_force_external.empty()) return nullptr;
+  IDMS_CHECK(static_cast<int32_t>(ws.atom_force_external.size()) == 3 * m.num_atoms);
+  return ws.atom_force_external.data();
+}
+
+namespace {
+
+// The caller's external forces, added last (the fused kernel adds them as it integrates each atom).
+void AddExternalForces(Workspace& ws, const Real* external) {
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    for (int c = 0; c < 3; ++c) ws.atom_force[3 * a + c] += external[3 * a + c];
+  }
+}
+
+}  // namespace
 
 // Thesis 5.5.1 for each sphere/tweezers MIO over the contact candidates, and the tweezers' grasp
 // element (6.1.3). The reaction, -sum, is the device force; fixed atoms push back but do not move.
@@ -158,6 +171,7 @@ void EvaluateForces(const Model& m, State& s, Workspace& ws, bool filtered, Real
   } else {
     ElementForces<true, false>(m, s, ws, T, lambda);
   }
+  if (const Real* external = ExternalForces(m, ws)) AddExternalForces(ws, external);
 }
 
 namespace {

@@ -470,6 +470,7 @@ class Substep {
   struct AtomIo {
     Real *pos, *vel, *force;
     const Real* t_over_m;           // by slot
+    const Real* external;           // Workspace::atom_force_external, or null
     Real *backup_pos, *backup_vel;  // by slot; null: no rollback copy in this substep
     Real* backup_rows;              // by slot, 8 each (kRowBackup); null as backup_pos
     Real T;
@@ -481,6 +482,7 @@ class Substep {
             vel_,
             force_,
             fp_.atom_t_over_m.data(),
+            ExternalForces(m_, ws_),
             backup_ ? ws_.backup_pos.data() : nullptr,
             ws_.backup_vel.data(),
             backup_ ? ws_.fused->backup_rows.data() : nullptr,
@@ -494,6 +496,7 @@ class Substep {
                         [[maybe_unused]] Kinetic& k) {
     const V4 p = LoadAtom(io.pos, g, io.last), v = LoadAtom(io.vel, g, io.last);
     const Real t_over_m = io.t_over_m[i];
+    if (io.external) acc += LoadAtom(io.external, g, io.last);  // last in the sum, as forces.cc adds it
     V4 np, nv;
     if constexpr (kSymplectic) {
       nv = v + t_over_m * acc;
@@ -767,7 +770,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   const StepOptions& o = ws.options;
   const Real T = static_cast<Real>(o.dt_s / substeps);
   const bool filter = m.has_damping && UsesFilter(o, integrator);
-  const bool field = o.gravity || o.air_damping > 0 || !ws.atom_force_external.empty();
+  const bool field = o.gravity || o.air_damping > 0;  // the external forces come in Integrate
   for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
   // T / m by slot: one division per atom when T changes rather than in every substep.
   if (ws.fused->t_over_m_of != T) {

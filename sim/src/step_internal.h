@@ -72,10 +72,14 @@ void EvaluateForces(const Model& model, State& state, Workspace& ws, bool filter
 
 // forces.cc — the parts of EvaluateForces the full-mode fused pass calls on its own, into an
 // accumulator holding atom a's force at force[stride * a] (ws.atom_force: stride 3): eq. 4.2
-// field forces (and the caller's external forces) written over the active atoms' entries; tool
-// contact and grasp forces added to them.
+// field forces written over the active atoms' entries; tool contact and grasp forces added to
+// them. An atom's sum is formed in one order by both kernels: field, tools, elements in list
+// order, and the caller's external forces last (the fused kernel adds those as it integrates
+// the atom, so no pass of their own).
 void FieldForces(const Model& model, const State& state, Workspace& ws, Real* force, int stride);
 void ToolForces(const State& state, Workspace& ws, Real* force, int stride);
+// Workspace::atom_force_external (num_atoms x 3), or null when there are none.
+const Real* ExternalForces(const Model& model, const Workspace& ws);
 
 // The atoms a tool loop visits: Workspace::reach while atoms cannot have moved in from outside it
 // (reach_slack > 0), else every candidate. Either gives the same sums in the same order.

@@ -133,8 +133,9 @@ TEST(Forces, OnlyActiveAtomsReceiveForces) {
   for (int c = 0; c < 3; ++c) EXPECT_EQ(ws.atom_force[c], sentinel) << "the fixed atom's entry is not written";
 }
 
-// Eq. 4.2: m g and -c m v, plus the caller's external forces, written over the accumulator.
-TEST(Forces, FieldForcesAreGravityAirAndExternal) {
+// Eq. 4.2: m g and -c m v written over the accumulator; the caller's external forces come last,
+// in EvaluateForces (and in the fused kernel's integration), not here.
+TEST(Forces, FieldForcesAreGravityAndAirExternalForcesComeLast) {
   const Model m = TwoAtoms(10, 0, /*mass=*/0.5);
   State s = MakeState(m);
   s.atom_vel[0] = 2, s.atom_vel[5] = -4;
@@ -148,15 +149,15 @@ TEST(Forces, FieldForcesAreGravityAirAndExternal) {
   Real acc[8];
   for (Real& v : acc) v = 99;
   internal::FieldForces(m, s, ws, acc, 4);
-  EXPECT_DOUBLE_EQ(acc[0], 0.5 * 1 - 3 * 0.5 * 2 + 0.25);
+  EXPECT_DOUBLE_EQ(acc[0], 0.5 * 1 - 3 * 0.5 * 2);
   EXPECT_DOUBLE_EQ(acc[1], 0);
   EXPECT_DOUBLE_EQ(acc[2], 0.5 * -9.81);
   EXPECT_EQ(acc[3], 99);
   EXPECT_DOUBLE_EQ(acc[4], 0.5);
   EXPECT_DOUBLE_EQ(acc[5], 0);
-  EXPECT_DOUBLE_EQ(acc[6], 0.5 * -9.81 - 3 * 0.5 * -4 + 1);
+  EXPECT_DOUBLE_EQ(acc[6], 0.5 * -9.81 - 3 * 0.5 * -4);
   EXPECT_EQ(acc[7], 99);
-  // EvaluateForces adds the (unstretched) element: nothing more.
+  // EvaluateForces adds the (unstretched) element, nothing, and the external forces.
   EvaluateForces(m, s, ws, false, 1e-3);
   ExpectForce(ws, 1, 0.5, 0, 0.5 * -9.81 + 6 + 1);
 }

@@ -74,7 +74,8 @@ struct Run {
 // Steps the same model and start three times: the general path, the fused pass, and the fused
 // pass without its AVX2 code (the baseline x86-64 code, whatever this machine has). Returns the
 // general run and the fused one, after checking that both fused runs agree.
-std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOptions& o, int ticks, bool tools) {
+std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOptions& o, int ticks, bool tools,
+                            const std::vector<Real>& external = {}) {
   Run runs[3];
   std::vector<double> general_energy;
   for (int fused = 0; fused < 3; ++fused) {
@@ -82,6 +83,7 @@ std::pair<Run, Run> RunBoth(const Model& model, const State& start, const StepOp
     Workspace ws = MakeWorkspace(model, o);
     ws.options.fused_pass = fused > 0;
     ws.options.fused_avx2 = fused == 1;
+    ws.atom_force_external = external;
     for (int i = 0; i < ticks; ++i) {
       const StepReport r = Step(model, s, ws, tools ? Tools(i) : ToolInput{});
       for (int t = 0; t < r.num_tools; ++t)
@@ -164,6 +166,25 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"symplectic_everything_checked", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true,
              true, true}),
     [](const auto& param_info) { return param_info.param.name; });
+
+// The caller's external forces (draping's form) come last in each atom's sum in both kernels:
+// the general one adds them after the elements, the fused one as it integrates the atom.
+TEST(FusedPass, ExternalForcesMatch) {
+  const Model model = Slab();
+  std::vector<Real> external(3 * static_cast<size_t>(model.num_atoms));
+  for (size_t i = 0; i < external.size(); ++i) external[i] = static_cast<Real>(0.3 * std::cos(0.71 * i));
+  for (Integrator integrator : {Integrator::kExplicitEuler, Integrator::kSymplecticEuler}) {
+    StepOptions o = FullNoCheck(integrator);
+    o.gravity = true;
+    const auto [general, fused] = RunBoth(model, Deformed(model), o, 200, true, external);
+    EXPECT_EQ(fused.fused_ticks, 200);
+    EXPECT_EQ(fused.hash, general.hash) << IntegratorName(integrator);
+    EXPECT_EQ(fused.force_bits, general.force_bits);
+    // And they act: the same run without them ends elsewhere.
+    const auto [without, unused] = RunBoth(model, Deformed(model), o, 200, true);
+    EXPECT_NE(without.hash, general.hash);
+  }
+}
 
 TEST(FusedPass, RestartMarksOfDegenerateElementsMatch) {
   // At rest every zero-length home element is degenerate (its filter is marked to restart); the
