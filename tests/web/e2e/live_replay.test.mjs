@@ -139,7 +139,14 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   // The seek to 4.5 s is confirmed; the surface there is drawn.
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s && s.keyframes >= 1 && s.renders >= 1; });
   await page.waitForFunction(() => Math.abs(Number(/** @type {HTMLInputElement} */ (document.getElementById('seek')).value) - 4.5) < 0.05);
-  assert.equal(new URL(page.url()).searchParams.get('t'), '4.50');
+  await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '4.50');
+  // Paused there, the force plot shows the samples that led to 4.5 s at once (the seek's
+  // catch-up since the keyframe at or before it, here the session's first), not a blank until Play.
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms.forceShown >= 1000, undefined, { timeout: 10000 }).catch(() => {});
+  const paused = await state(page);
+  assert.ok(paused.forceShown >= 1000, `the paused replay's force plot shows ${paused.forceShown} samples`);
+  assert.ok(Math.abs(paused.timeS - 4.5) < 0.1, `the last sample shown is at ${paused.timeS} s`);
+  assert.equal(await page.getAttribute('#play', 'aria-pressed'), 'false');
   // The live annotation is marked on the timeline.
   const mark = page.locator('#marks .mark.annotation');
   await mark.waitFor();

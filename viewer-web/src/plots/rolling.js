@@ -56,6 +56,8 @@ export class RollingPlot {
     this.length = 0;
     this.total = 0;
     this.lastDraw = -1e9;
+    /** Samples in the picture on screen (the tests read it). */
+    this.shown = 0;
     /** Redraws and the time they took, ms (the bench reads them). */
     this.draws = 0;
     this.drawMs = 0;
@@ -100,6 +102,7 @@ export class RollingPlot {
   clear() {
     this.numPending = 0;
     this.length = 0;
+    this.shown = 0;
     this.plot.setData([[], ...this.columns.slice(1).map(() => [])]);
   }
 
@@ -134,6 +137,7 @@ export class RollingPlot {
     this.plot.batch(() => this.plot.setData(/** @type {any} */ (data)));
     this.drawMs += performance.now() - start;
     this.draws++;
+    this.shown = this.length;
     return false;
   }
 
