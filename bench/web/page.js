@@ -9,7 +9,7 @@
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
-import { placeCamera } from '../../viewer-web/src/view/surface.js';
+import { framedSphere, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
@@ -34,6 +34,11 @@ async function frames() {
  * @param {number} n
  */
 function samplesEnvelope(n) {
+  return Envelope.encode({ deviceSamples: { samples: samplesOf(n), stats: { ticks: 17 * n, computeP99Us: 40, periodP99Us: 1010 } } }).finish();
+}
+
+/** @param {number} n */
+function samplesOf(n) {
   const samples = [];
   for (let k = 0; k < 17; k++) {
     const t = (17 * n + k) / 1000;
@@ -42,7 +47,7 @@ function samplesEnvelope(n) {
     samples.push({ timeS: t, toolPos: { x: Math.cos(t), y: Math.sin(t), z: 1 - depth },
       force: { x: 0.05 * Math.sin(7 * t), y: 0.05 * Math.cos(5 * t), z: contact ? 2 * depth : 0 }, contact });
   }
-  return Envelope.encode({ deviceSamples: { samples, stats: { ticks: 17 * n, computeP99Us: 40, periodP99Us: 1010 } } }).finish();
+  return samples;
 }
 
 /** @param {HTMLCanvasElement} canvas @param {THREE.WebGLRenderer} renderer */
@@ -135,9 +140,13 @@ async function barePage() {
   geometry.computeVertexNormals();
   geometry.computeBoundingSphere();
   scene.add(new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide })));
+  // The live view's camera: fitted to the surface and the tool where the first samples put it
+  // (of the live view's default radius), so that both draw the mesh at the same size.
   const s = /** @type {THREE.Sphere} */ (geometry.boundingSphere);
+  const p = samplesOf(0)[16].toolPos;
+  const tool = new THREE.Sphere(new THREE.Vector3(p.x, p.y, p.z), 1.5);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
-  placeCamera(camera, s);
+  placeCamera(camera, framedSphere(s, tool, new THREE.Sphere()));
   const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
   const loop = () => {

@@ -48,6 +48,12 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s.keyframes >= 1 && s.renders >= 1 && s.samples >= 300; });
   const view = page.locator('#view3d');
   const first = await shot(view, 'live-1.png');
+  // The camera frames the tissue with the tool in sight (fitted to the surface alone, it had the
+  // tool hovering above fill the top of the view, cut off).
+  const framing = await page.evaluate(() => /** @type {any} */ (window).__idmsFraming());
+  const said = JSON.stringify(framing);
+  assert.ok(framing.toolShown && framing.toolInView, `the tool is wholly in view: ${said}`);
+  assert.ok(framing.surfaceSpan >= 0.4, `the tissue spans at least 40% of the view: ${said}`);
   await page.waitForFunction(() => /\d/.test(document.getElementById('duration')?.textContent ?? ''));
   const duration1 = await headerDuration(page);
   const before1 = await state(page);

@@ -149,6 +149,8 @@ export function sessionPage(id, role, mode) {
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
   Object.defineProperty(st, 'forceShown', { get: () => view.forcePlot.shown, enumerable: true });
+  // Where the surface and the tool fall in the view, for the tests (computed when asked).
+  /** @type {any} */ (window).__idmsFraming = () => view.view.framing();
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
   /** @type {Parts} */
