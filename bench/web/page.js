@@ -9,6 +9,7 @@
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
+import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
 import { framedSphere, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
@@ -82,13 +83,15 @@ async function viewerPage() {
     stats.renders++;
     stats.calls += view.view.renderer.info.render.calls;
   };
+  // Decoded as the page's socket decodes them (FrameDecoder).
+  const decoder = new FrameDecoder();
   /** @param {Uint8Array} bytes */
   const apply = (bytes) => {
-    const env = Envelope.decode(bytes);
+    const env = decoder.decode(bytes);
     if (env.meshKeyframe) view.applyKeyframe(env.meshKeyframe);
     else if (env.meshDelta) view.applyDelta(env.meshDelta);
     else if (env.deviceSamples) {
-      view.onSamples(env.deviceSamples.samples || []);
+      view.onSamples(env.deviceSamples.samples, env.deviceSamples.count);
       health.setStats(env.deviceSamples.stats, 0);
     }
   };

@@ -68,7 +68,7 @@ function layout(id, mode, panels) {
  *   notes: AnnotationList, onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
  */
 
-/** @param {Parts} p @param {idms.v1.Envelope} env */
+/** @param {Parts} p @param {import('../codec/frames.js').Frame} env */
 function dispatch(p, env) {
   if (env.meshKeyframe) {
     // A seek's catch-up starts: the plots restart with the samples that follow it.
@@ -77,9 +77,9 @@ function dispatch(p, env) {
   } else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
   else if (env.deviceSamples) {
     const batch = env.deviceSamples;
-    p.view.onSamples(batch.samples || []);
-    if (batch.samples?.length) p.timeline?.setTime(p.st.timeS);
-    p.health.setStats(batch.stats, batch.samplesDropped || 0);
+    p.view.onSamples(batch.samples, batch.count);
+    if (batch.count > 0) p.timeline?.setTime(p.st.timeS);
+    p.health.setStats(batch.stats, batch.samplesDropped);
     p.header.invalidate();
     return;
   } else if (env.sessionEvent) p.onEvent(env.sessionEvent);
