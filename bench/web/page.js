@@ -96,9 +96,14 @@ async function viewerPage() {
     }
   };
   apply(list[0]);
+  // The camera as the bare page's: fitted to the surface and the tool where the first samples put
+  // it, then held (the page would grow its frame as the tool circles: a few small refits that
+  // cost nothing but would draw the mesh a little smaller than the bare page does).
+  apply(samplesEnvelope(0));
+  view.view.userMoved = true;
   // 60 Hz: one mesh frame and 17 device samples each time, as the server relays them.
   let i = 0;
-  let n = 0;
+  let n = 1;
   let drawMs = 0;
   setInterval(() => {
     const samples = samplesEnvelope(n++);

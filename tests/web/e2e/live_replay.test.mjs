@@ -59,6 +59,9 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   const before1 = await state(page);
   await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.timeS > t + 1.5 && s.movedVertices > 0 && s.contactSamples > 0; }, before1.timeS, { timeout: 60000 });
   const second = await shot(view, 'live-2.png');
+  // Still in sight as the tool travels: the frame grows to hold where it has been.
+  const framing2 = await page.evaluate(() => /** @type {any} */ (window).__idmsFraming());
+  assert.ok(framing2.toolInView && framing2.surfaceSpan >= 0.3, `1.5 s on: ${JSON.stringify(framing2)}`);
   const after1 = await state(page);
   assert.notDeepEqual(first, second, 'the view changed as the tool pressed');
   assert.ok(after1.deltas > before1.deltas, 'deltas applied');

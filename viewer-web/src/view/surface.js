@@ -30,22 +30,24 @@ export function placeCamera(camera, sphere) {
 }
 
 /**
- * The sphere the camera frames: the surface's, grown to hold the tool's sphere too when it is
- * near (the smallest sphere around both), so that the view opens on the tissue with the tool in
- * sight. A tool further than the surface's diameter from it is left out: the tissue stays the
- * subject (the camera fitted to the surface alone had the tool hovering above it fill the view's
- * top, cut off).
+ * The sphere the camera frames: `from` (the surface's, or what was framed before), grown to hold
+ * the tool's sphere too when it is near the surface (the smallest sphere around both), so that
+ * the view shows the tissue with the tool in sight. A tool further than the surface's diameter
+ * from it is left out: the tissue stays the subject (the camera fitted to the surface alone had
+ * the tool hovering above it fill the view's top, cut off).
  * @param {THREE.Sphere} surface @param {THREE.Sphere | null} tool @param {THREE.Sphere} out
+ * @param {THREE.Sphere} [from] grown from, surface when not given; may be out
  * @returns {THREE.Sphere} out
  */
-export function framedSphere(surface, tool, out) {
-  out.copy(surface);
-  if (!tool) return out;
-  const d = surface.center.distanceTo(tool.center);
-  if (d + tool.radius <= surface.radius || d - tool.radius > 2 * surface.radius) return out;
-  const r = (surface.radius + d + tool.radius) / 2;
-  out.center.lerp(tool.center, (r - surface.radius) / d);
-  out.radius = r;
+export function framedSphere(surface, tool, out, from = surface) {
+  out.copy(from);
+  if (!tool || surface.center.distanceTo(tool.center) - tool.radius > 2 * surface.radius) return out;
+  const d = out.center.distanceTo(tool.center);
+  if (d + tool.radius <= out.radius) return out;
+  const r = (out.radius + d + tool.radius) / 2;
+  out.center.lerp(tool.center, (r - out.radius) / d);
+  // 5% more: placeCamera's distance shows a sphere's middle whole, not its rim at the view's edge.
+  out.radius = 1.05 * r;
   return out;
 }
 
@@ -119,12 +121,14 @@ export class SurfaceView {
     this.toolRadius = 1.5;
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
-    // The camera is fitted at the first surface, and again when the tool first shows, until the
-    // viewer moves it.
+    // The camera is fitted at the first surface, and again whenever the tool goes where it has
+    // not been (the framed sphere only grows: the view settles on the tool's travel rather than
+    // following it), until the viewer moves it.
     this.toolFitted = false;
     this.userMoved = false;
     this.controls.addEventListener('start', () => { this.userMoved = true; });
     this.toolSphere = new THREE.Sphere();
+    this.surfaceSphere = new THREE.Sphere();
     this.framed = new THREE.Sphere();
     this.dirty = true;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
@@ -286,7 +290,7 @@ export class SurfaceView {
     this.tool.visible = true;
     this.tool.position.set(x, y, z);
     this.tool.scale.setScalar(this.toolRadius);
-    if (this.fitted && !this.toolFitted && !this.userMoved) this.fit();
+    if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
     this.toolMaterial.color.setHex(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
     const f = Math.hypot(fx, fy, fz);
     this.arrow.visible = f > 1e-9;
@@ -306,14 +310,30 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Points the camera at the surface, and the tool when it shows (framedSphere), from above and in front. */
+  /** Whether the tool is where the camera has not framed it and could (framedSphere). */
+  toolOutOfFrame() {
+    if (!this.toolFitted) return true;
+    const p = this.tool.position, r = this.toolRadius;
+    const surface = this.surfaceSphere;
+    return this.framed.distanceToPoint(p) + r > 1e-6 * this.framed.radius &&
+      surface.distanceToPoint(p) - r <= surface.radius;
+  }
+
+  /**
+   * Points the camera at the surface, and the tool when it shows (framedSphere), from above and
+   * in front. The surface's sphere is the first surface's.
+   */
   fit() {
-    this.geometry.computeBoundingSphere();
-    const sphere = this.geometry.boundingSphere;
-    if (!sphere || !Number.isFinite(sphere.radius) || sphere.radius === 0) return;
+    if (!this.fitted) {
+      this.geometry.computeBoundingSphere();
+      const s = this.geometry.boundingSphere;
+      if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
+      this.surfaceSphere.copy(s);
+    }
+    const sphere = this.surfaceSphere;
     this.forceScale = sphere.radius / 4;
     const tool = this.tool.visible ? this.toolSphere.set(this.tool.position, this.toolRadius) : null;
-    const framed = framedSphere(sphere, tool, this.framed);
+    const framed = framedSphere(sphere, tool, this.framed, this.toolFitted ? this.framed : sphere);
     this.controls.target.copy(framed.center);
     placeCamera(this.camera, framed);
     this.controls.update();
