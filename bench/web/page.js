@@ -9,7 +9,8 @@
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
-import { placeCamera } from '../../viewer-web/src/view/surface.js';
+import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
+import { framedSphere, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
@@ -34,6 +35,11 @@ async function frames() {
  * @param {number} n
  */
 function samplesEnvelope(n) {
+  return Envelope.encode({ deviceSamples: { samples: samplesOf(n), stats: { ticks: 17 * n, computeP99Us: 40, periodP99Us: 1010 } } }).finish();
+}
+
+/** @param {number} n */
+function samplesOf(n) {
   const samples = [];
   for (let k = 0; k < 17; k++) {
     const t = (17 * n + k) / 1000;
@@ -42,7 +48,7 @@ function samplesEnvelope(n) {
     samples.push({ timeS: t, toolPos: { x: Math.cos(t), y: Math.sin(t), z: 1 - depth },
       force: { x: 0.05 * Math.sin(7 * t), y: 0.05 * Math.cos(5 * t), z: contact ? 2 * depth : 0 }, contact });
   }
-  return Envelope.encode({ deviceSamples: { samples, stats: { ticks: 17 * n, computeP99Us: 40, periodP99Us: 1010 } } }).finish();
+  return samples;
 }
 
 /** @param {HTMLCanvasElement} canvas @param {THREE.WebGLRenderer} renderer */
@@ -77,20 +83,27 @@ async function viewerPage() {
     stats.renders++;
     stats.calls += view.view.renderer.info.render.calls;
   };
+  // Decoded as the page's socket decodes them (FrameDecoder).
+  const decoder = new FrameDecoder();
   /** @param {Uint8Array} bytes */
   const apply = (bytes) => {
-    const env = Envelope.decode(bytes);
+    const env = decoder.decode(bytes);
     if (env.meshKeyframe) view.applyKeyframe(env.meshKeyframe);
     else if (env.meshDelta) view.applyDelta(env.meshDelta);
     else if (env.deviceSamples) {
-      view.onSamples(env.deviceSamples.samples || []);
+      view.onSamples(env.deviceSamples.samples, env.deviceSamples.count);
       health.setStats(env.deviceSamples.stats, 0);
     }
   };
   apply(list[0]);
+  // The camera as the bare page's: fitted to the surface and the tool where the first samples put
+  // it, then held (the page would grow its frame as the tool circles: a few small refits that
+  // cost nothing but would draw the mesh a little smaller than the bare page does).
+  apply(samplesEnvelope(0));
+  view.view.userMoved = true;
   // 60 Hz: one mesh frame and 17 device samples each time, as the server relays them.
   let i = 0;
-  let n = 0;
+  let n = 1;
   let drawMs = 0;
   setInterval(() => {
     const samples = samplesEnvelope(n++);
@@ -135,9 +148,13 @@ async function barePage() {
   geometry.computeVertexNormals();
   geometry.computeBoundingSphere();
   scene.add(new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide })));
+  // The live view's camera: fitted to the surface and the tool where the first samples put it
+  // (of the live view's default radius), so that both draw the mesh at the same size.
   const s = /** @type {THREE.Sphere} */ (geometry.boundingSphere);
+  const p = samplesOf(0)[16].toolPos;
+  const tool = new THREE.Sphere(new THREE.Vector3(p.x, p.y, p.z), 1.5);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
-  placeCamera(camera, s);
+  placeCamera(camera, framedSphere(s, tool, new THREE.Sphere()));
   const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
   const loop = () => {

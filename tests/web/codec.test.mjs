@@ -11,6 +11,7 @@ import { join } from 'node:path';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { inspectZstdFrame } from '../../viewer-web/src/codec/zstd_frame.js';
+import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
 
 const bin = process.env.IDMS_WEB_MESH_FRAMES_BIN;
 const Envelope = idms.v1.Envelope;
@@ -99,4 +100,56 @@ test('64-bit fields are numbers, set or not: an unset topology version compares 
   const state = new MeshState();
   assert.equal(state.apply(key), 'ok');
   assert.equal(state.apply(delta), 'ok', state.error);
+});
+
+test('FrameDecoder reads every C++-encoded frame as the generated decoder does', () => {
+  const decoder = new FrameDecoder();
+  /** @type {Map<string, MeshState[]>} */
+  const states = new Map();
+  let fast = 0;
+  for (const line of cppFrames()) {
+    const scenario = line.name.replace(/ frame \d+$/, '').replace(/^damaged( keyframe)?: .*/, 'damaged');
+    if (!states.has(scenario)) states.set(scenario, [new MeshState(), new MeshState()]);
+    const [a, b] = /** @type {MeshState[]} */ (states.get(scenario));
+    const bytes = Buffer.from(line.frame, 'hex');
+    const frame = decoder.decode(bytes);
+    if (frame === decoder.deltaFrame) fast++;
+    assert.equal(b.apply(/** @type {any} */ (frame)), a.apply(Envelope.decode(bytes)), line.name);
+    assert.equal(b.error, a.error, line.name);
+    assert.equal(b.sequence, a.sequence, line.name);
+    assert.deepEqual(b.q.subarray(0, 3 * b.numVertices), a.q.subarray(0, 3 * a.numVertices), line.name);
+  }
+  assert.ok(fast > 50, `${fast} deltas through the fast path`);
+});
+
+test('FrameDecoder reads device samples into the same objects every batch, with unset fields as 0', () => {
+  const decoder = new FrameDecoder();
+  const batch = (/** @type {number} */ n, /** @type {boolean} */ stats) => Envelope.encode({ deviceSamples: {
+    samples: Array.from({ length: n }, (_, k) => ({ tick: 2 ** 40 + k, timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 },
+      force: k % 2 ? { x: 0.25, z: -k } : null, contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, substeps: 1 })),
+    stats: stats ? { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true, periodMaxUs: 9 } : null,
+    samplesDropped: 12, sentUnixNs: 1.7e18 } }).finish();
+  const first = decoder.decode(batch(17, true));
+  const d = first.deviceSamples;
+  assert.ok(d);
+  assert.equal(d.count, 17);
+  assert.deepEqual(d.stats, { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true });
+  assert.equal(d.samplesDropped, 12);
+  for (let k = 0; k < 17; k++) {
+    const s = d.samples[k];
+    assert.deepEqual(s, { timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 }, force: k % 2 ? { x: 0.25, y: 0, z: -k } : { x: 0, y: 0, z: 0 },
+      contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0 }, `sample ${k}`);
+  }
+  const sample3 = d.samples[3];
+  // A smaller batch without statistics: the same objects, rewritten.
+  const second = decoder.decode(batch(5, false));
+  assert.equal(second, first);
+  assert.equal(second.deviceSamples?.samples[3], sample3);
+  assert.equal(second.deviceSamples?.count, 5);
+  assert.equal(second.deviceSamples?.stats, null);
+  // Other messages go through the generated decoder; malformed bytes throw.
+  const note = decoder.decode(Envelope.encode({ annotation: { text: 'here', timeS: 1.5 } }).finish());
+  assert.equal(note.annotation?.text, 'here');
+  const cut = batch(3, true);
+  assert.throws(() => decoder.decode(cut.subarray(0, cut.length - 4)), RangeError);
 });

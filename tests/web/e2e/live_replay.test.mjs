@@ -48,11 +48,20 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s.keyframes >= 1 && s.renders >= 1 && s.samples >= 300; });
   const view = page.locator('#view3d');
   const first = await shot(view, 'live-1.png');
+  // The camera frames the tissue with the tool in sight (fitted to the surface alone, it had the
+  // tool hovering above fill the top of the view, cut off).
+  const framing = await page.evaluate(() => /** @type {any} */ (window).__idmsFraming());
+  const said = JSON.stringify(framing);
+  assert.ok(framing.toolShown && framing.toolInView, `the tool is wholly in view: ${said}`);
+  assert.ok(framing.surfaceSpan >= 0.4, `the tissue spans at least 40% of the view: ${said}`);
   await page.waitForFunction(() => /\d/.test(document.getElementById('duration')?.textContent ?? ''));
   const duration1 = await headerDuration(page);
   const before1 = await state(page);
   await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.timeS > t + 1.5 && s.movedVertices > 0 && s.contactSamples > 0; }, before1.timeS, { timeout: 60000 });
   const second = await shot(view, 'live-2.png');
+  // Still in sight as the tool travels: the frame grows to hold where it has been.
+  const framing2 = await page.evaluate(() => /** @type {any} */ (window).__idmsFraming());
+  assert.ok(framing2.toolInView && framing2.surfaceSpan >= 0.3, `1.5 s on: ${JSON.stringify(framing2)}`);
   const after1 = await state(page);
   assert.notDeepEqual(first, second, 'the view changed as the tool pressed');
   assert.ok(after1.deltas > before1.deltas, 'deltas applied');
@@ -139,7 +148,14 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   // The seek to 4.5 s is confirmed; the surface there is drawn.
   await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s && s.keyframes >= 1 && s.renders >= 1; });
   await page.waitForFunction(() => Math.abs(Number(/** @type {HTMLInputElement} */ (document.getElementById('seek')).value) - 4.5) < 0.05);
-  assert.equal(new URL(page.url()).searchParams.get('t'), '4.50');
+  await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '4.50');
+  // Paused there, the force plot shows the samples that led to 4.5 s at once (the seek's
+  // catch-up since the keyframe at or before it, here the session's first), not a blank until Play.
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms.forceShown >= 1000, undefined, { timeout: 10000 }).catch(() => {});
+  const paused = await state(page);
+  assert.ok(paused.forceShown >= 1000, `the paused replay's force plot shows ${paused.forceShown} samples`);
+  assert.ok(Math.abs(paused.timeS - 4.5) < 0.1, `the last sample shown is at ${paused.timeS} s`);
+  assert.equal(await page.getAttribute('#play', 'aria-pressed'), 'false');
   // The live annotation is marked on the timeline.
   const mark = page.locator('#marks .mark.annotation');
   await mark.waitFor();

@@ -1,6 +1,7 @@
 // A WebSocket of idms.v1.Envelope frames that reconnects by itself (backoff 0.25 s doubling to
 // 5 s) and says what it is doing; a refused upgrade first tries a silent re-login.
 import { idms } from '../codec/proto.js';
+import { FrameDecoder } from '../codec/frames.js';
 import { relogin } from './api.js';
 
 const Envelope = idms.v1.Envelope;
@@ -8,7 +9,7 @@ const Envelope = idms.v1.Envelope;
 /**
  * @typedef {{
  *   onOpen?: (socket: EnvelopeSocket) => void,
- *   onEnvelope: (env: idms.v1.Envelope) => void,
+ *   onEnvelope: (env: import('../codec/frames.js').Frame) => void,
  *   onStatus?: (state: 'connecting' | 'open' | 'reconnecting' | 'closed', text: string) => void,
  * }} SocketHandlers
  */
@@ -18,6 +19,8 @@ export class EnvelopeSocket {
   constructor(path, handlers) {
     this.path = path;
     this.handlers = handlers;
+    // Frames decoded into reused objects (valid until the next message).
+    this.decoder = new FrameDecoder();
     /** @type {WebSocket | null} */
     this.ws = null;
     this.attempt = 0;
@@ -44,7 +47,7 @@ export class EnvelopeSocket {
     };
     ws.onmessage = (ev) => {
       if (!(ev.data instanceof ArrayBuffer)) return;
-      this.handlers.onEnvelope(Envelope.decode(new Uint8Array(ev.data)));
+      this.handlers.onEnvelope(this.decoder.decode(new Uint8Array(ev.data)));
     };
     ws.onclose = () => this.retry();
   }

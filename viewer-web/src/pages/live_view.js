@@ -81,13 +81,15 @@ export class LiveView {
 
   /**
    * A batch of device samples (1 kHz): into the plots; the last one moves the tool and the arrow.
+   * Allocates nothing.
    * @param {{timeS?: number | null, force?: {x?: number | null, y?: number | null, z?: number | null} | null,
    *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
    *   grasp?: boolean | null, warnings?: number | null}[]} samples
+   * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
-  onSamples(samples) {
+  onSamples(samples, count = samples.length) {
     const st = this.st;
-    for (let i = 0; i < samples.length; i++) {
+    for (let i = 0; i < count; i++) {
       const s = samples[i];
       const f = s.force, p = s.toolPos;
       const fx = f?.x || 0, fy = f?.y || 0, fz = f?.z || 0;
@@ -101,9 +103,9 @@ export class LiveView {
       this.depthPlot.push(px, py, pz, fx, fy, fz, !!s.contact);
       st.warnings += s.warnings || 0;
     }
-    st.samples += samples.length;
-    const last = samples[samples.length - 1];
-    if (!last) return;
+    st.samples += count;
+    if (count === 0) return;
+    const last = samples[count - 1];
     const f = last.force, p = last.toolPos;
     this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp);
     // The tool's state in words (colour alone is not enough), written only when it changes.

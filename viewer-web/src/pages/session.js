@@ -18,7 +18,7 @@ const kWindowS = 5;
  * @typedef {{mode: string, frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string, lastInvalid: string,
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
- *   contactSamples: number, forcePoints: number, depthSamples: number}} PageState
+ *   contactSamples: number, forcePoints: number, forceShown: number, depthSamples: number}} PageState
  */
 
 /**
@@ -68,21 +68,24 @@ function layout(id, mode, panels) {
  *   notes: AnnotationList, onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
  */
 
-/** @param {Parts} p @param {idms.v1.Envelope} env */
+/** @param {Parts} p @param {import('../codec/frames.js').Frame} env */
 function dispatch(p, env) {
-  if (env.meshKeyframe) p.view.applyKeyframe(env.meshKeyframe);
-  else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
+  if (env.meshKeyframe) {
+    // A seek's catch-up starts: the plots restart with the samples that follow it.
+    if (p.timeline?.onKeyframe()) p.view.clearPlots();
+    p.view.applyKeyframe(env.meshKeyframe);
+  } else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
   else if (env.deviceSamples) {
     const batch = env.deviceSamples;
-    p.view.onSamples(batch.samples || []);
-    if (batch.samples?.length) p.timeline?.setTime(p.st.timeS);
-    p.health.setStats(batch.stats, batch.samplesDropped || 0);
+    p.view.onSamples(batch.samples, batch.count);
+    if (batch.count > 0) p.timeline?.setTime(p.st.timeS);
+    p.health.setStats(batch.stats, batch.samplesDropped);
     p.header.invalidate();
     return;
   } else if (env.sessionEvent) p.onEvent(env.sessionEvent);
   else if (env.annotation) p.notes.add(env.annotation);
   else if (env.playbackState) {
-    // A confirmed seek: the plots restart at the new time.
+    // A confirmed seek without a catch-up: the plots restart at the new time.
     if (p.timeline?.onState(env.playbackState)) p.view.clearPlots();
   } else if (env.welcome) {
     const tools = env.welcome.scene?.tools || [];
@@ -123,7 +126,7 @@ export function sessionPage(id, role, mode) {
   /** @type {PageState} */
   const st = { mode, frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0,
     warnings: 0, fallbacks: 0, lastError: '', lastInvalid: '', annotations: 0, connection: 'connecting', ended: false,
-    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, depthSamples: 0 };
+    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, forceShown: 0, depthSamples: 0 };
   /** @type {any} */ (window).__idms = st;
 
   // The panels, the layout, then what draws into it (the plots take their width from their boxes).
@@ -145,6 +148,9 @@ export function sessionPage(id, role, mode) {
   const view = new LiveView(st, hosts, kWindowS, loop);
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
+  Object.defineProperty(st, 'forceShown', { get: () => view.forcePlot.shown, enumerable: true });
+  // Where the surface and the tool fall in the view, for the tests (computed when asked).
+  /** @type {any} */ (window).__idmsFraming = () => view.view.framing();
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
   /** @type {Parts} */

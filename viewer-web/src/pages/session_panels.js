@@ -75,7 +75,7 @@ export class HealthPanel {
   constructor(st, loop) {
     this.st = st;
     this.loop = loop;
-    /** @type {idms.v1.ILoopStats} the latest cumulative loop statistics */
+    /** @type {import('../codec/frames.js').Stats | idms.v1.ILoopStats} the latest cumulative loop statistics */
     this.stats = {};
     /** Samples the agent's backlog lost. */
     this.dropped = 0;
@@ -90,7 +90,11 @@ export class HealthPanel {
     loop.add(this);
   }
 
-  /** @param {idms.v1.ILoopStats | null | undefined} stats @param {number} dropped */
+  /**
+   * @param {import('../codec/frames.js').Stats | idms.v1.ILoopStats | null | undefined} stats kept by reference
+   *   (FrameDecoder's is rewritten in place by each batch: still the latest)
+   * @param {number} dropped
+   */
   setStats(stats, dropped) {
     if (stats) this.stats = stats;
     this.dropped = dropped;

@@ -5,6 +5,7 @@
 import uPlot from 'uplot';
 import 'uplot/dist/uPlot.min.css';
 import { FrameLoop, Visibility, isDue } from '../view/frame_loop.js';
+import { decimateMinMax } from './decimate.js';
 
 /**
  * Plots redraw at most this often; samples still arrive and are kept at 1 kHz. 10 Hz moves a
@@ -56,11 +57,20 @@ export class RollingPlot {
     this.length = 0;
     this.total = 0;
     this.lastDraw = -1e9;
+    /** Samples in the picture on screen (the tests read it). */
+    this.shown = 0;
     /** Redraws and the time they took, ms (the bench reads them). */
     this.draws = 0;
     this.drawMs = 0;
-    /** @type {any[]} */
-    this.fullData = this.columns;
+    // What uPlot draws when the samples outnumber what the plot's width can show: the samples
+    // reduced per pixel column (decimateMinMax), and views of it, made again only when the count
+    // changes (not per redraw once the window is full and the width settled).
+    /** @type {Float64Array[]} */
+    this.reduced = [];
+    /** @type {Float64Array[]} */
+    this.views = [];
+    this.viewsOf = /** @type {Float64Array[] | null} */ (null);
+    this.viewsLength = -1;
     const width = Math.max(200, host.clientWidth || 400);
     this.plot = withCpuCanvases(() => new uPlot({
       title: spec.title,
@@ -100,6 +110,7 @@ export class RollingPlot {
   clear() {
     this.numPending = 0;
     this.length = 0;
+    this.shown = 0;
     this.plot.setData([[], ...this.columns.slice(1).map(() => [])]);
   }
 
@@ -128,13 +139,38 @@ export class RollingPlot {
     this.lastDraw = now;
     const start = performance.now();
     this.flush();
-    // Views while the window fills (the first seconds only), then the full columns themselves.
-    const data = this.length === this.capacity ? this.fullData : this.columns.map((col) => col.subarray(0, this.length));
+    // Four points per pixel column at most: uPlot's time goes with the points it is given.
+    const width = Math.max(1, Math.round(this.plot.bbox.width));
+    let data = this.columns;
+    let n = this.length;
+    if (n > 4 * (width + 1)) {
+      if (this.reduced.length === 0 || this.reduced[0].length < 4 * (width + 1)) {
+        this.reduced = this.columns.map(() => new Float64Array(4 * (width + 1)));
+      }
+      n = decimateMinMax(this.columns, n, width, this.reduced);
+      data = this.reduced;
+    }
     // batch: drawn now, in this frame (setData alone draws in a microtask).
-    this.plot.batch(() => this.plot.setData(/** @type {any} */ (data)));
+    const views = this.viewsFor(data, n);
+    this.plot.batch(() => this.plot.setData(/** @type {any} */ (views)));
     this.drawMs += performance.now() - start;
     this.draws++;
+    this.shown = this.length;
     return false;
+  }
+
+  /**
+   * The first n values of each column, as uPlot takes them; the same views while n and the
+   * columns are the same.
+   * @param {Float64Array[]} data @param {number} n
+   */
+  viewsFor(data, n) {
+    if (data !== this.viewsOf || n !== this.viewsLength) {
+      this.views = data.map((col) => (n === col.length ? col : col.subarray(0, n)));
+      this.viewsOf = data;
+      this.viewsLength = n;
+    }
+    return this.views;
   }
 
   dispose() {

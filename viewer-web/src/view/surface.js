@@ -29,6 +29,28 @@ export function placeCamera(camera, sphere) {
   camera.updateProjectionMatrix();
 }
 
+/**
+ * The sphere the camera frames: `from` (the surface's, or what was framed before), grown to hold
+ * the tool's sphere too when it is near the surface (the smallest sphere around both), so that
+ * the view shows the tissue with the tool in sight. A tool further than the surface's diameter
+ * from it is left out: the tissue stays the subject (the camera fitted to the surface alone had
+ * the tool hovering above it fill the view's top, cut off).
+ * @param {THREE.Sphere} surface @param {THREE.Sphere | null} tool @param {THREE.Sphere} out
+ * @param {THREE.Sphere} [from] grown from, surface when not given; may be out
+ * @returns {THREE.Sphere} out
+ */
+export function framedSphere(surface, tool, out, from = surface) {
+  out.copy(from);
+  if (!tool || surface.center.distanceTo(tool.center) - tool.radius > 2 * surface.radius) return out;
+  const d = out.center.distanceTo(tool.center);
+  if (d + tool.radius <= out.radius) return out;
+  const r = (out.radius + d + tool.radius) / 2;
+  out.center.lerp(tool.center, (r - out.radius) / d);
+  // 5% more: placeCamera's distance shows a sphere's middle whole, not its rim at the view's edge.
+  out.radius = 1.05 * r;
+  return out;
+}
+
 export class SurfaceView {
   /**
    * @param {HTMLElement} host
@@ -99,6 +121,15 @@ export class SurfaceView {
     this.toolRadius = 1.5;
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
+    // The camera is fitted at the first surface, and again whenever the tool goes where it has
+    // not been (the framed sphere only grows: the view settles on the tool's travel rather than
+    // following it), until the viewer moves it.
+    this.toolFitted = false;
+    this.userMoved = false;
+    this.controls.addEventListener('start', () => { this.userMoved = true; });
+    this.toolSphere = new THREE.Sphere();
+    this.surfaceSphere = new THREE.Sphere();
+    this.framed = new THREE.Sphere();
     this.dirty = true;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
     this.onRender = null;
@@ -259,6 +290,7 @@ export class SurfaceView {
     this.tool.visible = true;
     this.tool.position.set(x, y, z);
     this.tool.scale.setScalar(this.toolRadius);
+    if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
     this.toolMaterial.color.setHex(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
     const f = Math.hypot(fx, fy, fz);
     this.arrow.visible = f > 1e-9;
@@ -278,16 +310,64 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Points the camera at the surface from above and in front. */
+  /** Whether the tool is where the camera has not framed it and could (framedSphere). */
+  toolOutOfFrame() {
+    if (!this.toolFitted) return true;
+    const p = this.tool.position, r = this.toolRadius;
+    const surface = this.surfaceSphere;
+    return this.framed.distanceToPoint(p) + r > 1e-6 * this.framed.radius &&
+      surface.distanceToPoint(p) - r <= surface.radius;
+  }
+
+  /**
+   * Points the camera at the surface, and the tool when it shows (framedSphere), from above and
+   * in front. The surface's sphere is the first surface's.
+   */
   fit() {
-    this.geometry.computeBoundingSphere();
-    const sphere = this.geometry.boundingSphere;
-    if (!sphere || !Number.isFinite(sphere.radius) || sphere.radius === 0) return;
+    if (!this.fitted) {
+      this.geometry.computeBoundingSphere();
+      const s = this.geometry.boundingSphere;
+      if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
+      this.surfaceSphere.copy(s);
+    }
+    const sphere = this.surfaceSphere;
     this.forceScale = sphere.radius / 4;
-    this.controls.target.copy(sphere.center);
-    placeCamera(this.camera, sphere);
+    const tool = this.tool.visible ? this.toolSphere.set(this.tool.position, this.toolRadius) : null;
+    const framed = framedSphere(sphere, tool, this.framed, this.toolFitted ? this.framed : sphere);
+    this.controls.target.copy(framed.center);
+    placeCamera(this.camera, framed);
     this.controls.update();
     this.fitted = true;
+    this.toolFitted = tool !== null;
+  }
+
+  /**
+   * Where the surface and the tool fall in the view (the tests read it): the surface's bounding
+   * box's span across the view (1 = the view's width or height, whichever it fills more of), the
+   * tool's sphere's span likewise, and whether the tool's sphere lies wholly inside the view.
+   * Allocates; not for a frame.
+   */
+  framing() {
+    const ndc = (/** @type {THREE.Vector3} */ p) => p.clone().project(this.camera);
+    const span = (/** @type {THREE.Vector3[]} */ ps) => {
+      const q = ps.map(ndc);
+      const xs = q.map((p) => p.x), ys = q.map((p) => p.y);
+      return { span: Math.max(Math.max(...xs) - Math.min(...xs), Math.max(...ys) - Math.min(...ys)) / 2,
+        inside: q.every((p) => Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1 && p.z < 1) };
+    };
+    this.geometry.computeBoundingBox();
+    const b = /** @type {THREE.Box3} */ (this.geometry.boundingBox);
+    const corners = [];
+    for (let i = 0; i < 8; i++) {
+      corners.push(new THREE.Vector3(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z));
+    }
+    // The tool's silhouette: its centre +- its radius along the camera's right and up.
+    this.camera.updateMatrixWorld();
+    const right = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 0).multiplyScalar(this.toolRadius);
+    const up = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1).multiplyScalar(this.toolRadius);
+    const c = this.tool.position;
+    const tool = span([c.clone().add(right), c.clone().sub(right), c.clone().add(up), c.clone().sub(up)]);
+    return { surfaceSpan: span(corners).span, toolShown: this.tool.visible, toolSpan: tool.span, toolInView: tool.inside };
   }
 
   /** @param {number} nv @param {number} nt */
