@@ -89,8 +89,9 @@ void SqrtInverse(int32_t n, const double* r2, double* r, double* inv) {
 constexpr int32_t kFormBlock = 64;
 
 StageTwoState FormPass(const Model& m, const SphereForm& form, const State& s, std::vector<Real>* force) {
-  StageTwoState out;
-  double max_speed2 = 0;
+  // Sums in locals: a member of `out` may alias the forces stored in the loop, so the compiler
+  // kept it in memory, a store and a reload per atom on the sum's critical path.
+  double kinetic = 0, form_energy = 0, max_speed2 = 0;
   alignas(32) double r2[kFormBlock], r[kFormBlock], inv_r[kFormBlock];
   for (int32_t a0 = 0; a0 < m.num_atoms; a0 += kFormBlock) {
     const int32_t n = std::min(kFormBlock, m.num_atoms - a0);
@@ -108,13 +109,16 @@ StageTwoState FormPass(const Model& m, const SphereForm& form, const State& s, s
       if (m.atom_fixed[a]) continue;
       const Real* v = &s.atom_vel[3 * a];
       const double speed2 = double(v[0]) * v[0] + double(v[1]) * v[1] + double(v[2]) * v[2];
-      out.kinetic += 0.5 * m.atom_mass[a] * speed2;
+      kinetic += 0.5 * m.atom_mass[a] * speed2;
       max_speed2 = std::max(max_speed2, speed2);
       double d[3];
       FormOffset(form, &s.atom_pos[3 * a], d);
-      out.form += FormForceAt(form, d, r[j], inv_r[j], v, f);
+      form_energy += FormForceAt(form, d, r[j], inv_r[j], v, f);
     }
   }
+  StageTwoState out;
+  out.kinetic = kinetic;
+  out.form = form_energy;
   out.max_speed = std::sqrt(max_speed2);
   return out;
 }
