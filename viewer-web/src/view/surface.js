@@ -21,7 +21,13 @@ const kToolGrasp = 0xc0392b;
 export function placeCamera(camera, sphere) {
   const r = sphere.radius;
   const c = sphere.center;
-  camera.position.set(c.x + 0.3 * r, c.y - 2.6 * r, c.z + 1.0 * r);
+  // Far enough that the whole sphere lies inside the narrower of the two fields of view: a sphere
+  // at distance d fills a half-angle of asin(r / d) (r / tan(half) left its rim outside, and a
+  // tool at the frame's edge cut off).
+  const half = THREE.MathUtils.degToRad(camera.fov) / 2;
+  const d = r / Math.sin(Math.min(half, Math.atan(Math.tan(half) * camera.aspect)));
+  const k = d / Math.hypot(0.3, 2.6, 1.0);
+  camera.position.set(c.x + 0.3 * k, c.y - 2.6 * k, c.z + 1.0 * k);
   camera.up.set(0, 0, 1);
   camera.near = r / 100;
   camera.far = r * 100;
@@ -367,7 +373,11 @@ export class SurfaceView {
     const up = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1).multiplyScalar(this.toolRadius);
     const c = this.tool.position;
     const tool = span([c.clone().add(right), c.clone().sub(right), c.clone().add(up), c.clone().sub(up)]);
-    return { surfaceSpan: span(corners).span, toolShown: this.tool.visible, toolSpan: tool.span, toolInView: tool.inside };
+    // Near: where framedSphere takes the tool in (toolOutOfFrame's test); a tool further off is
+    // left out of the frame on purpose, the tissue staying the subject.
+    const near = this.surfaceSphere.distanceToPoint(c) - this.toolRadius <= this.surfaceSphere.radius;
+    return { surfaceSpan: span(corners).span, toolShown: this.tool.visible, toolSpan: tool.span, toolInView: tool.inside,
+      toolNear: near };
   }
 
   /** @param {number} nv @param {number} nt */
