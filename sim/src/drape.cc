@@ -71,8 +71,7 @@ inline void FormOffset(const SphereForm& form, const Real p[3], double d[3]) {
   }
 }
 void SqrtInverse(int32_t n, const double* r2, double* r, double* inv) {
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) return SqrtInverseAvx2(n, r2, r, inv);
+  if (internal::UseAvx2(true)) return SqrtInverseAvx2(n, r2, r, inv);
   for (int32_t i = 0; i < n; i += 2) {
     const __m128d s = _mm_sqrt_pd(_mm_loadu_pd(r2 + i));
     _mm_storeu_pd(r + i, s);

@@ -275,20 +275,6 @@ template <Rate kRate, bool kDirectIn, bool kEnergy>
 }
 #endif
 
-// The baseline code or, on x86-64, the AVX2 code chosen once at run time: the default build runs
-// on any x86-64 and uses AVX2 where it exists. Rejected: -march=native (the binary must run on
-// any CI machine); compiling the whole file twice (inline functions it shares with other files
-// could be linked in their AVX2 form and fault on an older CPU), or the whole substep as an AVX2
-// clone (no faster).
-bool UseAvx2([[maybe_unused]] bool allow_avx2) {
-#if defined(__x86_64__) && !defined(__AVX2__)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  return avx2 && allow_avx2;
-#else
-  return false;
-#endif
-}
-
 template <Rate kRate, bool kDirectIn, bool kEnergy>
 void Dispatch(bool allow_avx2, const BatchIo& io) {
 #if defined(__x86_64__) && !defined(__AVX2__)
@@ -311,6 +297,20 @@ void DispatchRate(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io)
 }
 
 }  // namespace
+
+// The baseline code or, on x86-64, the AVX2 code chosen once at run time: the default build runs
+// on any x86-64 and uses AVX2 where it exists. Rejected: -march=native (the binary must run on
+// any CI machine); compiling the whole file twice (inline functions it shares with other files
+// could be linked in their AVX2 form and fault on an older CPU), or the whole substep as an AVX2
+// clone (no faster).
+bool UseAvx2([[maybe_unused]] bool allow_avx2) {
+#if defined(__x86_64__) && !defined(__AVX2__)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2 && allow_avx2;
+#else
+  return false;
+#endif
+}
 
 void BatchForces(Rate rate, bool direct_in, bool allow_avx2, const BatchIo& io) {
   std::fill(io.degenerate, io.degenerate + kMaskWords, 0);

@@ -78,6 +78,9 @@ void EvaluateForces(const Model& model, State& state, Workspace& ws, bool filter
 // the atom, so no pass of their own).
 void FieldForces(const Model& model, const State& state, Workspace& ws, Real* force, int stride);
 void ToolForces(const State& state, Workspace& ws, Real* force, int stride);
+// full_step_batch.cc — whether the vectorised paths take their AVX2 code: allowed (StepOptions::
+// fused_avx2) and the CPU has it (asked once).
+bool UseAvx2(bool allow_avx2);
 // Workspace::atom_force_external (num_atoms x 3), or null when there are none.
 const Real* ExternalForces(const Model& model, const Workspace& ws);
 
