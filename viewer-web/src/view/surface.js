@@ -7,6 +7,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { FrameLoop } from './frame_loop.js';
+import { ToolMesh } from './tool.js';
 
 const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
@@ -113,18 +114,12 @@ export class SurfaceView {
     /** Time spent on normals, ms (the bench counts it as the page's work). */
     this.normalsMs = 0;
     // The tool and the force.
-    this.toolMaterial = new THREE.MeshStandardMaterial({ color: kToolFree, transparent: true, opacity: 0.5, depthWrite: false });
-    this.tool = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), this.toolMaterial);
+    this.tool = new ToolMesh(kToolFree, 0x1d5fa8);
     this.tool.visible = false;
     this.scene.add(this.tool);
-    this.arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 1, 0x1d5fa8);
-    this.arrow.visible = false;
-    // Drawn over everything, so that the force shows through the tool and the tissue.
-    for (const m of [this.arrow.line.material, this.arrow.cone.material]) /** @type {THREE.Material} */ (m).depthTest = false;
-    this.arrow.renderOrder = 10;
-    this.scene.add(this.arrow);
     this.forceDir = new THREE.Vector3();
     this.toolRadius = 1.5;
+    this.tool.setRadius(this.toolRadius);
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
     // The camera is fitted at the first surface, and again whenever the tool goes where it has
@@ -295,17 +290,15 @@ export class SurfaceView {
   setTool(x, y, z, fx, fy, fz, contact, grasp) {
     this.tool.visible = true;
     this.tool.position.set(x, y, z);
-    this.tool.scale.setScalar(this.toolRadius);
     if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
-    this.toolMaterial.color.setHex(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
+    this.tool.setColor(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
     const f = Math.hypot(fx, fy, fz);
-    this.arrow.visible = f > 1e-9;
-    if (this.arrow.visible) {
+    if (f > 1e-9) {
       this.forceDir.set(fx / f, fy / f, fz / f);
-      this.arrow.position.set(x, y, z);
-      this.arrow.setDirection(this.forceDir);
       const length = this.toolRadius + f * this.forceScale;
-      this.arrow.setLength(length, Math.min(0.4 * length, this.toolRadius * 0.6), this.toolRadius * 0.35);
+      this.tool.setForce(this.forceDir, length, Math.min(0.4 * length, this.toolRadius * 0.6), this.toolRadius * 0.35);
+    } else {
+      this.tool.hideForce();
     }
     this.invalidate();
   }
@@ -313,6 +306,7 @@ export class SurfaceView {
   /** @param {number} radius model units */
   setToolRadius(radius) {
     this.toolRadius = radius > 0 ? radius : 1.5;
+    this.tool.setRadius(this.toolRadius);
     this.invalidate();
   }
 
@@ -445,6 +439,7 @@ export class SurfaceView {
     this.resizeObserver.disconnect();
     this.controls.dispose();
     this.geometry.dispose();
+    this.tool.dispose();
     this.renderer.dispose();
     this.renderer.domElement.remove();
   }

@@ -1,0 +1,92 @@
+// The tool and force as one mesh (viewer-web/src/view/tool.js): the arrow starts at the tool's
+// centre and ends at the force's length along its direction, its faces and normals point
+// outward, it is drawn after the sphere and only while there is a force, and the sphere takes
+// its state's colour, half see-through.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import * as THREE from '../../viewer-web/node_modules/three/build/three.module.js';
+import { ToolMesh } from '../../viewer-web/src/view/tool.js';
+
+/** @param {ToolMesh} m @param {number} v */
+const vertex = (m, v) => new THREE.Vector3().fromArray(m.positions, 3 * v);
+/** @param {ToolMesh} m @param {number} v */
+const normal = (m, v) => new THREE.Vector3().fromArray(m.normals, 3 * v);
+
+test('the arrow runs from the centre along the force, its length and head as asked', () => {
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  m.setRadius(1.5);
+  const dir = new THREE.Vector3(0.4, -0.2, 1).normalize();
+  const length = 4.5, headLength = 0.9, headWidth = 0.525;
+  m.setForce(dir, length, headLength, headWidth);
+  const n = m.positions.length / 3;
+  const arrow = [];
+  for (let v = m.numSphere; v < n; v++) arrow.push(vertex(m, v));
+  // Every arrow vertex lies on the axis's segment [0, length], within the head's half width of it.
+  let tip = 0;
+  for (const p of arrow) {
+    const along = p.dot(dir);
+    const off = p.clone().sub(dir.clone().multiplyScalar(along)).length();
+    assert.ok(along >= -1e-6 && along <= length + 1e-6, `along ${along}`);
+    assert.ok(off <= headWidth / 2 + 1e-6, `off the axis by ${off}`);
+    tip = Math.max(tip, along);
+  }
+  assert.ok(Math.abs(tip - length) < 1e-5, `the tip at ${tip}, not ${length}`);
+  // The head's base: widest ring at length - headLength.
+  const widest = arrow.filter((p) => Math.abs(p.clone().sub(dir.clone().multiplyScalar(p.dot(dir))).length() - headWidth / 2) < 1e-5);
+  assert.ok(widest.length >= 12, `${widest.length} vertices on the head's rim`);
+  for (const p of widest) assert.ok(Math.abs(p.dot(dir) - (length - headLength)) < 1e-5);
+});
+
+test('the sphere has the radius, and every face of the mesh faces outward', () => {
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  m.setRadius(2);
+  const dir = new THREE.Vector3(0, 0, -1);
+  m.setForce(dir, 5, 1, 0.7);
+  for (let v = 0; v < m.numSphere; v++) assert.ok(Math.abs(vertex(m, v).length() - 2) < 1e-5);
+  const index = /** @type {THREE.BufferAttribute} */ (m.geometry.index).array;
+  let faces = 0;
+  for (let t = 0; t < index.length; t += 3) {
+    const [a, b, c] = [index[t], index[t + 1], index[t + 2]];
+    const pa = vertex(m, a), pb = vertex(m, b), pc = vertex(m, c);
+    const face = pb.clone().sub(pa).cross(pc.clone().sub(pb));
+    if (face.lengthSq() < 1e-16) continue;  // the sphere's poles
+    // Counter-clockwise seen from outside: the face normal agrees with the vertices' normals.
+    const avg = normal(m, a).add(normal(m, b)).add(normal(m, c));
+    assert.ok(face.dot(avg) > 0, `triangle ${t / 3} (${a}, ${b}, ${c}) faces inward`);
+    faces++;
+  }
+  assert.ok(faces > m.numSphereIndices / 3, 'the arrow has faces');
+  for (let v = 0; v < m.positions.length / 3; v++) assert.ok(Math.abs(normal(m, v).length() - 1) < 1e-5, `normal ${v}`);
+});
+
+test('the arrow is drawn after the sphere, and only with a force', () => {
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  assert.equal(m.geometry.drawRange.count, m.numSphereIndices, 'no force yet: the sphere alone');
+  m.setForce(new THREE.Vector3(1, 0, 0), 3, 0.9, 0.5);
+  assert.ok(m.geometry.drawRange.count >= /** @type {THREE.BufferAttribute} */ (m.geometry.index).count);
+  const index = /** @type {THREE.BufferAttribute} */ (m.geometry.index).array;
+  for (let i = 0; i < m.numSphereIndices; i++) assert.ok(index[i] < m.numSphere, 'the sphere first');
+  for (let i = m.numSphereIndices; i < index.length; i++) assert.ok(index[i] >= m.numSphere, 'then the arrow');
+  m.hideForce();
+  assert.equal(m.geometry.drawRange.count, m.numSphereIndices);
+});
+
+test('the sphere is half see-through in its state colour; the arrow opaque', () => {
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  m.setColor(0xe08a1e);
+  const want = new THREE.Color(0xe08a1e);
+  for (let v = 0; v < m.numSphere; v++) {
+    assert.deepEqual(Array.from(m.colors.subarray(4 * v, 4 * v + 4)), [Math.fround(want.r), Math.fround(want.g), Math.fround(want.b), 0.5]);
+  }
+  const arrow = new THREE.Color(0x1d5fa8);
+  assert.deepEqual(Array.from(m.colors.subarray(4 * m.numSphere, 4 * m.numSphere + 4)),
+    [Math.fround(arrow.r), Math.fround(arrow.g), Math.fround(arrow.b), 1]);
+});
+
+test('a force changed several times before a render uploads the arrow once', () => {
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  const pos = /** @type {THREE.BufferAttribute} */ (m.geometry.attributes.position);
+  pos.clearUpdateRanges();
+  for (let i = 0; i < 3; i++) m.setForce(new THREE.Vector3(0, 1, 0), 2 + i, 0.5, 0.3);
+  assert.deepEqual(pos.updateRanges, [{ start: 3 * m.numSphere, count: pos.array.length - 3 * m.numSphere }]);
+});
