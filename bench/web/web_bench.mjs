@@ -10,7 +10,7 @@
 //   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
-import { mkdtempSync, readFileSync, readdirSync } from 'node:fs';
+import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
 import { loadavg, tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -35,6 +35,8 @@ const { chromium } = await import(join(root, 'tests', 'web', 'node_modules', 'pl
 
 // The page bundle (the viewer's own modules, as the viewer bundles them).
 const out = mkdtempSync(join(tmpdir(), 'idms-web-bench-'));
+// Removed however the bench ends (a failed run too).
+process.on('exit', () => rmSync(out, { recursive: true, force: true }));
 await esbuild.build({ entryPoints: [join(here, 'page.js')], outdir: out, bundle: true, format: 'esm', minify: true,
   target: 'es2020', nodePaths: [join(root, 'viewer-web', 'node_modules')], logLevel: 'warning' });
 
