@@ -90,3 +90,17 @@ test('a force changed several times before a render uploads the arrow once', () 
   for (let i = 0; i < 3; i++) m.setForce(new THREE.Vector3(0, 1, 0), 2 + i, 0.5, 0.3);
   assert.deepEqual(pos.updateRanges, [{ start: 3 * m.numSphere, count: pos.array.length - 3 * m.numSphere }]);
 });
+
+test('every change is uploaded, also when its range is still pending from the first upload', () => {
+  // three.js uploads a new buffer whole and leaves the ranges asked for before it pending.
+  const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
+  const color = /** @type {THREE.BufferAttribute} */ (m.geometry.attributes.color);
+  const uploaded = color.version;
+  m.setColor(0xe08a1e);
+  assert.ok(color.version > uploaded, 'the new colour is uploaded');
+  const pos = /** @type {THREE.BufferAttribute} */ (m.geometry.attributes.position);
+  const before = pos.version;
+  m.setRadius(3);
+  assert.ok(pos.version > before, 'the new radius is uploaded');
+  assert.equal(pos.updateRanges.filter((r) => r.start === 0).length, 1, 'its range once');
+});

@@ -147,10 +147,12 @@ export class ToolMesh extends THREE.Mesh {
   upload(name, first, count) {
     const attr = /** @type {THREE.BufferAttribute} */ (this.geometry.attributes[name]);
     const start = first * attr.itemSize, size = count * attr.itemSize;
+    attr.needsUpdate = true;
+    // A range already pending (three.js keeps them until an update, not a first upload) is not
+    // added again.
     const ranges = attr.updateRanges;
     for (let i = 0; i < ranges.length; i++) if (ranges[i].start === start && ranges[i].count === size) return;
     attr.addUpdateRange(start, size);
-    attr.needsUpdate = true;
   }
 
   dispose() {
