@@ -1,5 +1,5 @@
-// Session recordings: idms's three channels on MCAP, and reading them back with seek-to-time that
-// rebuilds the mesh from the latest keyframe.
+// Session recordings: idms's channels on MCAP, and reading them back with seek-to-time that
+// rebuilds the mesh from the latest keyframe and replays the device samples that led there.
 #include "idms/protocol/recording.h"
 
 #include <google/protobuf/descriptor.h>
@@ -146,24 +146,29 @@ bool RecordingReader::Setup(const RecordingReaderOptions& options, std::string* 
 bool RecordingReader::Seek(uint64_t t_ns, std::string* error) {
   if (error != nullptr) error->clear();
   seek_ns_ = t_ns;
+  mesh_from_ns_ = t_ns;
   awaiting_keyframe_ = false;
-  const uint64_t end = std::numeric_limits<uint64_t>::max();
   if (selected_.empty()) return true;  // no selected topic in the file: Next() reads nothing
-  // With /mesh, start at the latest keyframe at or before t.
-  uint64_t keyframe_ns = 0;
+  // With /mesh, the catch-up's /mesh frames start at the latest keyframe at or before t.
   if (options_.mesh && mesh_channel_ != 0 && t_ns > 0) {
     std::string find_error;
+    uint64_t keyframe_ns = 0;
     if (FindKeyframe(t_ns, &keyframe_ns, &find_error)) {
-      mcap_.Seek(keyframe_ns, end, selected_);
+      mesh_from_ns_ = keyframe_ns;
       awaiting_keyframe_ = true;
-      return true;
-    }
-    if (!find_error.empty()) {
+    } else if (!find_error.empty()) {
       if (error != nullptr) *error = find_error;
       return false;
     }
   }
-  mcap_.Seek(t_ns, end, selected_);
+  // Its /device batches at that keyframe or device_history_ns back, whichever is earlier, but not
+  // before the start (t - history could wrap around).
+  const uint64_t history_from = t_ns - std::min(t_ns - std::min(t_ns, start_ns()), options_.device_history_ns);
+  device_from_ns_ = std::min(history_from, mesh_from_ns_);
+  // One merged read from the earlier of the two: Next() drops what comes before its topic's start
+  // by log time alone, without parsing it.
+  mcap_.Seek(options_.device && device_channel_ != 0 ? device_from_ns_ : mesh_from_ns_,
+             std::numeric_limits<uint64_t>::max(), selected_);
   return true;
 }
 
@@ -206,10 +211,14 @@ bool RecordingReader::Next(RecordedMessage* out, std::string* error) {
   McapMessage m;
   while (mcap_.Next(&m, error)) {
     // Before the seek time the /mesh frames from the keyframe on are replayed, and the /device
-    // samples since that keyframe: a viewer that seeks sees the tool where it was and the force
-    // that led there, not only the surface.
+    // batches from device_from_ns_: a viewer that seeks sees the surface, the tool where it was and
+    // the force that led there. Events and annotations are not: a viewer has them from the
+    // session's record, and replayed on every seek they would be listed again.
     const bool before = m.log_time_ns < seek_ns_;
-    if (before && m.channel_id != mesh_channel_ && (m.channel_id != device_channel_ || awaiting_keyframe_)) continue;
+    const uint64_t from = m.channel_id == mesh_channel_     ? mesh_from_ns_
+                          : m.channel_id == device_channel_ ? device_from_ns_
+                                                            : seek_ns_;
+    if (m.log_time_ns < from) continue;
     if (!Parse(m, out, error)) return false;
     if (awaiting_keyframe_ && m.channel_id == mesh_channel_) {
       if (!out->envelope.has_mesh_keyframe()) continue;

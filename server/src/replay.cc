@@ -1,7 +1,8 @@
 // /ws/replay/{id}: a recording played back to one viewer, with play, pause, seek and speed
-// (PlaybackControl), and PlaybackState after each control and once a second. Each replay viewer
-// has its own reader, so many replays of one recording are independent. Reads run on the worker
-// pool (disk), never on an I/O thread; a seek finds the latest keyframe through the chunk index.
+// (PlaybackControl), and PlaybackState before a seek's catch-up, after each control and once a
+// second. Each replay viewer has its own reader, so many replays of one recording are independent.
+// Reads run on the worker pool (disk), never on an I/O thread; a seek finds the latest keyframe
+// through the chunk index and sends the device samples of the viewer's plot window with it.
 #include <google/protobuf/text_format.h>
 
 #include <boost/asio/post.hpp>
@@ -10,6 +11,7 @@
 #include <cmath>
 
 #include "idms/protocol/envelope.h"
+#include "idms/protocol/mesh_mirror.h"
 #include "idms/protocol/recording.h"
 #include "idms/server/log.h"
 #include "sessions.h"
@@ -22,6 +24,10 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 constexpr size_t kReplayQueueLimit = 256;  // frames queued for the viewer before playback waits
+// A seek's catch-up carries the device samples of this long before the new time: the browser
+// viewer's plot window (kWindowS in viewer-web/src/pages/session.js, LiveView's windowS), so that
+// its plots are full at once, however far back the keyframe is.
+constexpr uint64_t kPlotWindowNs = 5'000'000'000;
 
 class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<ReplayEndpoint> {
  public:
@@ -69,7 +75,9 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
 
   void Open() {
     std::string error;
-    if (!reader_.Open(path_, RecordingReaderOptions{}, &error)) {
+    RecordingReaderOptions options;
+    options.device_history_ns = kPlotWindowNs;
+    if (!reader_.Open(path_, options, &error)) {
       Error("cannot read the recording: " + error);
       if (peer_) peer_->Close(1011, "cannot read the recording");
       return;
@@ -85,30 +93,58 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
       google::protobuf::TextFormat::ParseFromString(scene->second, w.mutable_welcome()->mutable_scene());
     }
     Send(w);
-    SeekTo(0);
-    SendState();
+    if (!SeekTo(0)) SendState();  // SeekTo sent it when it could seek
     Heartbeat();
   }
 
-  // Positions at session time t_s and sends the surface there (keyframe, then deltas up to t).
-  void SeekTo(double t_s) {
+  // Positions at session time t_s and sends, at once: the PlaybackState at t_s, which tells the
+  // viewer that what follows is the new time's (it restarts its plots there), then the catch-up
+  // (RecordingReader::Seek): the device samples of the plot window before t_s, in log-time order,
+  // and the surface at t_s as one keyframe: the recorded keyframe at or before t_s with the
+  // deltas after it, applied here (a few hundred deltas at the default keyframe interval, tens
+  // of thousands at a long one, would otherwise each be a frame to the viewer, past its queue's
+  // limit). False (an error sent) when the recording is damaged there.
+  bool SeekTo(double t_s) {
     const double duration = TimeS(reader_.end_ns());
     t_s = std::clamp(t_s, 0.0, duration);
     const uint64_t target = reader_.start_ns() + static_cast<uint64_t>(std::llround(t_s * 1e9));
     std::string error;
     pending_.reset();
-    if (!reader_.Seek(target, &error)) return Error("seek: " + error);
+    if (!reader_.Seek(target, &error)) {
+      Error("seek: " + error);
+      return false;
+    }
     position_ns_ = target;
-    // The catch-up frames go at once; the first message at or after t waits in pending_.
+    SendState();
+    // The catch-up goes at once; the first message at or after t waits in pending_.
     RecordedMessage m;
+    bool surface = false;
     while (reader_.Next(&m, &error)) {
       if (!m.catch_up) {
         pending_ = std::move(m);
         break;
       }
-      Send(m.envelope);
+      if (m.topic != RecordingTopic::kMesh) {
+        Send(m.envelope);
+        continue;
+      }
+      // A frame the recording cannot apply (lost before it was written) leaves the surface at the
+      // last one applied; the viewer then waits for the next keyframe, as it would have.
+      std::string mesh_error;
+      if (catch_up_.Apply(m.envelope, &mesh_error) == MirrorStatus::kOk) surface = true;
+    }
+    if (!error.empty()) Error("recording: " + error);
+    if (surface) {
+      v1::Envelope keyframe;
+      std::string mesh_error;
+      if (catch_up_.MakeKeyframe(keyframe.mutable_mesh_keyframe(), &mesh_error)) {
+        Send(keyframe);
+      } else {
+        Error("recording: " + mesh_error);
+      }
     }
     Anchor();
+    return true;
   }
 
   void Anchor() {
@@ -208,6 +244,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
   std::string path_, id_;
   RecordingReader reader_;
   std::optional<RecordedMessage> pending_;
+  MeshMirror catch_up_;  // a seek's surface, sent as one keyframe
   bool playing_ = false, closed_ = false;
   double speed_ = 1;
   uint64_t position_ns_ = 0, anchor_ns_ = 0;

@@ -1,6 +1,6 @@
 // RecordingWriter and RecordingReader (protocol/src/recording.cc): a simulated session recorded
-// and read back; seek-to-time rebuilding the mesh from the latest keyframe; the agent's
-// device-only reading; a crashed recording; schemas Foxglove can decode. Also keeps the seeds of
+// and read back; seek-to-time rebuilding the mesh from the latest keyframe, with a device history;
+// the agent's device-only reading; a crashed recording; schemas Foxglove can decode. Also keeps the seeds of
 // tests/fuzz/corpus/mcap_fuzz (rewritten with IDMS_WRITE_FUZZ_SEEDS=1) and writes the recording
 // tests/protocol/mcap_check.py checks.
 #include "idms/protocol/recording.h"
@@ -252,6 +252,98 @@ TEST(Recording, SeekRebuildsTheMeshFromTheLatestKeyframe) {
     EXPECT_EQ(seeked.sequence(), full.sequence()) << "t = " << t_s;
     EXPECT_TRUE(std::ranges::equal(seeked.quantized(), full.quantized())) << "t = " << t_s;
   }
+}
+
+// "N frames logged from A to B ms" (after kT0): what a catch-up holds, short enough to read.
+std::string Span(const std::vector<uint64_t>& log_ns) {
+  if (log_ns.empty()) return "none";
+  return std::to_string(log_ns.size()) + " frames logged from " + std::to_string((log_ns.front() - kT0) / 1'000'000) +
+         " to " + std::to_string((log_ns.back() - kT0) / 1'000'000) + " ms";
+}
+
+// The catch-up with a device history longer than the keyframe interval (the server asks for its
+// viewer's 5 s plot window): /device from t - history on, /mesh only from the keyframe at or before
+// t, no events; each topic in log-time order, the keyframe before any delta.
+TEST(Recording, SeekReplaysTheDeviceHistory) {
+  const std::string path = TempPath("history.mcap");
+  RecordingWriterOptions writer_options = DefaultOptions();
+  writer_options.mcap.chunk_max_age_ns = 200'000'000;
+  const std::vector<Frame> written = Record(path, 6.0, writer_options, 1.0);
+  constexpr uint64_t kHistoryNs = 2'500'000'000;
+  RecordingReaderOptions options;
+  options.device_history_ns = kHistoryNs;
+  RecordingReader reader;
+  std::string error;
+  ASSERT_TRUE(reader.Open(path, options, &error)) << error;
+  for (const double t_s : {0.0, 0.4, 1.7, 3.25, 4.0, 5.999, 7.0}) {
+    const uint64_t t = kT0 + static_cast<uint64_t>(t_s * 1e9);
+    ASSERT_TRUE(reader.Seek(t, &error)) << error;
+    const std::vector<RecordedMessage> read = ReadAll(reader, &error);
+    ASSERT_EQ(error, "");
+    // What it should be, from what was written: the latest keyframe at or before t, and the
+    // catch-up's /device start.
+    uint64_t keyframe_ns = t;
+    for (const Frame& f : written) {
+      v1::Envelope env;
+      ASSERT_TRUE(ParseEnvelope(f.envelope, &env, &error));
+      if (f.log_ns <= t && env.has_mesh_keyframe()) keyframe_ns = f.log_ns;
+    }
+    const uint64_t device_from = std::min(keyframe_ns, t > kT0 + kHistoryNs ? t - kHistoryNs : kT0);
+    std::map<RecordingTopic, std::vector<std::string>> caught, expected_caught;
+    std::map<RecordingTopic, std::vector<uint64_t>> caught_ns, expected_ns;
+    for (const Frame& f : written) {
+      const bool in = f.topic == RecordingTopic::kDevice ? f.log_ns >= device_from
+                      : f.topic == RecordingTopic::kMesh ? f.log_ns >= keyframe_ns
+                                                         : false;
+      if (in && f.log_ns < t) {
+        expected_caught[f.topic].push_back(f.envelope);
+        expected_ns[f.topic].push_back(f.log_ns);
+      }
+    }
+    // The catch-up: before t, in log-time order, the first /mesh frame a keyframe.
+    size_t n = 0;
+    for (; n < read.size() && read[n].catch_up; ++n) {
+      EXPECT_LT(read[n].log_time_ns, t);
+      EXPECT_GE(read[n].log_time_ns, n > 0 ? read[n - 1].log_time_ns : 0);
+      std::vector<std::string>& topic = caught[read[n].topic];
+      EXPECT_TRUE(read[n].topic != RecordingTopic::kMesh || read[n].envelope.has_mesh_keyframe() == topic.empty());
+      SerializeEnvelope(read[n].envelope, &topic.emplace_back());
+      caught_ns[read[n].topic].push_back(read[n].log_time_ns);
+    }
+    for (const RecordingTopic topic : {RecordingTopic::kDevice, RecordingTopic::kMesh, RecordingTopic::kEvents}) {
+      EXPECT_EQ(Span(caught_ns[topic]), Span(expected_ns[topic])) << "t = " << t_s << ", topic " << int(topic);
+    }
+    EXPECT_TRUE(caught == expected_caught) << "t = " << t_s;
+    // Past the first keyframe interval the plots' history reaches t - history, before the keyframe.
+    if (t_s > 3) {
+      ASSERT_FALSE(caught[RecordingTopic::kDevice].empty());
+      v1::Envelope first;
+      ASSERT_TRUE(ParseEnvelope(caught[RecordingTopic::kDevice][0], &first, &error));
+      EXPECT_NEAR(first.device_samples().samples(0).time_s(), t_s - kHistoryNs * 1e-9, 0.021) << "t = " << t_s;
+      EXPECT_GT(keyframe_ns, device_from) << "t = " << t_s;
+    }
+    // Then every topic from t on.
+    std::vector<std::string> after, expected_after;
+    for (size_t i = n; i < read.size(); ++i) {
+      EXPECT_FALSE(read[i].catch_up);
+      SerializeEnvelope(read[i].envelope, &after.emplace_back());
+    }
+    for (const Frame& f : written) {
+      if (f.log_ns >= t) expected_after.push_back(f.envelope);
+    }
+    EXPECT_EQ(after, expected_after) << "t = " << t_s;
+  }
+  // Without /mesh (no keyframe to start from), the history alone.
+  options.mesh = false;
+  ASSERT_TRUE(reader.Open(path, options, &error)) << error;
+  const uint64_t t = kT0 + 4'000'000'000;
+  ASSERT_TRUE(reader.Seek(t, &error)) << error;
+  const std::vector<RecordedMessage> read = ReadAll(reader, &error);
+  ASSERT_FALSE(read.empty());
+  EXPECT_TRUE(read[0].catch_up);
+  EXPECT_EQ(read[0].topic, RecordingTopic::kDevice);
+  EXPECT_GE(read[0].log_time_ns, t - kHistoryNs);
+  EXPECT_LT(read[0].log_time_ns, t - kHistoryNs + 20'000'000);
 }
 
 TEST(Recording, DeviceOnlyForTheAgentsReplay) {

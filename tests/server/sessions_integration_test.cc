@@ -268,7 +268,13 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
   ASSERT_TRUE(server.ready()) << server.Log();
   const uint16_t port = server.port();
   const std::string observer = server.Token("observer");
-  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(server, dir, 3), dir + "/agent.log");
+  // 7 s with a keyframe every second: a seek's catch-up reaches further back than its keyframe.
+  const std::string scene = dir + "/palpate.scene";
+  std::ofstream(scene) << ReadText(std::string(IDMS_SOURCE_DIR) + "/models/palpate.scene")
+                       << "keyframe_interval_s: 1\n";
+  std::vector<std::string> args = AgentArgs(server, dir, 7);
+  args.insert(args.end(), {"--scene", scene});
+  ChildProcess agent(IDMS_AGENT_BIN, args, dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
   std::string id;
   ASSERT_TRUE(Eventually([&] {
@@ -277,7 +283,7 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
     id = s[0]["id"];
     return true;
   }));
-  // Welcome, then the state: paused at 0 of about 3 s.
+  // Welcome, then the state: paused at 0 of about 7 s.
   asio::io_context io;
   websocket::stream<beast::tcp_stream> ws(io);
   beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
@@ -310,8 +316,8 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
   e = read();
   ASSERT_TRUE(e.has_playback_state());
   EXPECT_FALSE(e.playback_state().playing());
-  // On the session's clock: 3 s of simulation is 3 s of replay, however late frames arrived.
-  EXPECT_NEAR(e.playback_state().duration_s(), 3.0, 0.01);
+  // On the session's clock: 7 s of simulation is 7 s of replay, however late frames arrived.
+  EXPECT_NEAR(e.playback_state().duration_s(), 7.0, 0.01);
   // At 10x the whole recording plays in about a tenth of its length, every tick in order.
   send(v1::PlaybackControl::ACTION_SET_SPEED, 10);
   send(v1::PlaybackControl::ACTION_PLAY, 0);
@@ -329,17 +335,53 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
     if (e.has_playback_state() && !e.playback_state().playing() && !ticks.empty()) break;
   }
   const double played_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  ASSERT_EQ(ticks.size(), 3000u);
+  ASSERT_EQ(ticks.size(), 7000u);
   for (size_t i = 0; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], i);
   EXPECT_EQ(gaps, 0);
-  EXPECT_GT(played_s, 0.2);
-  EXPECT_LT(played_s, 1.5);
-  // A seek to 1.5 s sends the surface there first: a keyframe, then the deltas up to 1.5 s.
-  send(v1::PlaybackControl::ACTION_SEEK, 1.5);
-  e = read();
-  EXPECT_TRUE(e.has_mesh_keyframe()) << EnvelopeBodyName(e);
-  while (!e.has_playback_state()) e = read();
-  EXPECT_NEAR(e.playback_state().time_s(), 1.5, 0.01);
+  EXPECT_GT(played_s, 0.5);
+  EXPECT_LT(played_s, 3.5);
+  // A seek to 6.5 s: first the state there (a viewer restarts its plots), then the catch-up: the
+  // device samples of the viewer's 5 s plot window, from 1.5 s, though the latest keyframe is
+  // within the last second; the surface at 6.5 s as one keyframe (the server applied the deltas
+  // since the recorded keyframe); then the state again.
+  send(v1::PlaybackControl::ACTION_SEEK, 6.5);
+  do {
+    e = read();
+    ASSERT_FALSE(e.has_device_samples() || e.has_mesh_keyframe() || e.has_mesh_delta()) << EnvelopeBodyName(e);
+  } while (!e.has_playback_state() || std::abs(e.playback_state().time_s() - 6.5) > 0.01);
+  std::vector<uint64_t> caught;
+  MeshMirror seeked;
+  double keyframe_s = -1;
+  int mesh_frames = 0;
+  for (e = read(); !e.has_playback_state(); e = read()) {
+    if (e.has_device_samples()) {
+      for (const auto& s : e.device_samples().samples()) caught.push_back(s.tick());
+    }
+    if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+      ++mesh_frames;
+      EXPECT_TRUE(e.has_mesh_keyframe()) << EnvelopeBodyName(e);
+      EXPECT_EQ(seeked.Apply(e, &error), MirrorStatus::kOk) << error;
+      keyframe_s = seeked.time_s();
+    }
+  }
+  EXPECT_NEAR(e.playback_state().time_s(), 6.5, 0.01);
+  EXPECT_EQ(mesh_frames, 1);
+  // The last mesh frame before 6.5 s (at 60 Hz), not the recorded keyframe (at about 6 s).
+  EXPECT_GT(keyframe_s, 6.4);
+  EXPECT_LE(keyframe_s, 6.5);
+  ASSERT_FALSE(caught.empty());
+  EXPECT_GE(caught.front(), 1480u);
+  EXPECT_LE(caught.front(), 1540u);
+  EXPECT_GE(caught.back(), 6460u);
+  EXPECT_LT(caught.back(), 6500u);
+  for (size_t i = 1; i < caught.size(); ++i) ASSERT_EQ(caught[i], caught[i - 1] + 1);
+  // Played on from there, the recorded deltas apply on top of that keyframe.
+  send(v1::PlaybackControl::ACTION_PLAY, 0);
+  do e = read();
+  while (!e.has_mesh_delta() && !e.has_mesh_keyframe());
+  EXPECT_EQ(seeked.Apply(e, &error), MirrorStatus::kOk) << EnvelopeBodyName(e) << ": " << error;
+  EXPECT_GT(seeked.time_s(), keyframe_s);
+  send(v1::PlaybackControl::ACTION_PAUSE, 0);
   // Speed outside 0.1..10: an error event, and the replay carries on.
   send(v1::PlaybackControl::ACTION_SET_SPEED, 20);
   do e = read();

@@ -1,7 +1,8 @@
 // A real agent publishes a palpation to a real server; the browser lists it live, draws the
 // surface moving with the tool and force, grows the force plot, serves a late joiner at once,
 // relays an admin's keyframe request, takes an annotation; then replays the recording: the URL's
-// t opens there, play advances the time and the URL, speed changes, the annotation is on the timeline.
+// t opens there, play advances the time and the URL, speed changes, the annotation is on the timeline;
+// opened or sought past keyframes (every 5 s), paused, the plots hold the whole 5 s before the time.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { Server, tempDir, launchBrowser, login, shot, startAgent } from './harness.mjs';
@@ -150,7 +151,7 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await page.waitForFunction(() => Math.abs(Number(/** @type {HTMLInputElement} */ (document.getElementById('seek')).value) - 4.5) < 0.05);
   await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '4.50');
   // Paused there, the force plot shows the samples that led to 4.5 s at once (the seek's
-  // catch-up since the keyframe at or before it, here the session's first), not a blank until Play.
+  // catch-up: the plots' 5 s window before it, here all since the start), not a blank until Play.
   await page.waitForFunction(() => /** @type {any} */ (window).__idms.forceShown >= 1000, undefined, { timeout: 10000 }).catch(() => {});
   const paused = await state(page);
   assert.ok(paused.forceShown >= 1000, `the paused replay's force plot shows ${paused.forceShown} samples`);
@@ -187,5 +188,46 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await page.focus('#seek');
   await page.keyboard.press('Home');
   await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '0.00');
+  assert.deepEqual(errors, []);
+});
+
+test('replay: opened or sought past a keyframe, paused, the plots hold the 5 s before the time', async () => {
+  const { page, errors } = browser;
+  assert.ok(sessionId, 'the live test ran');
+  /** The paused replay at t s: the force plot from t - 5 to t, the health panel at t. @param {number} t @param {string} how */
+  const check = async (t, how) => {
+    await page.waitForFunction((t) => new URL(location.href).searchParams.get('t') === t.toFixed(2), t);
+    await page.waitForFunction((t) => {
+      const s = /** @type {any} */ (window).__idms;
+      return s.forceShown >= 4900 && Math.abs(s.forceFirstS - (t - 5)) < 0.1 && Math.abs(s.forceLastS - t) < 0.1;
+    }, t, { timeout: 10000 }).catch(() => {});
+    const s = await state(page);
+    const said = `${how} ${t} s: the force plot shows ${s.forceShown} samples, ${s.forceFirstS} s to ${s.forceLastS} s`;
+    assert.ok(s.forceShown >= 4900, said);
+    assert.ok(Math.abs(s.forceFirstS - (t - 5)) < 0.1, said);
+    assert.ok(Math.abs(s.forceLastS - t) < 0.1, said);
+    assert.equal(s.gaps + s.invalid, 0, s.lastError);
+    assert.equal(await page.getAttribute('#play', 'aria-pressed'), 'false');
+    // The health panel's session time is the replay's, not the last sample's (nor the last stats').
+    const clock = `0:${t.toFixed(3).padStart(6, '0')}`;
+    await page.waitForFunction((c) => (document.getElementById('health')?.innerText ?? '').includes(c), clock,
+      { timeout: 5000 }).catch(() => {});
+    assert.match(await page.locator('#health').innerText(), new RegExp(`Session time\\s+${clock.replace('.', '\\.')}`));
+  };
+  /** A seek from the slider, as a drag ends. @param {number} t */
+  const seek = (t) => page.evaluate((t) => {
+    const slider = /** @type {HTMLInputElement} */ (document.getElementById('seek'));
+    slider.value = String(t);
+    slider.dispatchEvent(new Event('change'));
+  }, t);
+  // Opened there: 3.5 s past the keyframe at 10 s (or a later one).
+  await page.goto(`${server.base}/replay/${sessionId}?t=13.5`);
+  await check(13.5, 'opened at');
+  await shot(page, 'replay-seek-window.png');
+  // Sought back and forth, paused: the plots restart each time, with no sample of the last time.
+  await seek(7.06);
+  await check(7.06, 'sought back to');
+  await seek(18.25);
+  await check(18.25, 'sought on to');
   assert.deepEqual(errors, []);
 });

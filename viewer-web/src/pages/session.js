@@ -11,6 +11,7 @@ import { Timeline } from './timeline.js';
 import { LiveView } from './live_view.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel } from './session_panels.js';
 
+/** Seconds the time plots keep; the server's replay sends as much with a seek (kPlotWindowNs in server/src/replay.cc). */
 const kWindowS = 5;
 
 /**
@@ -18,7 +19,8 @@ const kWindowS = 5;
  * @typedef {{mode: string, frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string, lastInvalid: string,
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
- *   contactSamples: number, forcePoints: number, forceShown: number, depthSamples: number}} PageState
+ *   contactSamples: number, forcePoints: number, forceShown: number, forceFirstS: number, forceLastS: number,
+ *   depthSamples: number}} PageState
  */
 
 /**
@@ -70,11 +72,8 @@ function layout(id, mode, panels) {
 
 /** @param {Parts} p @param {import('../codec/frames.js').Frame} env */
 function dispatch(p, env) {
-  if (env.meshKeyframe) {
-    // A seek's catch-up starts: the plots restart with the samples that follow it.
-    if (p.timeline?.onKeyframe()) p.view.clearPlots();
-    p.view.applyKeyframe(env.meshKeyframe);
-  } else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
+  if (env.meshKeyframe) p.view.applyKeyframe(env.meshKeyframe);
+  else if (env.meshDelta) p.view.applyDelta(env.meshDelta);
   else if (env.deviceSamples) {
     const batch = env.deviceSamples;
     p.view.onSamples(batch.samples, batch.count);
@@ -85,7 +84,8 @@ function dispatch(p, env) {
   } else if (env.sessionEvent) p.onEvent(env.sessionEvent);
   else if (env.annotation) p.notes.add(env.annotation);
   else if (env.playbackState) {
-    // A confirmed seek without a catch-up: the plots restart at the new time.
+    // A confirmed seek: its catch-up follows (the plot window's samples before the new time, then
+    // the surface there), so the plots restart here and are full at once, paused or not.
     if (p.timeline?.onState(env.playbackState)) p.view.clearPlots();
   } else if (env.welcome) {
     const tools = env.welcome.scene?.tools || [];
@@ -126,7 +126,8 @@ export function sessionPage(id, role, mode) {
   /** @type {PageState} */
   const st = { mode, frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0,
     warnings: 0, fallbacks: 0, lastError: '', lastInvalid: '', annotations: 0, connection: 'connecting', ended: false,
-    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, forceShown: 0, depthSamples: 0 };
+    movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, forceShown: 0, forceFirstS: NaN, forceLastS: NaN,
+    depthSamples: 0 };
   /** @type {any} */ (window).__idms = st;
 
   // The panels, the layout, then what draws into it (the plots take their width from their boxes).
@@ -136,11 +137,13 @@ export function sessionPage(id, role, mode) {
   const send = (env) => socket?.send(env) ?? false;
   const loop = new FrameLoop();
   const header = new SessionHeader(mode, st, loop);
-  const health = new HealthPanel(st, loop);
-  const events = new EventList(st);
   const timelineHost = h('section', { class: 'timeline-section', 'aria-label': 'Timeline' });
   /** @type {Timeline | null} */
   const timeline = mode === 'replay' ? new Timeline(timelineHost, (msg) => send({ playbackControl: msg })) : null;
+  // A replay's session time is where playback is (the timeline's), not its latest sample's: paused
+  // after a seek, the samples stop short of the time sought.
+  const health = new HealthPanel(st, loop, timeline ? () => timeline.time : undefined);
+  const events = new EventList(st);
   const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
   const { hosts, wire } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
     annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el,
@@ -149,6 +152,8 @@ export function sessionPage(id, role, mode) {
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
   Object.defineProperty(st, 'forceShown', { get: () => view.forcePlot.shown, enumerable: true });
+  Object.defineProperty(st, 'forceFirstS', { get: () => view.forcePlot.shownFirstS, enumerable: true });
+  Object.defineProperty(st, 'forceLastS', { get: () => view.forcePlot.shownLastS, enumerable: true });
   // Where the surface and the tool fall in the view, for the tests (computed when asked).
   /** @type {any} */ (window).__idmsFraming = () => view.view.framing();
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });

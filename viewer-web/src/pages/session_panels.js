@@ -71,10 +71,13 @@ export class HealthPanel {
   /**
    * @param {{timeS: number, warnings: number, fallbacks: number, frames: number, keyframes: number, gaps: number}} st
    * @param {FrameLoop} loop
+   * @param {() => number} [sessionTimeS] the session time shown, s: by default the latest sample's
+   *   (st.timeS); a replay's is where playback is
    */
-  constructor(st, loop) {
+  constructor(st, loop, sessionTimeS = () => st.timeS) {
     this.st = st;
     this.loop = loop;
+    this.sessionTimeS = sessionTimeS;
     /** @type {import('../codec/frames.js').Stats | idms.v1.ILoopStats} the latest cumulative loop statistics */
     this.stats = {};
     /** Samples the agent's backlog lost. */
@@ -113,7 +116,7 @@ export class HealthPanel {
     this.dirty = false;
     this.lastDraw = now;
     const st = this.st, s = this.stats;
-    this.set(0, formatTime(st.timeS));
+    this.set(0, formatTime(this.sessionTimeS()));
     this.set(1, `${s.computeP99Us ?? 0} µs`);
     this.set(2, `${s.periodP99Us ?? 0} µs`);
     this.set(3, `${s.overruns ?? 0} of ${s.ticks ?? 0} ticks`);

@@ -22,8 +22,6 @@ export class Timeline {
     this.opened = false;
     /** A seek sent and not yet confirmed by a PlaybackState at its time; NaN = none. */
     this.seekTarget = NaN;
-    /** Whether the pending seek's catch-up has begun (its keyframe came). */
-    this.catchingUp = false;
     /** @type {{t: number, kind: string, title: string}[]} */
     this.marks = [];
     const t = Number(new URLSearchParams(location.search).get('t'));
@@ -52,7 +50,6 @@ export class Timeline {
   /** @param {number} t session time, s */
   seek(t) {
     this.seekTarget = t;
-    this.catchingUp = false;
     this.time = t;
     this.send({ action: Action.ACTION_SEEK, seekTimeS: t });
     this.showTime();
@@ -84,22 +81,12 @@ export class Timeline {
   }
 
   /**
-   * A keyframe came. While a seek is pending it starts the seek's catch-up (the server sends the
-   * keyframe at or before the new time, then the mesh frames and the device samples since, then
-   * the PlaybackState that confirms it): true then, and the plots restart here, so that they
-   * show the samples that led to the new time at once, paused or not.
-   */
-  onKeyframe() {
-    if (Number.isNaN(this.seekTarget)) return false;
-    this.catchingUp = true;
-    return true;
-  }
-
-  /**
-   * A PlaybackState from the server; true when it confirms a seek that brought no catch-up (no
-   * keyframe before its time): the plots restart at the new time then. A seek with a catch-up
-   * restarted them at its keyframe (onKeyframe); clearing them here again, as this did, left a
-   * paused replay's plots blank until Play.
+   * A PlaybackState from the server; true when it confirms the pending seek. The server sends that
+   * state before the seek's catch-up (the device samples of the plots' window before the new time,
+   * and the keyframe at or before it with the deltas since, in log-time order), so the plots restart
+   * here and the catch-up fills them at once, paused or not. (They restarted at the catch-up's
+   * keyframe before, which dropped the samples older than it: a seek showed only the seconds since
+   * its keyframe.)
    * @param {idms.v1.IPlaybackState} ps
    */
   onState(ps) {
@@ -116,8 +103,7 @@ export class Timeline {
       const want = this.duration > 0 ? Math.min(this.seekTarget, this.duration) : this.seekTarget;
       if (Math.abs(t - want) > 0.05) return false;
       this.seekTarget = NaN;
-      seeked = !this.catchingUp;
-      this.catchingUp = false;
+      seeked = true;
     }
     this.time = t;
     this.showTime();

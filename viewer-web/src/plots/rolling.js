@@ -57,8 +57,10 @@ export class RollingPlot {
     this.length = 0;
     this.total = 0;
     this.lastDraw = -1e9;
-    /** Samples in the picture on screen (the tests read it). */
+    /** Samples in the picture on screen, and the times of its first and last, s (the tests read them). */
     this.shown = 0;
+    this.shownFirstS = NaN;
+    this.shownLastS = NaN;
     /** Redraws and the time they took, ms (the bench reads them). */
     this.draws = 0;
     this.drawMs = 0;
@@ -111,6 +113,7 @@ export class RollingPlot {
     this.numPending = 0;
     this.length = 0;
     this.shown = 0;
+    this.shownFirstS = this.shownLastS = NaN;
     this.plot.setData([[], ...this.columns.slice(1).map(() => [])]);
   }
 
@@ -156,6 +159,8 @@ export class RollingPlot {
     this.drawMs += performance.now() - start;
     this.draws++;
     this.shown = this.length;
+    this.shownFirstS = this.columns[0][0];
+    this.shownLastS = this.columns[0][this.length - 1];
     return false;
   }
 

@@ -75,7 +75,8 @@ struct RecordedMessage {
   RecordingTopic topic = RecordingTopic::kDevice;
   uint64_t log_time_ns = 0;
   uint64_t publish_time_ns = 0;
-  // A /mesh frame from before the seek time, replayed so that a MeshMirror holds the surface at it.
+  // A frame from before the seek time that Seek replays: a /mesh frame, so that a MeshMirror holds
+  // the surface at it, or a /device batch, so that plots hold the samples that led to it.
   bool catch_up = false;
   // device_samples (/device), mesh_keyframe or mesh_delta (/mesh), session_event or topology_event (/events).
   v1::Envelope envelope;
@@ -88,6 +89,11 @@ struct RecordingReaderOptions {
   bool mesh = true;
   bool events = true;
   bool annotations = true;
+  // How much /device history a Seek(t) replays, ns: the catch-up's /device batches start at the
+  // earlier of the mesh keyframe it starts from and t - device_history_ns (not before the
+  // recording's start), e.g. a viewer's plot window, so that its plots are full at t. 0: the
+  // batches since the keyframe only, none without one.
+  uint64_t device_history_ns = 0;
 };
 
 // Reads a recording (finished, or unfinished after a crash: see McapReader) in log-time order.
@@ -110,11 +116,15 @@ class RecordingReader {
   const std::map<std::string, std::string>& session() const { return session_; }  // "idms.session" metadata
   const McapReader& mcap() const { return mcap_; }
 
-  // Positions reading at log time t_ns: with /mesh selected, the next messages are the latest
-  // keyframe at or before t_ns and the deltas after it up to t_ns, with the /device samples
-  // logged since that keyframe (catch_up = true); then every selected topic from t_ns on. Without a keyframe at or
-  // before t_ns, reading simply starts at t_ns. Reads the chunks back from t_ns to find the keyframe (keyframes come
-  // every few seconds).
+  // Positions reading at log time t_ns. The next messages are the catch-up (catch_up = true), all
+  // logged before t_ns: with /mesh selected, the latest keyframe at or before t_ns and the deltas
+  // after it (earlier /mesh frames are skipped: the first /mesh message is that keyframe); with
+  // /device selected, the batches since that keyframe or since t_ns - device_history_ns, whichever
+  // is earlier. They come in log-time order, so /device batches older than the keyframe come
+  // before it. /events and /annotations are not replayed (a viewer has them from the session's
+  // record). Then every selected topic from t_ns on. Without a keyframe at or before t_ns, /mesh
+  // simply starts at t_ns. Reads the chunks back from t_ns to find the keyframe (keyframes come
+  // every few seconds), then those from the catch-up's start on.
   bool Seek(uint64_t t_ns, std::string* error);
   // The next message; false at the end (*error empty) or on malformed data (*error says where).
   bool Next(RecordedMessage* out, std::string* error);
@@ -135,8 +145,11 @@ class RecordingReader {
   uint16_t events_channel_ = 0;
   uint16_t annotations_channel_ = 0;
   std::vector<uint16_t> selected_;
-  // Seek state: before seek_ns only /mesh frames from the keyframe on are returned.
+  // Seek state: before seek_ns_ only /mesh frames from mesh_from_ns_ (the keyframe's time, then
+  // the keyframe itself) and /device batches from device_from_ns_ are returned.
   uint64_t seek_ns_ = 0;
+  uint64_t mesh_from_ns_ = 0;
+  uint64_t device_from_ns_ = 0;
   bool awaiting_keyframe_ = false;
 };
 
