@@ -28,6 +28,7 @@ constexpr size_t kReplayQueueLimit = 256;  // frames queued for the viewer befor
 // viewer's plot window (kWindowS in viewer-web/src/pages/session.js, LiveView's windowS), so that
 // its plots are full at once, however far back the keyframe is.
 constexpr uint64_t kPlotWindowNs = 5'000'000'000;
+constexpr int kHistoryBatch = 1000;  // device samples per catch-up message at most
 
 class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<ReplayEndpoint> {
  public:
@@ -119,10 +120,15 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
     // The catch-up goes at once; the first message at or after t waits in pending_.
     RecordedMessage m;
     bool surface = false;
+    v1::Envelope history;  // the catch-up's device samples, in batches of up to kHistoryBatch
     while (reader_.Next(&m, &error)) {
       if (!m.catch_up) {
         pending_ = std::move(m);
         break;
+      }
+      if (m.topic == RecordingTopic::kDevice && m.envelope.has_device_samples()) {
+        AddHistory(m.envelope.device_samples(), &history);
+        continue;
       }
       if (m.topic != RecordingTopic::kMesh) {
         Send(m.envelope);
@@ -133,6 +139,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
       std::string mesh_error;
       if (catch_up_.Apply(m.envelope, &mesh_error) == MirrorStatus::kOk) surface = true;
     }
+    if (history.device_samples().samples_size() > 0) Send(history);
     if (!error.empty()) Error("recording: " + error);
     if (surface) {
       v1::Envelope keyframe;
@@ -145,6 +152,26 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
     }
     Anchor();
     return true;
+  }
+
+  // Appends a recorded batch to the catch-up's history: one message per kHistoryBatch samples,
+  // not one per recorded batch (an agent that sends every sample alone, sample_batch 1, would
+  // make a 5 s window 5,000 messages, past the viewer's queue). A batch that does not follow the
+  // last sample's tick (samples lost before they were recorded) starts a new message, so that
+  // each holds consecutive ticks; the statistics are the latest batch's.
+  void AddHistory(const v1::DeviceSamples& batch, v1::Envelope* history) {
+    v1::DeviceSamples* h = history->mutable_device_samples();
+    if (h->samples_size() > 0 &&
+        (h->samples_size() + batch.samples_size() > kHistoryBatch || batch.samples_size() == 0 ||
+         batch.samples(0).tick() != h->samples(h->samples_size() - 1).tick() + 1)) {
+      Send(*history);
+      history->Clear();
+      h = history->mutable_device_samples();
+    }
+    h->mutable_samples()->MergeFrom(batch.samples());
+    *h->mutable_stats() = batch.stats();
+    h->set_samples_dropped(batch.samples_dropped());
+    h->set_sent_unix_ns(batch.sent_unix_ns());
   }
 
   void Anchor() {
