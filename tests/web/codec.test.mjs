@@ -63,6 +63,34 @@ test('every C++-encoded frame, valid or damaged, decodes to the C++ mirror state
     JSON.stringify({ keyframes, deltas, empty, refused, zstd, raw }));
 });
 
+test('decompressing never turns the output buffer into a string (fzstd tests it with a loose == 1)', () => {
+  // A Uint8Array meets == through %TypedArray%.prototype.toString: every byte as text, some
+  // milliseconds a frame. The viewer hands fzstd a view that converts to NaN instead.
+  const proto = Object.getPrototypeOf(Uint8Array.prototype);
+  const toString = proto.toString;
+  let calls = 0;
+  proto.toString = function () {
+    calls++;
+    return toString.call(this);
+  };
+  let zstd = 0;
+  try {
+    const state = new MeshState();
+    for (const line of cppFrames()) {
+      const env = Envelope.decode(Buffer.from(line.frame, 'hex'));
+      const frame = env.meshKeyframe ?? env.meshDelta;
+      if (line.status !== 'ok' || frame?.compression !== 1) continue;
+      state.payload(/** @type {any} */ (frame), 1 << 24);
+      assert.equal(state.error, '', line.name);
+      zstd++;
+    }
+  } finally {
+    proto.toString = toString;
+  }
+  assert.ok(zstd > 20, `${zstd} zstd frames`);
+  assert.equal(calls, 0, 'typed arrays converted to strings while decompressing');
+});
+
 test('a refused frame leaves the surface as it was, and the next valid delta applies', () => {
   const lines = cppFrames().filter((l) => l.name.startsWith('session origin 0'));
   const state = new MeshState();

@@ -94,6 +94,23 @@ function addInt32(/** @type {number} */ base, /** @type {number} */ d) {
   return s >= kInt32Min && s <= kInt32Max ? s : NaN;
 }
 
+/**
+ * The first n bytes of `raw` as fzstd's output buffer. fzstd (0.1.1) tests the buffer it is given
+ * with a loose `== 1` twice per frame, which converts a Uint8Array to the string of all its bytes:
+ * measured in Node, 3.5 ms for a 40 kB buffer that takes 0.15 ms to decompress into. A view that
+ * converts to NaN answers the test at once, and fzstd then writes into it as before.
+ * @param {Uint8Array} raw @param {number} n
+ */
+export function outputView(raw, n) {
+  const view = raw.subarray(0, n);
+  Object.defineProperty(view, Symbol.toPrimitive, { value: notANumber });
+  return view;
+}
+
+function notANumber() {
+  return NaN;
+}
+
 export class MeshState {
   /** @param {typeof kDefaultLimits} [limits] */
   constructor(limits = kDefaultLimits) {
@@ -319,7 +336,7 @@ export class MeshState {
     }
     if (this.raw.length < frame.contentSize) this.raw = new Uint8Array(Math.max(frame.contentSize, 2 * this.raw.length));
     try {
-      decompress(payload, this.raw.subarray(0, frame.contentSize));
+      decompress(payload, outputView(this.raw, frame.contentSize));
     } catch (e) {
       this.error = `zstd: ${e instanceof Error ? e.message : String(e)}`;
       return -1;
