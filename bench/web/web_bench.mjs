@@ -93,7 +93,7 @@ function browserCpu() {
 /** @param {string} hash '' for the live view, '#bare' for three.js alone */
 async function run(hash) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
-  await page.goto(`http://127.0.0.1:${port}/${hash}`);
+  await page.goto(`http://127.0.0.1:${port}/?seconds=${seconds}${hash}`);
   await page.waitForFunction(() => /** @type {any} */ (window).__bench || /** @type {any} */ (window).__benchError, undefined, { timeout: 120000 });
   const err = await page.evaluate(() => /** @type {any} */ (window).__benchError);
   if (err) throw new Error(err);
