@@ -6,6 +6,7 @@ import { SurfaceView } from '../view/surface.js';
 import { FrameLoop } from '../view/frame_loop.js';
 import { RollingPlot } from '../plots/rolling.js';
 import { DepthPlot } from '../plots/depth.js';
+import { length3 } from '../length3.js';
 
 /**
  * What the view has seen (a part of the page's state object, window.__idms).
@@ -95,7 +96,7 @@ export class LiveView {
       const fx = f?.x || 0, fy = f?.y || 0, fz = f?.z || 0;
       const px = p?.x || 0, py = p?.y || 0, pz = p?.z || 0;
       const t = s.timeS || 0;
-      const f2 = Math.hypot(fx, fy, fz);
+      const f2 = length3(fx, fy, fz);
       this.forcePlot.push(t, fx, fy, fz, f2);
       if (f2 > st.peakForce) st.peakForce = f2;
       if (s.contact) st.contactSamples++;

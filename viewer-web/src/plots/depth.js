@@ -4,6 +4,7 @@
 // only when it changed and only while it is on screen.
 import { FrameLoop, Visibility, isDue } from '../view/frame_loop.js';
 import { kPlotRedrawHz } from './rolling.js';
+import { length3 } from '../length3.js';
 
 export class DepthPlot {
   /**
@@ -70,7 +71,7 @@ export class DepthPlot {
       this.z0 = z;
     }
     if (this.count === this.depth.length) return;
-    const f = Math.hypot(fx, fy, fz);
+    const f = length3(fx, fy, fz);
     const d = f > 0 ? ((this.x0 - x) * fx + (this.y0 - y) * fy + (this.z0 - z) * fz) / f : 0;
     this.depth[this.count] = d;
     this.force[this.count] = f;

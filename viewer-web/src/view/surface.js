@@ -8,6 +8,7 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { FrameLoop } from './frame_loop.js';
 import { ToolMesh } from './tool.js';
+import { length3 } from '../length3.js';
 
 const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
@@ -292,7 +293,7 @@ export class SurfaceView {
     this.tool.position.set(x, y, z);
     if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
     this.tool.setColor(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
-    const f = Math.hypot(fx, fy, fz);
+    const f = length3(fx, fy, fz);
     if (f > 1e-9) {
       this.forceDir.set(fx / f, fy / f, fz / f);
       const length = this.toolRadius + f * this.forceScale;
@@ -427,7 +428,7 @@ export class SurfaceView {
       y += this.faceNormals[t + 1];
       z += this.faceNormals[t + 2];
     }
-    const len = Math.hypot(x, y, z) || 1;
+    const len = length3(x, y, z) || 1;
     const n = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.normAttr).array);
     n[3 * v] = x / len;
     n[3 * v + 1] = y / len;

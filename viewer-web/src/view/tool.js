@@ -101,7 +101,7 @@ export class ToolMesh extends THREE.Mesh {
     const shaft = headWidth / 8, head = headWidth / 2;
     // The head's side normal: outward and up by the cone's slope.
     const h = Math.max(length - neck, 1e-9);
-    const slope = Math.hypot(h, head);
+    const slope = Math.sqrt(h * h + head * head);
     const a = this.numSphere;
     for (let i = 0; i < kSides; i++) {
       const angle = (2 * Math.PI * i) / kSides;
