@@ -6,6 +6,15 @@
 // the last two in the frames drawn, added to the frames received in between).
 // "bare": three.js alone drawing the same mesh (still) with the same lights, material, antialias
 // and pixel ratio, rendering every animation frame. Both report their canvas and draw calls.
+// Variants (web_bench.mjs --variants), switches after the URL's #, comma-separated:
+//   bare          the bare page;  bare,sphere  with one more lit sphere (one more draw call)
+//   still         the page fed nothing after its first frames, rendering every animation frame as
+//                 the bare page does (what the page costs standing)
+//   notool        the tool and force hidden
+//   noplots       the plots never redrawn (samples still pushed)
+//   nohealth      the loop-health panel not updated
+//   nomesh        the mesh deltas decoded but not applied
+//   align         the plots and the panel drawn only in the same frames, at most 10 a second
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
@@ -58,6 +67,9 @@ function describe(canvas, renderer) {
     antialias: !!gl.getContextAttributes()?.antialias, cssSize: `${canvas.clientWidth}x${canvas.clientHeight}` };
 }
 
+/** The variant's switches (see above). */
+const flags = new Set(location.hash.slice(1).split(',').filter(Boolean));
+
 async function viewerPage() {
   const list = await frames();
   const panel = /** @type {HTMLElement} */ (document.getElementById('plots'));
@@ -77,6 +89,22 @@ async function viewerPage() {
   const health = new HealthPanel(st, view.loop);
   panel.append(health.el);
   const plots = [view.forcePlot, view.posPlot, view.depthPlot];
+  if (flags.has('noplots')) for (const p of plots) view.loop.remove(p);
+  if (flags.has('align')) {
+    // One shared gate: a frame is the panel's when 98 ms have passed since the last one.
+    const gate = { now: -1, open: false, last: -1e9 };
+    for (const part of [...plots, health]) {
+      const draw = part.draw.bind(part);
+      part.draw = (/** @type {number} */ now) => {
+        if (now !== gate.now) {
+          gate.now = now;
+          gate.open = now - gate.last >= 98;
+          if (gate.open) gate.last = now;
+        }
+        return gate.open ? draw(now) : true;
+      };
+    }
+  }
   const stats = { frames: 0, jsMs: 0, renders: 0, changed: 0, gaps: 0, calls: 0, ...describe(view.view.renderer.domElement, view.view.renderer) };
   w.__bench = stats;
   view.view.onRender = () => {
@@ -89,10 +117,12 @@ async function viewerPage() {
   const apply = (bytes) => {
     const env = decoder.decode(bytes);
     if (env.meshKeyframe) view.applyKeyframe(env.meshKeyframe);
-    else if (env.meshDelta) view.applyDelta(env.meshDelta);
-    else if (env.deviceSamples) {
+    else if (env.meshDelta) {
+      if (!flags.has('nomesh')) view.applyDelta(env.meshDelta);
+    } else if (env.deviceSamples) {
       view.onSamples(env.deviceSamples.samples, env.deviceSamples.count);
-      health.setStats(env.deviceSamples.stats, 0);
+      if (!flags.has('nohealth')) health.setStats(env.deviceSamples.stats, 0);
+      if (flags.has('notool')) view.view.tool.visible = false;
     }
   };
   apply(list[0]);
@@ -111,6 +141,14 @@ async function viewerPage() {
   let i = 0;
   let n = 1;
   let drawMs = 0;
+  if (flags.has('still')) {
+    const again = () => {
+      view.view.invalidate();
+      requestAnimationFrame(again);
+    };
+    again();
+    return;
+  }
   setInterval(() => {
     const samples = n <= precomputed.length ? precomputed[n - 1] : samplesEnvelope(n);
     n++;
@@ -162,6 +200,12 @@ async function barePage() {
   const tool = new THREE.Sphere(new THREE.Vector3(p.x, p.y, p.z), 1.5);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
   placeCamera(camera, framedSphere(s, tool, new THREE.Sphere()));
+  if (flags.has('sphere')) {
+    // One more draw: a lit sphere the tool's size where the tool is.
+    const sphere = new THREE.Mesh(new THREE.SphereGeometry(1.5, 32, 16), new THREE.MeshStandardMaterial({ color: 0x4f7cac }));
+    sphere.position.copy(tool.center);
+    scene.add(sphere);
+  }
   const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
   const loop = () => {
@@ -173,4 +217,4 @@ async function barePage() {
   loop();
 }
 
-(location.hash === '#bare' ? barePage() : viewerPage()).catch((e) => { w.__benchError = String(e); });
+(flags.has('bare') ? barePage() : viewerPage()).catch((e) => { w.__benchError = String(e); });

@@ -8,6 +8,10 @@
 // CPU time the browser's processes spent per frame drawn (from /proc), which load moves less.
 // Never fails on time.
 //   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]
+//     [--variants "page bare still,notool ..."]
+// --variants runs the named variants of the two pages in turn instead (page.js lists the switches:
+// a part of the page switched off, or one more draw on the bare page), and prints each one's frame
+// rate and CPU per frame drawn: how a part's cost is found.
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
 import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
@@ -26,8 +30,9 @@ const option = (name, fallback) => {
 const seconds = option('--seconds', 6);
 const runs = option('--runs', 3);
 const only = process.argv.includes('--vertices') ? process.argv[process.argv.indexOf('--vertices') + 1].split(',').map(Number) : null;
+const variants = process.argv.includes('--variants') ? process.argv[process.argv.indexOf('--variants') + 1].split(/\s+/).filter(Boolean) : null;
 if (!build || !(seconds > 0) || !(runs >= 1)) {
-  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]');
+  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000] [--variants "page bare ..."]');
   process.exit(2);
 }
 const esbuild = await import(join(root, 'viewer-web', 'node_modules', 'esbuild', 'lib', 'main.js'));
@@ -60,7 +65,7 @@ const browser = await chromium.launch({ executablePath: '/usr/bin/chromium', hea
   args: ['--headless', '--no-sandbox', '--disable-background-networking', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', tag] });
 const ticksPerS = 100;  // USER_HZ
 
-/** CPU seconds (user + system) of the browser's processes so far, by --type (renderer, gpu-process, ...). */
+/** CPU seconds (user + system) of each of the browser's processes so far, with its --type (renderer, gpu-process, ...). */
 function browserCpu() {
   /** @type {{pid: number, ppid: number, s: number, type: string, root: boolean}[]} */
   const procs = [];
@@ -85,12 +90,25 @@ function browserCpu() {
       grew = true;
     }
   }
-  /** @type {Record<string, number>} */
-  const out = {};
-  for (const p of procs) if (tree.has(p.pid)) out[p.type] = (out[p.type] ?? 0) + p.s;
+  /** @type {Map<number, {type: string, s: number}>} */
+  const out = new Map();
+  for (const p of procs) if (tree.has(p.pid)) out.set(p.pid, { type: p.type, s: p.s });
   return out;
 }
-/** @param {string} hash '' for the live view, '#bare' for three.js alone */
+
+/**
+ * CPU seconds by process type between two snapshots, process by process: one that exited
+ * meanwhile (the previous page's renderer, closing) counts nothing, where subtracting totals by
+ * type took its whole life off the run's figure; one that started counts from zero.
+ * @param {ReturnType<typeof browserCpu>} a @param {ReturnType<typeof browserCpu>} b
+ */
+function cpuBetween(a, b) {
+  /** @type {Record<string, number>} */
+  const out = {};
+  for (const [pid, p] of b) out[p.type] = (out[p.type] ?? 0) + p.s - (a.get(pid)?.s ?? 0);
+  return out;
+}
+/** @param {string} hash '' for the live view, '#bare' for three.js alone, '#switch,switch' for a variant */
 async function run(hash) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
   await page.goto(`http://127.0.0.1:${port}/?seconds=${seconds}${hash}`);
@@ -105,14 +123,15 @@ async function run(hash) {
   const cpu1 = browserCpu();
   await page.close();
   const wall = (b.now - a.now) / 1000;
+  const used = cpuBetween(cpu0, cpu1);
   if (b.gaps) throw new Error(`${hash || 'page'}: ${b.gaps} mesh frames were gaps or invalid: the page drew nothing for them`);
   const frames = (b.frames ?? 0) - (a.frames ?? 0);
   const renders = b.renders - a.renders;
   return { fps: renders / wall, frames, wall, jsMs: ((b.jsMs ?? 0) - (a.jsMs ?? 0)) / Math.max(1, frames),
     changed: ((b.changed ?? 0) - (a.changed ?? 0)) / Math.max(1, frames), calls: (b.calls - a.calls) / Math.max(1, renders),
     // CPU per frame drawn, ms: the page's renderer process and the GPU process (SwiftShader).
-    rendererMs: 1000 * ((cpu1.renderer ?? 0) - (cpu0.renderer ?? 0)) / Math.max(1, renders),
-    gpuMs: 1000 * ((cpu1['gpu-process'] ?? 0) - (cpu0['gpu-process'] ?? 0)) / Math.max(1, renders),
+    rendererMs: 1000 * (used.renderer ?? 0) / Math.max(1, renders),
+    gpuMs: 1000 * (used['gpu-process'] ?? 0) / Math.max(1, renders),
     canvas: b.canvas, pixelRatio: b.pixelRatio, antialias: b.antialias };
 }
 
@@ -137,6 +156,22 @@ for (const [nx, ny] of sizes) {
   const viewer = [];
   /** @type {Awaited<ReturnType<typeof run>>[]} */
   const bare = [];
+  if (variants) {
+    // In turn, as the two pages alternate.
+    /** @type {Awaited<ReturnType<typeof run>>[][]} */
+    const results = variants.map(() => []);
+    for (let r = 0; r < runs; r++) {
+      for (let v = 0; v < variants.length; v++) results[v].push(await run(variants[v] === 'page' ? '' : `#${variants[v]}`));
+    }
+    for (let v = 0; v < variants.length; v++) {
+      const xs = results[v];
+      const r = median(xs.map((x) => x.rendererMs)), g = median(xs.map((x) => x.gpuMs));
+      console.log(`  ${variants[v].padEnd(22)} fps ${median(xs.map((x) => x.fps)).toFixed(1).padStart(5)} (${xs.map((x) => x.fps.toFixed(1)).join(' ')}), ` +
+        `CPU ms per frame drawn ${(r + g).toFixed(1)} (renderer ${r.toFixed(1)} + GPU process ${g.toFixed(1)}), draw calls ${median(xs.map((x) => x.calls)).toFixed(1)}`);
+    }
+    console.log(`  load average ${load()}`);
+    continue;
+  }
   // Alternating, so that a change in the machine's load falls on both.
   for (let r = 0; r < runs; r++) {
     viewer.push(await run(''));
