@@ -162,9 +162,9 @@ bool RecordingReader::Seek(uint64_t t_ns, std::string* error) {
     }
   }
   // Its /device batches at that keyframe or device_history_ns back, whichever is earlier, but not
-  // before the start (t - history could wrap around).
-  const uint64_t history_from = t_ns - std::min(t_ns - std::min(t_ns, start_ns()), options_.device_history_ns);
-  device_from_ns_ = std::min(history_from, mesh_from_ns_);
+  // before the start.
+  const uint64_t since_start = t_ns > start_ns() ? t_ns - start_ns() : 0;
+  device_from_ns_ = std::min(t_ns - std::min(since_start, options_.device_history_ns), mesh_from_ns_);
   // One merged read from the earlier of the two: Next() drops what comes before its topic's start
   // by log time alone, without parsing it.
   mcap_.Seek(options_.device && device_channel_ != 0 ? device_from_ns_ : mesh_from_ns_,

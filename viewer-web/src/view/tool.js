@@ -14,6 +14,9 @@ const kSides = 12;
 const kArrowVertices = 4 * kSides + 2;
 const kUp = new THREE.Vector3(0, 1, 0);
 const kSeeThrough = 0.5;
+/** The cosine and sine of each side's angle around the arrow. */
+const kSideCos = Float64Array.from({ length: kSides }, (_, i) => Math.cos((2 * Math.PI * i) / kSides));
+const kSideSin = Float64Array.from({ length: kSides }, (_, i) => Math.sin((2 * Math.PI * i) / kSides));
 
 export class ToolMesh extends THREE.Mesh {
   /** @param {number} color the tool's colour @param {number} arrowColor */
@@ -105,8 +108,7 @@ export class ToolMesh extends THREE.Mesh {
     const slope = Math.sqrt(h * h + head * head);
     const a = this.numSphere;
     for (let i = 0; i < kSides; i++) {
-      const angle = (2 * Math.PI * i) / kSides;
-      const c = Math.cos(angle), s = Math.sin(angle);
+      const c = kSideCos[i], s = kSideSin[i];
       this.arrowVertex(a + i, shaft * c, 0, shaft * s, c, 0, s);
       this.arrowVertex(a + kSides + i, shaft * c, neck, shaft * s, c, 0, s);
       this.arrowVertex(a + 2 * kSides + i, head * c, neck, head * s, (h * c) / slope, head / slope, (h * s) / slope);
