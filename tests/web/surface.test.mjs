@@ -116,3 +116,54 @@ test('applying moved vertices and recomputing their normals allocates nothing pe
   observer.disconnect();
   assert.ok(collections <= 1, `${collections} garbage collections during 3,000 frames`);
 });
+
+test('a keyframe of the same triangles moves only what moved: no rebuild, no whole upload, the same normals', () => {
+  const { keyframe, deltas } = decodedDeltas();
+  const view = geometryOnly();
+  view.setSurface(keyframe);
+  // Drawn once: what a first keyframe uploads is done with.
+  view.updateNormals();
+  const index = /** @type {THREE.BufferAttribute} */ (view.geometry.index);
+  const pos = /** @type {THREE.BufferAttribute} */ (view.posAttr);
+  const norm = /** @type {THREE.BufferAttribute} */ (view.normAttr);
+  for (const a of [index, pos, norm]) a.clearUpdateRanges();
+  const indexVersion = index.version;
+  const adjacency = view.adjTris;
+  // The stream's periodic keyframe some frames on: the same triangles, the dent moved on.
+  const later = deltas[40];
+  const again = { ...keyframe, positions: later.positions };
+  view.setSurface(again);
+  const moved = [];
+  for (let v = 0; v < keyframe.numVertices; v++) {
+    for (let c = 0; c < 3; c++) {
+      if (keyframe.positions[3 * v + c] !== later.positions[3 * v + c]) {
+        moved.push(v);
+        break;
+      }
+    }
+  }
+  assert.ok(moved.length > 0 && moved.length < keyframe.numVertices / 2, `${moved.length} vertices moved`);
+  assert.equal(view.numTouchedTris > 0, true);
+  assert.equal(index.version, indexVersion, 'the triangles were uploaded again');
+  assert.equal(view.adjTris, adjacency);
+  view.updateNormals();
+  // Only the span of the vertices that moved is uploaded.
+  assert.deepEqual(pos.updateRanges, [{ start: 3 * moved[0], count: 3 * (moved[moved.length - 1] - moved[0] + 1) }]);
+  assert.equal(norm.updateRanges.length, 1);
+  assert.ok(norm.updateRanges[0].count < 3 * keyframe.numVertices);
+  // The same positions and normals as the keyframe taken whole.
+  const fresh = geometryOnly();
+  fresh.setSurface(again);
+  assert.deepEqual(pos.array, /** @type {THREE.BufferAttribute} */ (fresh.posAttr).array);
+  const a = /** @type {Float32Array} */ (norm.array);
+  const b = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (fresh.normAttr).array);
+  let worst = 0;
+  for (let i = 0; i < 3 * keyframe.numVertices; i++) worst = Math.max(worst, Math.abs(a[i] - b[i]));
+  assert.ok(worst < 1e-6, `normals differ by up to ${worst}`);
+  // Other triangles: rebuilt whole.
+  const flipped = keyframe.triangles.slice();
+  [flipped[1], flipped[2]] = [flipped[2], flipped[1]];
+  view.setSurface({ ...keyframe, triangles: flipped });
+  assert.ok(index.version > indexVersion, 'new triangles were not uploaded');
+  assert.equal(/** @type {Uint32Array} */ (index.array)[1], flipped[1]);
+});

@@ -106,6 +106,9 @@ export class SurfaceView {
     this.vertStamp = new Uint32Array(0);
     this.touchedTris = new Int32Array(0);
     this.touchedVerts = new Int32Array(0);
+    this.keyframeMoved = new Int32Array(0);
+    /** @type {{positions: Float32Array, changed: Int32Array, numChanged: number}} */
+    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
     this.stamp = 1;
     // Moved since the last frame drawn: the triangles around them (stamped with this.stamp) and
     // the span of their ids; their normals are recomputed when the frame is drawn.
@@ -175,12 +178,18 @@ export class SurfaceView {
   }
 
   /**
-   * A whole surface (a keyframe): positions, triangles, adjacency, every normal.
+   * A whole surface (a keyframe): positions, triangles, adjacency, every normal. The same
+   * triangles again (the stream's periodic keyframe, every few seconds of a session) are taken as
+   * a delta of the vertices that moved: nothing rebuilt, nothing uploaded but what moved.
    * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
    */
   setSurface(s) {
     const nv = s.numVertices;
     const nt = s.numTriangles;
+    if (nt > 0 && nv === this.numVertices && nt === this.numTriangles && this.sameTriangles(s.triangles)) {
+      this.applyMoved(this.movedSince(s.positions));
+      return;
+    }
     if (nv > this.capacityV || nt > this.capacityT) this.allocate(Math.max(nv, this.capacityV), Math.max(nt, this.capacityT));
     const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
     const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
@@ -394,6 +403,35 @@ export class SurfaceView {
     this.touchedVerts = new Int32Array(nv);
     this.adjStart = new Int32Array(nv + 1);
     this.adjTris = new Int32Array(3 * nt);
+    // A keyframe of the same triangles, as a delta (setSurface).
+    this.keyframeMoved = new Int32Array(nv);
+    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
+  }
+
+  /** @param {Uint32Array} tris @returns {boolean} whether they are the triangles shown */
+  sameTriangles(tris) {
+    const shown = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    for (let i = 0; i < 3 * this.numTriangles; i++) if (shown[i] !== tris[i]) return false;
+    return true;
+  }
+
+  /**
+   * The vertices whose positions differ from those shown, in increasing order, as applyMoved reads
+   * a delta (the object is reused).
+   * @param {Float32Array} positions
+   */
+  movedSince(positions) {
+    const shown = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    const moved = this.keyframeMoved;
+    let n = 0;
+    for (let v = 0; v < this.numVertices; v++) {
+      const i = 3 * v;
+      if (shown[i] !== positions[i] || shown[i + 1] !== positions[i + 1] || shown[i + 2] !== positions[i + 2]) moved[n++] = v;
+    }
+    const delta = this.keyframeDelta;
+    delta.positions = positions;
+    delta.numChanged = n;
+    return delta;
   }
 
   /** @param {Uint32Array} tris @param {number} nv @param {number} nt */
