@@ -7,10 +7,12 @@
 // "bare": three.js alone drawing the same mesh (still) with the same lights, material, antialias
 // and pixel ratio, rendering every animation frame. Both report their canvas and draw calls.
 // Variants (web_bench.mjs --variants), switches after the URL's #, comma-separated:
-//   bare          the bare page;  bare,sphere  with one more lit sphere (one more draw call)
+//   bare          the bare page;  bare,sphere  with one more lit sphere (one more draw call);
+//                 bare,sphere,sphere2  two more (each draw's own cost, apart from its pixels)
 //   still         the page fed nothing after its first frames, rendering every animation frame as
 //                 the bare page does (what the page costs standing)
-//   notool        the tool and force hidden
+//   notool        the tool and force hidden (one draw call fewer)
+//   nopanel       the plots' and loop-health panel hidden (still drawn into, never composited)
 //   noplots       the plots never redrawn (samples still pushed)
 //   nohealth      the loop-health panel not updated
 //   nomesh        the mesh deltas decoded but not applied
@@ -86,6 +88,7 @@ async function viewerPage() {
   // The three plots on screen (they skip drawing when scrolled away), the panel's text below them.
   panel.append(hosts.force, hosts.position, hosts.depth, hosts.toolState, hosts.gapNote);
   const view = new LiveView(st, hosts, 5);
+  if (flags.has('nopanel')) panel.style.display = 'none';
   const health = new HealthPanel(st, view.loop);
   panel.append(health.el);
   const plots = [view.forcePlot, view.posPlot, view.depthPlot];
@@ -205,6 +208,11 @@ async function barePage() {
     const sphere = new THREE.Mesh(new THREE.SphereGeometry(1.5, 32, 16), new THREE.MeshStandardMaterial({ color: 0x4f7cac }));
     sphere.position.copy(tool.center);
     scene.add(sphere);
+    if (flags.has('sphere2')) {
+      const second = new THREE.Mesh(sphere.geometry, sphere.material);
+      second.position.copy(tool.center).add(new THREE.Vector3(3, 0, 0));
+      scene.add(second);
+    }
   }
   const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
