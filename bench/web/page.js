@@ -8,10 +8,10 @@
 // and pixel ratio, rendering every animation frame. Both report their canvas and draw calls.
 // Variants (web_bench.mjs --variants), switches after the URL's #, comma-separated:
 //   bare          the bare page;  bare,sphere  with one more lit sphere (one more draw call);
-//                 bare,sphere,sphere2  two more (each draw's own cost, apart from its pixels)
+//                 bare,sphere,sphere2  two more (what each small object costs)
 //   still         the page fed nothing after its first frames, rendering every animation frame as
 //                 the bare page does (what the page costs standing)
-//   notool        the tool and force hidden (one draw call fewer)
+//   notool        the tool and force hidden
 //   nopanel       the plots' and loop-health panel hidden (still drawn into, never composited)
 //   noplots       the plots never redrawn (samples still pushed)
 //   nohealth      the loop-health panel not updated
