@@ -40,10 +40,20 @@ function geometryOnly() {
   const view = /** @type {SurfaceView} */ (Object.create(SurfaceView.prototype));
   Object.assign(view, {
     geometry: new THREE.BufferGeometry(), mesh: { visible: false }, capacityV: 0, capacityT: 0,
-    numVertices: 0, numTriangles: 0, posAttr: null, normAttr: null, stamp: 1, numTouchedTris: 0,
+    numVertices: 0, numTriangles: 0, posAttr: null, normAttr: null, wholePending: false, stamp: 1, numTouchedTris: 0,
     movedLo: 0, movedHi: -1, normalsMs: 0, fitted: true, invalidate() {},
   });
   return view;
+}
+
+/**
+ * What a render does to the buffers: three.js uploads what is pending and clears the ranges.
+ * @param {SurfaceView} view
+ */
+function rendered(view) {
+  if (view.movedHi >= 0) view.updateNormals();
+  for (const a of [view.posAttr, view.normAttr, view.geometry.index]) a?.clearUpdateRanges();
+  view.wholePending = false;
 }
 
 /**
@@ -71,6 +81,7 @@ test('normals updated around the moved vertices equal a full recomputation; only
   const { keyframe, deltas } = decodedDeltas();
   const view = geometryOnly();
   view.setSurface(keyframe);
+  rendered(view);
   // Three deltas per frame drawn, as the bench's 60 Hz stream against a 20 fps view.
   for (let k = 0; k + 3 <= 30; k += 3) {
     for (let j = k; j < k + 3; j++) view.applyMoved(deltas[j]);
@@ -122,7 +133,7 @@ test('a keyframe of the same triangles moves only what moved: no rebuild, no who
   const view = geometryOnly();
   view.setSurface(keyframe);
   // Drawn once: what a first keyframe uploads is done with.
-  view.updateNormals();
+  rendered(view);
   const index = /** @type {THREE.BufferAttribute} */ (view.geometry.index);
   const pos = /** @type {THREE.BufferAttribute} */ (view.posAttr);
   const norm = /** @type {THREE.BufferAttribute} */ (view.normAttr);
@@ -166,4 +177,10 @@ test('a keyframe of the same triangles moves only what moved: no rebuild, no who
   view.setSurface({ ...keyframe, triangles: flipped });
   assert.ok(index.version > indexVersion, 'new triangles were not uploaded');
   assert.equal(/** @type {Uint32Array} */ (index.array)[1], flipped[1]);
+  // And a delta before the frame is drawn leaves them whole: an update range would have three.js
+  // upload that span alone, and the rest of the new surface never.
+  view.applyMoved(deltas[41]);
+  view.updateNormals();
+  assert.deepEqual(pos.updateRanges, [], 'the new positions go whole, not as a range');
+  assert.deepEqual(norm.updateRanges, [], 'the new normals go whole, not as a range');
 });

@@ -97,6 +97,9 @@ export class SurfaceView {
     this.numTriangles = 0;
     /** @type {THREE.BufferAttribute | null} */ this.posAttr = null;
     /** @type {THREE.BufferAttribute | null} */ this.normAttr = null;
+    // The buffers go whole with the next render (new triangles): until then no update range is
+    // set (three.js uploads only the ranges when there are any).
+    this.wholePending = false;
     // Vertex -> triangles (CSR), face normals, and stamps that collect the triangles and
     // vertices around the moved ones without clearing anything.
     this.adjStart = new Int32Array(1);
@@ -167,6 +170,7 @@ export class SurfaceView {
     this.dirty = false;
     if (this.movedHi >= 0) this.updateNormals();
     this.renderer.render(this.scene, this.camera);
+    this.wholePending = false;
     this.onRender?.();
     return false;
   }
@@ -207,6 +211,7 @@ export class SurfaceView {
       a.clearUpdateRanges();
       a.needsUpdate = true;
     }
+    this.wholePending = true;
     // Everything is new: nothing moved is left to do (a new stamp: the arrays may be new too).
     this.stamp++;
     this.numTouchedTris = 0;
@@ -275,14 +280,17 @@ export class SurfaceView {
       if (v < lo) lo = v;
       if (v > hi) hi = v;
     }
-    // Upload only the spans that changed.
-    pos.clearUpdateRanges();
-    pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
-    pos.needsUpdate = true;
-    if (hi >= lo) {
-      norm.clearUpdateRanges();
-      norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
-      norm.needsUpdate = true;
+    // Upload only the spans that changed, unless the buffers go whole with this frame (a keyframe
+    // of new triangles, then a delta, before it).
+    if (!this.wholePending) {
+      pos.clearUpdateRanges();
+      pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
+      pos.needsUpdate = true;
+      if (hi >= lo) {
+        norm.clearUpdateRanges();
+        norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
+        norm.needsUpdate = true;
+      }
     }
     // The next frame collects afresh: a new stamp, nothing cleared.
     this.stamp++;
