@@ -1,4 +1,4 @@
-// The surface's per-frame work (viewer-web/src/view/surface.js) without a browser: the moved
+// The surface's per-frame work (viewer-web/src/view/surface_geometry.js) without a browser: the moved
 // vertices of a C++-encoded stream applied, then the normals around them recomputed once per frame
 // drawn, as the live view does. It must give the normals a full recomputation gives, upload only
 // the spans that moved, and allocate nothing per frame (the issue's "nothing is allocated per
@@ -13,7 +13,7 @@ import { PerformanceObserver } from 'node:perf_hooks';
 import * as THREE from '../../viewer-web/node_modules/three/build/three.module.js';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
-import { SurfaceView } from '../../viewer-web/src/view/surface.js';
+import { SurfaceGeometry } from '../../viewer-web/src/view/surface_geometry.js';
 
 const bin = process.env.IDMS_WEB_MESH_FRAMES_BIN;
 
@@ -33,27 +33,13 @@ function sheetFrames() {
 }
 
 /**
- * A SurfaceView's geometry part alone: no renderer, canvas or camera (those need a browser), the
- * fields the constructor gives the rest.
- */
-function geometryOnly() {
-  const view = /** @type {SurfaceView} */ (Object.create(SurfaceView.prototype));
-  Object.assign(view, {
-    geometry: new THREE.BufferGeometry(), mesh: { visible: false }, capacityV: 0, capacityT: 0,
-    numVertices: 0, numTriangles: 0, posAttr: null, normAttr: null, wholePending: false, stamp: 1, numTouchedTris: 0,
-    movedLo: 0, movedHi: -1, normalsMs: 0, fitted: true, invalidate() {},
-  });
-  return view;
-}
-
-/**
  * What a render does to the buffers: three.js uploads what is pending and clears the ranges.
- * @param {SurfaceView} view
+ * @param {SurfaceGeometry} surface
  */
-function rendered(view) {
-  if (view.movedHi >= 0) view.updateNormals();
-  for (const a of [view.posAttr, view.normAttr, view.geometry.index]) a?.clearUpdateRanges();
-  view.wholePending = false;
+function rendered(surface) {
+  if (surface.movedHi >= 0) surface.updateNormals();
+  for (const a of [surface.posAttr, surface.normAttr, surface.geometry.index]) a?.clearUpdateRanges();
+  surface.rendered();
 }
 
 /**
@@ -79,22 +65,22 @@ function decodedDeltas() {
 
 test('normals updated around the moved vertices equal a full recomputation; only the moved span is uploaded', () => {
   const { keyframe, deltas } = decodedDeltas();
-  const view = geometryOnly();
-  view.setSurface(keyframe);
-  rendered(view);
-  // Three deltas per frame drawn, as the bench's 60 Hz stream against a 20 fps view.
+  const surface = new SurfaceGeometry();
+  surface.setSurface(keyframe);
+  rendered(surface);
+  // Three deltas per frame drawn, as the bench's 60 Hz stream against a 20 fps surface.
   for (let k = 0; k + 3 <= 30; k += 3) {
-    for (let j = k; j < k + 3; j++) view.applyMoved(deltas[j]);
-    const lo = view.movedLo, hi = view.movedHi;
-    view.updateNormals();
-    const pos = /** @type {THREE.BufferAttribute} */ (view.posAttr);
+    for (let j = k; j < k + 3; j++) surface.applyMoved(deltas[j]);
+    const lo = surface.movedLo, hi = surface.movedHi;
+    surface.updateNormals();
+    const pos = /** @type {THREE.BufferAttribute} */ (surface.posAttr);
     assert.deepEqual(pos.updateRanges, [{ start: 3 * lo, count: 3 * (hi - lo + 1) }]);
     for (let j = k; j < k + 3; j++) assert.ok(deltas[j].changed[0] >= lo && deltas[j].changed[deltas[j].numChanged - 1] <= hi);
   }
   // Against every normal computed afresh from the same positions.
-  const fresh = geometryOnly();
-  fresh.setSurface({ ...keyframe, positions: /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (view.posAttr).array) });
-  const a = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (view.normAttr).array);
+  const fresh = new SurfaceGeometry();
+  fresh.setSurface({ ...keyframe, positions: /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (surface.posAttr).array) });
+  const a = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (surface.normAttr).array);
   const b = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (fresh.normAttr).array);
   let worst = 0;
   for (let i = 0; i < 3 * keyframe.numVertices; i++) worst = Math.max(worst, Math.abs(a[i] - b[i]));
@@ -103,14 +89,14 @@ test('normals updated around the moved vertices equal a full recomputation; only
 
 test('applying moved vertices and recomputing their normals allocates nothing per frame', async () => {
   const { keyframe, deltas } = decodedDeltas();
-  const view = geometryOnly();
-  view.setSurface(keyframe);
+  const surface = new SurfaceGeometry();
+  surface.setSurface(keyframe);
   const frame = (/** @type {number} */ f) => {
     const k = (3 * f) % (deltas.length - 2);
-    view.applyMoved(deltas[k]);
-    view.applyMoved(deltas[k + 1]);
-    view.applyMoved(deltas[k + 2]);
-    view.updateNormals();
+    surface.applyMoved(deltas[k]);
+    surface.applyMoved(deltas[k + 1]);
+    surface.applyMoved(deltas[k + 2]);
+    surface.updateNormals();
   };
   // Warm-up: every path compiled and optimised.
   for (let f = 0; f < 2000; f++) frame(f);
@@ -130,20 +116,20 @@ test('applying moved vertices and recomputing their normals allocates nothing pe
 
 test('a keyframe of the same triangles moves only what moved: no rebuild, no whole upload, the same normals', () => {
   const { keyframe, deltas } = decodedDeltas();
-  const view = geometryOnly();
-  view.setSurface(keyframe);
+  const surface = new SurfaceGeometry();
+  surface.setSurface(keyframe);
   // Drawn once: what a first keyframe uploads is done with.
-  rendered(view);
-  const index = /** @type {THREE.BufferAttribute} */ (view.geometry.index);
-  const pos = /** @type {THREE.BufferAttribute} */ (view.posAttr);
-  const norm = /** @type {THREE.BufferAttribute} */ (view.normAttr);
+  rendered(surface);
+  const index = /** @type {THREE.BufferAttribute} */ (surface.geometry.index);
+  const pos = /** @type {THREE.BufferAttribute} */ (surface.posAttr);
+  const norm = /** @type {THREE.BufferAttribute} */ (surface.normAttr);
   for (const a of [index, pos, norm]) a.clearUpdateRanges();
   const indexVersion = index.version;
-  const adjacency = view.adjTris;
+  const adjacency = surface.adjTris;
   // The stream's periodic keyframe some frames on: the same triangles, the dent moved on.
   const later = deltas[40];
   const again = { ...keyframe, positions: later.positions };
-  view.setSurface(again);
+  surface.setSurface(again);
   const moved = [];
   for (let v = 0; v < keyframe.numVertices; v++) {
     for (let c = 0; c < 3; c++) {
@@ -154,16 +140,16 @@ test('a keyframe of the same triangles moves only what moved: no rebuild, no who
     }
   }
   assert.ok(moved.length > 0 && moved.length < keyframe.numVertices / 2, `${moved.length} vertices moved`);
-  assert.equal(view.numTouchedTris > 0, true);
+  assert.equal(surface.numTouchedTris > 0, true);
   assert.equal(index.version, indexVersion, 'the triangles were uploaded again');
-  assert.equal(view.adjTris, adjacency);
-  view.updateNormals();
+  assert.equal(surface.adjTris, adjacency);
+  surface.updateNormals();
   // Only the span of the vertices that moved is uploaded.
   assert.deepEqual(pos.updateRanges, [{ start: 3 * moved[0], count: 3 * (moved[moved.length - 1] - moved[0] + 1) }]);
   assert.equal(norm.updateRanges.length, 1);
   assert.ok(norm.updateRanges[0].count < 3 * keyframe.numVertices);
   // The same positions and normals as the keyframe taken whole.
-  const fresh = geometryOnly();
+  const fresh = new SurfaceGeometry();
   fresh.setSurface(again);
   assert.deepEqual(pos.array, /** @type {THREE.BufferAttribute} */ (fresh.posAttr).array);
   const a = /** @type {Float32Array} */ (norm.array);
@@ -174,13 +160,13 @@ test('a keyframe of the same triangles moves only what moved: no rebuild, no who
   // Other triangles: rebuilt whole.
   const flipped = keyframe.triangles.slice();
   [flipped[1], flipped[2]] = [flipped[2], flipped[1]];
-  view.setSurface({ ...keyframe, triangles: flipped });
+  surface.setSurface({ ...keyframe, triangles: flipped });
   assert.ok(index.version > indexVersion, 'new triangles were not uploaded');
   assert.equal(/** @type {Uint32Array} */ (index.array)[1], flipped[1]);
   // And a delta before the frame is drawn leaves them whole: an update range would have three.js
   // upload that span alone, and the rest of the new surface never.
-  view.applyMoved(deltas[41]);
-  view.updateNormals();
+  surface.applyMoved(deltas[41]);
+  surface.updateNormals();
   assert.deepEqual(pos.updateRanges, [], 'the new positions go whole, not as a range');
   assert.deepEqual(norm.updateRanges, [], 'the new normals go whole, not as a range');
 });

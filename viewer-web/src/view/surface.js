@@ -1,12 +1,13 @@
-// The tissue in 3D: the surface as one three.js BufferGeometry updated in place (only moved
-// vertices' positions and the normals around them, uploaded as update ranges; the normals once
-// per frame drawn, for every vertex moved since the last, not once per delta), the tool as a
+// The tissue in 3D: the surface as one three.js BufferGeometry updated in place (SurfaceGeometry:
+// only moved vertices' positions and the normals around them, uploaded as update ranges; the
+// normals once per frame drawn, for every vertex moved since the last), the tool as a
 // sphere of its radius (thesis 6.1), the force as an arrow scaled to its magnitude. Renders only
 // when something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the
 // first keyframe is drawn.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { FrameLoop } from './frame_loop.js';
+import { SurfaceGeometry } from './surface_geometry.js';
 import { ToolMesh } from './tool.js';
 import { length3 } from '../length3.js';
 
@@ -84,42 +85,13 @@ export class SurfaceView {
     const sun = new THREE.DirectionalLight(0xffffff, 1.8);
     sun.position.set(3, 5, 8);
     this.scene.add(sun);
-    // The surface: buffers sized at a keyframe, reused while the surface does not grow.
-    this.geometry = new THREE.BufferGeometry();
+    // The surface.
+    this.surface = new SurfaceGeometry();
     this.material = new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide });
-    this.mesh = new THREE.Mesh(this.geometry, this.material);
+    this.mesh = new THREE.Mesh(this.surface.geometry, this.material);
     this.mesh.frustumCulled = false;
     this.mesh.visible = false;
     this.scene.add(this.mesh);
-    this.capacityV = 0;
-    this.capacityT = 0;
-    this.numVertices = 0;
-    this.numTriangles = 0;
-    /** @type {THREE.BufferAttribute | null} */ this.posAttr = null;
-    /** @type {THREE.BufferAttribute | null} */ this.normAttr = null;
-    // The buffers go whole with the next render (new triangles): until then no update range is
-    // set (three.js uploads only the ranges when there are any).
-    this.wholePending = false;
-    // Vertex -> triangles (CSR), face normals, and stamps that collect the triangles and
-    // vertices around the moved ones without clearing anything.
-    this.adjStart = new Int32Array(1);
-    this.adjTris = new Int32Array(0);
-    this.faceNormals = new Float32Array(0);
-    this.triStamp = new Uint32Array(0);
-    this.vertStamp = new Uint32Array(0);
-    this.touchedTris = new Int32Array(0);
-    this.touchedVerts = new Int32Array(0);
-    this.keyframeMoved = new Int32Array(0);
-    /** @type {{positions: Float32Array, changed: Int32Array, numChanged: number}} */
-    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
-    this.stamp = 1;
-    // Moved since the last frame drawn: the triangles around them (stamped with this.stamp) and
-    // the span of their ids; their normals are recomputed when the frame is drawn.
-    this.numTouchedTris = 0;
-    this.movedLo = 0;
-    this.movedHi = -1;
-    /** Time spent on normals, ms (the bench counts it as the page's work). */
-    this.normalsMs = 0;
     // The tool and the force.
     this.tool = new ToolMesh(kToolFree, 0x1d5fa8);
     this.tool.visible = false;
@@ -168,9 +140,9 @@ export class SurfaceView {
   draw() {
     if (!this.dirty) return false;
     this.dirty = false;
-    if (this.movedHi >= 0) this.updateNormals();
+    if (this.surface.movedHi >= 0) this.surface.updateNormals();
     this.renderer.render(this.scene, this.camera);
-    this.wholePending = false;
+    this.surface.rendered();
     this.onRender?.();
     return false;
   }
@@ -182,121 +154,32 @@ export class SurfaceView {
   }
 
   /**
-   * A whole surface (a keyframe): positions, triangles, adjacency, every normal. The same
-   * triangles again (the stream's periodic keyframe, every few seconds of a session) are taken as
-   * a delta of the vertices that moved: nothing rebuilt, nothing uploaded but what moved.
+   * A whole surface (a keyframe); the same triangles again are taken as the vertices that moved
+   * (SurfaceGeometry.setSurface).
    * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
    */
   setSurface(s) {
-    const nv = s.numVertices;
-    const nt = s.numTriangles;
-    if (nt > 0 && nv === this.numVertices && nt === this.numTriangles && this.sameTriangles(s.triangles)) {
-      this.applyMoved(this.movedSince(s.positions));
-      return;
+    if (this.surface.setSurface(s)) {
+      this.mesh.geometry = this.surface.geometry;
+      this.mesh.visible = s.numTriangles > 0;
+      if (!this.fitted && s.numVertices > 0) this.fit();
+      this.invalidate();
+    } else if (this.surface.movedHi >= 0) {
+      this.invalidate();
     }
-    if (nv > this.capacityV || nt > this.capacityT) this.allocate(Math.max(nv, this.capacityV), Math.max(nt, this.capacityT));
-    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
-    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
-    /** @type {Float32Array} */ (pos.array).set(s.positions.subarray(0, 3 * nv));
-    const index = /** @type {THREE.BufferAttribute} */ (this.geometry.index);
-    /** @type {Uint32Array} */ (index.array).set(s.triangles.subarray(0, 3 * nt));
-    this.numVertices = nv;
-    this.numTriangles = nt;
-    this.buildAdjacency(s.triangles, nv, nt);
-    // Every face normal, then every vertex normal.
-    for (let t = 0; t < nt; t++) this.faceNormal(t);
-    for (let v = 0; v < nv; v++) this.vertexNormal(v);
-    this.geometry.setDrawRange(0, 3 * nt);
-    for (const a of [pos, norm, index]) {
-      a.clearUpdateRanges();
-      a.needsUpdate = true;
-    }
-    this.wholePending = true;
-    // Everything is new: nothing moved is left to do (a new stamp: the arrays may be new too).
-    this.stamp++;
-    this.numTouchedTris = 0;
-    this.movedHi = -1;
-    this.mesh.visible = nt > 0;
-    if (!this.fitted && nv > 0) this.fit();
-    this.invalidate();
   }
 
   /**
-   * The vertices a delta moved: their positions now; the normals around them when the frame is
-   * drawn (a stream faster than the frame rate moves some vertices several times a frame).
+   * The vertices a delta moved (SurfaceGeometry.applyMoved).
    * @param {{positions: Float32Array, changed: Int32Array, numChanged: number}} s
    */
   applyMoved(s) {
-    const n = s.numChanged;
-    if (n === 0 || !this.posAttr || !this.normAttr) return;
-    const p = /** @type {Float32Array} */ (this.posAttr.array);
-    const stamp = this.stamp;
-    let numTris = this.numTouchedTris;
-    // Positions of the moved vertices, and the triangles around them not yet collected.
-    for (let k = 0; k < n; k++) {
-      const v = s.changed[k];
-      p[3 * v] = s.positions[3 * v];
-      p[3 * v + 1] = s.positions[3 * v + 1];
-      p[3 * v + 2] = s.positions[3 * v + 2];
-      for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
-        const t = this.adjTris[a];
-        if (this.triStamp[t] !== stamp) {
-          this.triStamp[t] = stamp;
-          this.touchedTris[numTris++] = t;
-        }
-      }
-    }
-    this.numTouchedTris = numTris;
-    // The span of moved ids (each delta's are increasing).
-    if (s.changed[0] < this.movedLo || this.movedHi < 0) this.movedLo = s.changed[0];
-    if (s.changed[n - 1] > this.movedHi) this.movedHi = s.changed[n - 1];
-    this.invalidate();
+    if (this.surface.applyMoved(s)) this.invalidate();
   }
 
-  /** The collected triangles' normals, their vertices' normals, and the spans to upload. */
-  updateNormals() {
-    const start = performance.now();
-    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
-    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
-    const stamp = this.stamp;
-    const index = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
-    let numVerts = 0;
-    for (let k = 0; k < this.numTouchedTris; k++) {
-      const t = this.touchedTris[k];
-      this.faceNormal(t);
-      for (let c = 0; c < 3; c++) {
-        const v = index[3 * t + c];
-        if (this.vertStamp[v] !== stamp) {
-          this.vertStamp[v] = stamp;
-          this.touchedVerts[numVerts++] = v;
-        }
-      }
-    }
-    let lo = this.numVertices;
-    let hi = -1;
-    for (let k = 0; k < numVerts; k++) {
-      const v = this.touchedVerts[k];
-      this.vertexNormal(v);
-      if (v < lo) lo = v;
-      if (v > hi) hi = v;
-    }
-    // Upload only the spans that changed, unless the buffers go whole with this frame (a keyframe
-    // of new triangles, then a delta, before it).
-    if (!this.wholePending) {
-      pos.clearUpdateRanges();
-      pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
-      pos.needsUpdate = true;
-      if (hi >= lo) {
-        norm.clearUpdateRanges();
-        norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
-        norm.needsUpdate = true;
-      }
-    }
-    // The next frame collects afresh: a new stamp, nothing cleared.
-    this.stamp++;
-    this.numTouchedTris = 0;
-    this.movedHi = -1;
-    this.normalsMs += performance.now() - start;
+  /** Time spent on normals, ms (the bench counts it as the page's work). */
+  get normalsMs() {
+    return this.surface.normalsMs;
   }
 
   /**
@@ -343,8 +226,8 @@ export class SurfaceView {
    */
   fit() {
     if (!this.fitted) {
-      this.geometry.computeBoundingSphere();
-      const s = this.geometry.boundingSphere;
+      this.surface.geometry.computeBoundingSphere();
+      const s = this.surface.geometry.boundingSphere;
       if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
       this.surfaceSphere.copy(s);
     }
@@ -373,8 +256,8 @@ export class SurfaceView {
       return { span: Math.max(Math.max(...xs) - Math.min(...xs), Math.max(...ys) - Math.min(...ys)) / 2,
         inside: q.every((p) => Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1 && p.z < 1) };
     };
-    this.geometry.computeBoundingBox();
-    const b = /** @type {THREE.Box3} */ (this.geometry.boundingBox);
+    this.surface.geometry.computeBoundingBox();
+    const b = /** @type {THREE.Box3} */ (this.surface.geometry.boundingBox);
     const corners = [];
     for (let i = 0; i < 8; i++) {
       corners.push(new THREE.Vector3(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z));
@@ -392,100 +275,11 @@ export class SurfaceView {
       toolNear: near };
   }
 
-  /** @param {number} nv @param {number} nt */
-  allocate(nv, nt) {
-    this.capacityV = nv;
-    this.capacityT = nt;
-    this.geometry.dispose();
-    this.geometry = new THREE.BufferGeometry();
-    this.posAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
-    this.normAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
-    this.geometry.setAttribute('position', this.posAttr);
-    this.geometry.setAttribute('normal', this.normAttr);
-    this.geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(3 * nt), 1));
-    this.mesh.geometry = this.geometry;
-    this.faceNormals = new Float32Array(3 * nt);
-    this.triStamp = new Uint32Array(nt);
-    this.vertStamp = new Uint32Array(nv);
-    this.touchedTris = new Int32Array(nt);
-    this.touchedVerts = new Int32Array(nv);
-    this.adjStart = new Int32Array(nv + 1);
-    this.adjTris = new Int32Array(3 * nt);
-    // A keyframe of the same triangles, as a delta (setSurface).
-    this.keyframeMoved = new Int32Array(nv);
-    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
-  }
-
-  /** @param {Uint32Array} tris @returns {boolean} whether they are the triangles shown */
-  sameTriangles(tris) {
-    const shown = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
-    for (let i = 0; i < 3 * this.numTriangles; i++) if (shown[i] !== tris[i]) return false;
-    return true;
-  }
-
-  /**
-   * The vertices whose positions differ from those shown, in increasing order, as applyMoved reads
-   * a delta (the object is reused).
-   * @param {Float32Array} positions
-   */
-  movedSince(positions) {
-    const shown = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
-    const moved = this.keyframeMoved;
-    let n = 0;
-    for (let v = 0; v < this.numVertices; v++) {
-      const i = 3 * v;
-      if (shown[i] !== positions[i] || shown[i + 1] !== positions[i + 1] || shown[i + 2] !== positions[i + 2]) moved[n++] = v;
-    }
-    const delta = this.keyframeDelta;
-    delta.positions = positions;
-    delta.numChanged = n;
-    return delta;
-  }
-
-  /** @param {Uint32Array} tris @param {number} nv @param {number} nt */
-  buildAdjacency(tris, nv, nt) {
-    const start = this.adjStart;
-    start.fill(0, 0, nv + 1);
-    for (let j = 0; j < 3 * nt; j++) start[tris[j] + 1]++;
-    for (let v = 0; v < nv; v++) start[v + 1] += start[v];
-    const fill = this.touchedVerts;  // per-vertex cursor, scratch here
-    fill.set(start.subarray(0, nv));
-    for (let j = 0; j < 3 * nt; j++) this.adjTris[fill[tris[j]]++] = Math.floor(j / 3);
-  }
-
-  /** The area-weighted normal of triangle t into faceNormals. @param {number} t */
-  faceNormal(t) {
-    const p = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
-    const idx = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
-    const a = 3 * idx[3 * t], b = 3 * idx[3 * t + 1], c = 3 * idx[3 * t + 2];
-    const ux = p[b] - p[a], uy = p[b + 1] - p[a + 1], uz = p[b + 2] - p[a + 2];
-    const vx = p[c] - p[a], vy = p[c + 1] - p[a + 1], vz = p[c + 2] - p[a + 2];
-    this.faceNormals[3 * t] = uy * vz - uz * vy;
-    this.faceNormals[3 * t + 1] = uz * vx - ux * vz;
-    this.faceNormals[3 * t + 2] = ux * vy - uy * vx;
-  }
-
-  /** Vertex v's normal: the normalised sum of its triangles' normals. @param {number} v */
-  vertexNormal(v) {
-    let x = 0, y = 0, z = 0;
-    for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
-      const t = 3 * this.adjTris[a];
-      x += this.faceNormals[t];
-      y += this.faceNormals[t + 1];
-      z += this.faceNormals[t + 2];
-    }
-    const len = length3(x, y, z) || 1;
-    const n = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.normAttr).array);
-    n[3 * v] = x / len;
-    n[3 * v + 1] = y / len;
-    n[3 * v + 2] = z / len;
-  }
-
   dispose() {
     this.loop.remove(this);
     this.resizeObserver.disconnect();
     this.controls.dispose();
-    this.geometry.dispose();
+    this.surface.dispose();
     this.tool.dispose();
     this.renderer.dispose();
     this.renderer.domElement.remove();

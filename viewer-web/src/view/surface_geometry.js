@@ -1,0 +1,260 @@
+// The tissue's surface as one three.js BufferGeometry updated in place: a keyframe sets it whole
+// (or, with the triangles already shown, as the vertices that moved), a delta moves vertices, and
+// once per frame drawn the normals around every vertex moved since the last frame are recomputed
+// and only the spans that changed are uploaded, as update ranges. Nothing is allocated per frame
+// once the first keyframe is set. No renderer, canvas or camera: SurfaceView draws it, and the
+// tests build it in Node.
+import * as THREE from 'three';
+import { length3 } from '../length3.js';
+
+export class SurfaceGeometry {
+  constructor() {
+    // Buffers sized at a keyframe, reused while the surface does not grow (allocate makes a new
+    // geometry when it does: its holder takes it up after setSurface).
+    this.geometry = new THREE.BufferGeometry();
+    this.capacityV = 0;
+    this.capacityT = 0;
+    this.numVertices = 0;
+    this.numTriangles = 0;
+    /** @type {THREE.BufferAttribute | null} */ this.posAttr = null;
+    /** @type {THREE.BufferAttribute | null} */ this.normAttr = null;
+    // The buffers go whole with the next render (new triangles): until then no update range is
+    // set (three.js uploads only the ranges when there are any).
+    this.wholePending = false;
+    // Vertex -> triangles (CSR), face normals, and stamps that collect the triangles and
+    // vertices around the moved ones without clearing anything.
+    this.adjStart = new Int32Array(1);
+    this.adjTris = new Int32Array(0);
+    this.faceNormals = new Float32Array(0);
+    this.triStamp = new Uint32Array(0);
+    this.vertStamp = new Uint32Array(0);
+    this.touchedTris = new Int32Array(0);
+    this.touchedVerts = new Int32Array(0);
+    this.keyframeMoved = new Int32Array(0);
+    /** @type {{positions: Float32Array, changed: Int32Array, numChanged: number}} */
+    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
+    this.stamp = 1;
+    // Moved since the last frame drawn: the triangles around them (stamped with this.stamp) and
+    // the span of their ids; their normals are recomputed when the frame is drawn.
+    this.numTouchedTris = 0;
+    this.movedLo = 0;
+    this.movedHi = -1;
+    /** Time spent on normals, ms (the bench counts it as the page's work). */
+    this.normalsMs = 0;
+  }
+
+  /**
+   * A whole surface (a keyframe): positions, triangles, adjacency, every normal. The same
+   * triangles again (the stream's periodic keyframe, every few seconds of a session) are taken as
+   * a delta of the vertices that moved: nothing rebuilt, nothing uploaded but what moved.
+   * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
+   * @returns {boolean} whether it was rebuilt whole (new triangles), not taken as moved vertices
+   */
+  setSurface(s) {
+    const nv = s.numVertices;
+    const nt = s.numTriangles;
+    if (nt > 0 && nv === this.numVertices && nt === this.numTriangles && this.sameTriangles(s.triangles)) {
+      this.applyMoved(this.movedSince(s.positions));
+      return false;
+    }
+    if (nv > this.capacityV || nt > this.capacityT) this.allocate(Math.max(nv, this.capacityV), Math.max(nt, this.capacityT));
+    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
+    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
+    /** @type {Float32Array} */ (pos.array).set(s.positions.subarray(0, 3 * nv));
+    const index = /** @type {THREE.BufferAttribute} */ (this.geometry.index);
+    /** @type {Uint32Array} */ (index.array).set(s.triangles.subarray(0, 3 * nt));
+    this.numVertices = nv;
+    this.numTriangles = nt;
+    this.buildAdjacency(s.triangles, nv, nt);
+    // Every face normal, then every vertex normal.
+    for (let t = 0; t < nt; t++) this.faceNormal(t);
+    for (let v = 0; v < nv; v++) this.vertexNormal(v);
+    this.geometry.setDrawRange(0, 3 * nt);
+    for (const a of [pos, norm, index]) {
+      a.clearUpdateRanges();
+      a.needsUpdate = true;
+    }
+    this.wholePending = true;
+    // Everything is new: nothing moved is left to do (a new stamp: the arrays may be new too).
+    this.stamp++;
+    this.numTouchedTris = 0;
+    this.movedHi = -1;
+    return true;
+  }
+
+  /**
+   * The vertices a delta moved: their positions now; the normals around them when the frame is
+   * drawn (a stream faster than the frame rate moves some vertices several times a frame).
+   * @param {{positions: Float32Array, changed: Int32Array, numChanged: number}} s
+   * @returns {boolean} whether anything moved
+   */
+  applyMoved(s) {
+    const n = s.numChanged;
+    if (n === 0 || !this.posAttr || !this.normAttr) return false;
+    const p = /** @type {Float32Array} */ (this.posAttr.array);
+    const stamp = this.stamp;
+    let numTris = this.numTouchedTris;
+    // Positions of the moved vertices, and the triangles around them not yet collected.
+    for (let k = 0; k < n; k++) {
+      const v = s.changed[k];
+      p[3 * v] = s.positions[3 * v];
+      p[3 * v + 1] = s.positions[3 * v + 1];
+      p[3 * v + 2] = s.positions[3 * v + 2];
+      for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
+        const t = this.adjTris[a];
+        if (this.triStamp[t] !== stamp) {
+          this.triStamp[t] = stamp;
+          this.touchedTris[numTris++] = t;
+        }
+      }
+    }
+    this.numTouchedTris = numTris;
+    // The span of moved ids (each delta's are increasing).
+    if (s.changed[0] < this.movedLo || this.movedHi < 0) this.movedLo = s.changed[0];
+    if (s.changed[n - 1] > this.movedHi) this.movedHi = s.changed[n - 1];
+    return true;
+  }
+
+  /** The collected triangles' normals, their vertices' normals, and the spans to upload. */
+  updateNormals() {
+    const start = performance.now();
+    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
+    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
+    const stamp = this.stamp;
+    const index = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    let numVerts = 0;
+    for (let k = 0; k < this.numTouchedTris; k++) {
+      const t = this.touchedTris[k];
+      this.faceNormal(t);
+      for (let c = 0; c < 3; c++) {
+        const v = index[3 * t + c];
+        if (this.vertStamp[v] !== stamp) {
+          this.vertStamp[v] = stamp;
+          this.touchedVerts[numVerts++] = v;
+        }
+      }
+    }
+    let lo = this.numVertices;
+    let hi = -1;
+    for (let k = 0; k < numVerts; k++) {
+      const v = this.touchedVerts[k];
+      this.vertexNormal(v);
+      if (v < lo) lo = v;
+      if (v > hi) hi = v;
+    }
+    // Upload only the spans that changed, unless the buffers go whole with this frame (a keyframe
+    // of new triangles, then a delta, before it).
+    if (!this.wholePending) {
+      pos.clearUpdateRanges();
+      pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
+      pos.needsUpdate = true;
+      if (hi >= lo) {
+        norm.clearUpdateRanges();
+        norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
+        norm.needsUpdate = true;
+      }
+    }
+    // The next frame collects afresh: a new stamp, nothing cleared.
+    this.stamp++;
+    this.numTouchedTris = 0;
+    this.movedHi = -1;
+    this.normalsMs += performance.now() - start;
+  }
+
+  /** @param {number} nv @param {number} nt */
+  allocate(nv, nt) {
+    this.capacityV = nv;
+    this.capacityT = nt;
+    this.geometry.dispose();
+    this.geometry = new THREE.BufferGeometry();
+    this.posAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    this.normAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    this.geometry.setAttribute('position', this.posAttr);
+    this.geometry.setAttribute('normal', this.normAttr);
+    this.geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(3 * nt), 1));
+    this.faceNormals = new Float32Array(3 * nt);
+    this.triStamp = new Uint32Array(nt);
+    this.vertStamp = new Uint32Array(nv);
+    this.touchedTris = new Int32Array(nt);
+    this.touchedVerts = new Int32Array(nv);
+    this.adjStart = new Int32Array(nv + 1);
+    this.adjTris = new Int32Array(3 * nt);
+    // A keyframe of the same triangles, as a delta (setSurface).
+    this.keyframeMoved = new Int32Array(nv);
+    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
+  }
+
+  /** @param {Uint32Array} tris @returns {boolean} whether they are the triangles shown */
+  sameTriangles(tris) {
+    const shown = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    for (let i = 0; i < 3 * this.numTriangles; i++) if (shown[i] !== tris[i]) return false;
+    return true;
+  }
+
+  /**
+   * The vertices whose positions differ from those shown, in increasing order, as applyMoved reads
+   * a delta (the object is reused).
+   * @param {Float32Array} positions
+   */
+  movedSince(positions) {
+    const shown = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    const moved = this.keyframeMoved;
+    let n = 0;
+    for (let v = 0; v < this.numVertices; v++) {
+      const i = 3 * v;
+      if (shown[i] !== positions[i] || shown[i + 1] !== positions[i + 1] || shown[i + 2] !== positions[i + 2]) moved[n++] = v;
+    }
+    const delta = this.keyframeDelta;
+    delta.positions = positions;
+    delta.numChanged = n;
+    return delta;
+  }
+
+  /** @param {Uint32Array} tris @param {number} nv @param {number} nt */
+  buildAdjacency(tris, nv, nt) {
+    const start = this.adjStart;
+    start.fill(0, 0, nv + 1);
+    for (let j = 0; j < 3 * nt; j++) start[tris[j] + 1]++;
+    for (let v = 0; v < nv; v++) start[v + 1] += start[v];
+    const fill = this.touchedVerts;  // per-vertex cursor, scratch here
+    fill.set(start.subarray(0, nv));
+    for (let j = 0; j < 3 * nt; j++) this.adjTris[fill[tris[j]]++] = Math.floor(j / 3);
+  }
+
+  /** The area-weighted normal of triangle t into faceNormals. @param {number} t */
+  faceNormal(t) {
+    const p = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    const idx = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+    const a = 3 * idx[3 * t], b = 3 * idx[3 * t + 1], c = 3 * idx[3 * t + 2];
+    const ux = p[b] - p[a], uy = p[b + 1] - p[a + 1], uz = p[b + 2] - p[a + 2];
+    const vx = p[c] - p[a], vy = p[c + 1] - p[a + 1], vz = p[c + 2] - p[a + 2];
+    this.faceNormals[3 * t] = uy * vz - uz * vy;
+    this.faceNormals[3 * t + 1] = uz * vx - ux * vz;
+    this.faceNormals[3 * t + 2] = ux * vy - uy * vx;
+  }
+
+  /** Vertex v's normal: the normalised sum of its triangles' normals. @param {number} v */
+  vertexNormal(v) {
+    let x = 0, y = 0, z = 0;
+    for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
+      const t = 3 * this.adjTris[a];
+      x += this.faceNormals[t];
+      y += this.faceNormals[t + 1];
+      z += this.faceNormals[t + 2];
+    }
+    const len = length3(x, y, z) || 1;
+    const n = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.normAttr).array);
+    n[3 * v] = x / len;
+    n[3 * v + 1] = y / len;
+    n[3 * v + 2] = z / len;
+  }
+
+  /** The frame was drawn: what was pending went to the GPU. */
+  rendered() {
+    this.wholePending = false;
+  }
+
+  dispose() {
+    this.geometry.dispose();
+  }
+}
