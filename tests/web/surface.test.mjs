@@ -37,7 +37,7 @@ function sheetFrames() {
  * @param {SurfaceGeometry} surface
  */
 function rendered(surface) {
-  if (surface.movedHi >= 0) surface.updateNormals();
+  if (surface.moved) surface.updateNormals();
   for (const a of [surface.posAttr, surface.normAttr, surface.geometry.index]) a?.clearUpdateRanges();
   surface.rendered();
 }

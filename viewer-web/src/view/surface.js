@@ -140,7 +140,7 @@ export class SurfaceView {
   draw() {
     if (!this.dirty) return false;
     this.dirty = false;
-    if (this.surface.movedHi >= 0) this.surface.updateNormals();
+    if (this.surface.moved) this.surface.updateNormals();
     this.renderer.render(this.scene, this.camera);
     this.surface.rendered();
     this.onRender?.();
@@ -164,7 +164,7 @@ export class SurfaceView {
       this.mesh.visible = s.numTriangles > 0;
       if (!this.fitted && s.numVertices > 0) this.fit();
       this.invalidate();
-    } else if (this.surface.movedHi >= 0) {
+    } else if (this.surface.moved) {
       this.invalidate();
     }
   }

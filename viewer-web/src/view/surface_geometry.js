@@ -181,7 +181,7 @@ export class SurfaceGeometry {
     this.adjTris = new Int32Array(3 * nt);
     // A keyframe of the same triangles, as a delta (setSurface).
     this.keyframeMoved = new Int32Array(nv);
-    this.keyframeDelta = { positions: new Float32Array(0), changed: this.keyframeMoved, numChanged: 0 };
+    this.keyframeDelta.changed = this.keyframeMoved;
   }
 
   /** @param {Uint32Array} tris @returns {boolean} whether they are the triangles shown */
@@ -247,6 +247,11 @@ export class SurfaceGeometry {
     n[3 * v] = x / len;
     n[3 * v + 1] = y / len;
     n[3 * v + 2] = z / len;
+  }
+
+  /** Whether vertices moved since the last frame drawn (their normals are still to recompute). */
+  get moved() {
+    return this.movedHi >= 0;
   }
 
   /** The frame was drawn: what was pending went to the GPU. */
