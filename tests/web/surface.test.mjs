@@ -170,3 +170,24 @@ test('a keyframe of the same triangles moves only what moved: no rebuild, no who
   assert.deepEqual(pos.updateRanges, [], 'the new positions go whole, not as a range');
   assert.deepEqual(norm.updateRanges, [], 'the new normals go whole, not as a range');
 });
+
+test('the bounds are those of the surface shown, not of a larger one before it left in the buffers', () => {
+  const surface = new SurfaceGeometry();
+  // A 10 x 10 square, then a unit triangle: the buffers keep the square's size.
+  surface.setSurface({ numVertices: 4, numTriangles: 2, positions: new Float32Array([0, 0, 0, 10, 0, 0, 10, 10, 0, 0, 10, 0]),
+    triangles: new Uint32Array([0, 1, 2, 0, 2, 3]) });
+  assert.equal(surface.boundingBox(new THREE.Box3()).max.x, 10);
+  surface.setSurface({ numVertices: 3, numTriangles: 1, positions: new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]),
+    triangles: new Uint32Array([0, 1, 2]) });
+  assert.equal(surface.capacityV, 4);
+  const box = surface.boundingBox(new THREE.Box3());
+  assert.deepEqual([box.min.toArray(), box.max.toArray()], [[0, 0, 0], [1, 1, 0]]);
+  const sphere = surface.boundingSphere(new THREE.Sphere());
+  assert.deepEqual(sphere.center.toArray(), [0.5, 0.5, 0]);
+  assert.ok(Math.abs(sphere.radius - Math.SQRT1_2) < 1e-6, `radius ${sphere.radius}`);
+  // three.js's own bounds take the whole buffer, the square's fourth vertex with it.
+  surface.geometry.computeBoundingBox();
+  assert.equal(surface.geometry.boundingBox?.max.y, 10);
+  // Nothing shown: empty.
+  assert.ok(new SurfaceGeometry().boundingSphere(new THREE.Sphere()).isEmpty());
+});

@@ -226,9 +226,8 @@ export class SurfaceView {
    */
   fit() {
     if (!this.fitted) {
-      this.surface.geometry.computeBoundingSphere();
-      const s = this.surface.geometry.boundingSphere;
-      if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
+      const s = this.surface.boundingSphere(new THREE.Sphere());
+      if (!Number.isFinite(s.radius) || s.radius <= 0) return;
       this.surfaceSphere.copy(s);
     }
     const sphere = this.surfaceSphere;
@@ -256,8 +255,7 @@ export class SurfaceView {
       return { span: Math.max(Math.max(...xs) - Math.min(...xs), Math.max(...ys) - Math.min(...ys)) / 2,
         inside: q.every((p) => Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1 && p.z < 1) };
     };
-    this.surface.geometry.computeBoundingBox();
-    const b = /** @type {THREE.Box3} */ (this.surface.geometry.boundingBox);
+    const b = this.surface.boundingBox(new THREE.Box3());
     const corners = [];
     for (let i = 0; i < 8; i++) {
       corners.push(new THREE.Vector3(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z));

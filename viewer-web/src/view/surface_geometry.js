@@ -249,6 +249,36 @@ export class SurfaceGeometry {
     n[3 * v + 2] = z / len;
   }
 
+  /**
+   * The box around the vertices shown. Not the buffer's: it keeps the size of the largest surface
+   * seen, and past numVertices holds an earlier surface's vertices.
+   * @param {THREE.Box3} box @returns {THREE.Box3} box
+   */
+  boundingBox(box) {
+    box.makeEmpty();
+    if (!this.posAttr) return box;
+    return box.setFromArray(/** @type {Float32Array} */ (this.posAttr.array).subarray(0, 3 * this.numVertices));
+  }
+
+  /**
+   * The sphere around the vertices shown, centred on their box (as three.js's own), empty (radius
+   * -1) with none.
+   * @param {THREE.Sphere} sphere @returns {THREE.Sphere} sphere
+   */
+  boundingSphere(sphere) {
+    const box = this.boundingBox(new THREE.Box3());
+    if (box.isEmpty()) return sphere.makeEmpty();
+    const c = box.getCenter(sphere.center);
+    const p = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    let r2 = 0;
+    for (let i = 0; i < 3 * this.numVertices; i += 3) {
+      const dx = p[i] - c.x, dy = p[i + 1] - c.y, dz = p[i + 2] - c.z;
+      r2 = Math.max(r2, dx * dx + dy * dy + dz * dz);
+    }
+    sphere.radius = Math.sqrt(r2);
+    return sphere;
+  }
+
   /** Whether vertices moved since the last frame drawn (their normals are still to recompute). */
   get moved() {
     return this.movedHi >= 0;
