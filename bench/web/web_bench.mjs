@@ -7,7 +7,7 @@
 // shared, and its frame rates swing by a third from one run to the next; so it also prints the
 // CPU time the browser's processes spent per frame drawn (from /proc), which load moves less.
 // Never fails on time.
-//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000]
+//   node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--warmup S] [--runs N] [--vertices 1000,10000,100000]
 //     [--variants "page bare still,notool ..."]
 // --variants runs the named variants of the two pages in turn instead (page.js lists the switches:
 // a part of the page switched off, or one more draw on the bare page), and prints each one's frame
@@ -28,11 +28,18 @@ const option = (name, fallback) => {
   return i > 0 ? Number(process.argv[i + 1]) : fallback;
 };
 const seconds = option('--seconds', 6);
+// Each page runs this long before it is measured. The live view's JavaScript is still being
+// optimised by V8 for 10-15 s after the stream starts (a trace at 10^4: TurboFan's background
+// compiles 1.0-1.2 ms of CPU per frame drawn 2-12 s in, none 15-19 s in, and the page's own
+// JavaScript on its main thread 30% slower meanwhile); an instructor watches for minutes, so the
+// bench measures the page as it runs then, not its first seconds. The bare page has no JavaScript
+// to speak of; it gets the same warm-up.
+const warmup = option('--warmup', 15);
 const runs = option('--runs', 3);
 const only = process.argv.includes('--vertices') ? process.argv[process.argv.indexOf('--vertices') + 1].split(',').map(Number) : null;
 const variants = process.argv.includes('--variants') ? process.argv[process.argv.indexOf('--variants') + 1].split(/\s+/).filter(Boolean) : null;
-if (!build || !(seconds > 0) || !(runs >= 1)) {
-  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--runs N] [--vertices 1000,10000,100000] [--variants "page bare ..."]');
+if (!build || !(seconds > 0) || !(warmup >= 0) || !(runs >= 1)) {
+  console.error('usage: node bench/web/web_bench.mjs BUILD_DIR [--seconds S] [--warmup S] [--runs N] [--vertices 1000,10000,100000] [--variants "page bare ..."]');
   process.exit(2);
 }
 const esbuild = await import(join(root, 'viewer-web', 'node_modules', 'esbuild', 'lib', 'main.js'));
@@ -111,11 +118,12 @@ function cpuBetween(a, b) {
 /** @param {string} hash '' for the live view, '#bare' for three.js alone, '#switch,switch' for a variant */
 async function run(hash) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
-  await page.goto(`http://127.0.0.1:${port}/?seconds=${seconds}${hash}`);
+  // The page encodes the device samples of the whole run before it starts (warm-up included).
+  await page.goto(`http://127.0.0.1:${port}/?seconds=${warmup + seconds}${hash}`);
   await page.waitForFunction(() => /** @type {any} */ (window).__bench || /** @type {any} */ (window).__benchError, undefined, { timeout: 120000 });
   const err = await page.evaluate(() => /** @type {any} */ (window).__benchError);
   if (err) throw new Error(err);
-  await page.waitForTimeout(1500);  // warm-up: the plots' window and the GPU buffers fill
+  await page.waitForTimeout(1000 * warmup);  // V8's optimising compilers done; the plots' window and the GPU buffers full
   const cpu0 = browserCpu();
   const a = await page.evaluate(() => ({ ...(/** @type {any} */ (window).__bench), now: performance.now() }));
   await page.waitForTimeout(seconds * 1000);
@@ -142,7 +150,7 @@ const median = (xs) => {
 };
 const load = () => loadavg().map((x) => x.toFixed(2)).join(' ');
 
-console.log(`idms web bench: headless chromium ${browser.version()} (SwiftShader), 1280x720 window, ${seconds} s per run, ` +
+console.log(`idms web bench: headless chromium ${browser.version()} (SwiftShader), 1280x720 window, ${seconds} s per run after ${warmup} s of warm-up, ` +
   `${runs} alternating runs per page and size, frames at 60 Hz, load average ${load()}`);
 console.log('page: the live view (3D view with tool and force arrow, force/position/depth plots, loop health) fed mesh frames + 17 samples at 60 Hz');
 console.log('bare: three.js alone, the same mesh held still, the same lights, material, antialias and pixel ratio, a render every animation frame');

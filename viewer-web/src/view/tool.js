@@ -48,8 +48,12 @@ export class ToolMesh extends THREE.Mesh {
     geometry.setAttribute('color', new THREE.BufferAttribute(colors, 4));
     geometry.setIndex(index);
     // No depth test: the force shows through the tissue (a grasp pulls the hand towards it) and
-    // the tool where the tissue hides it; drawn after the tissue (renderOrder).
-    const material = new THREE.MeshStandardMaterial({ vertexColors: true, transparent: true, depthWrite: false, depthTest: false });
+    // the tool where the tissue hides it; drawn after the tissue (renderOrder). Lambert: the
+    // physically based material it was (three.js's defaults, fully rough, not metal) added only a
+    // faint sheen to this see-through sphere, and its per-pixel shading cost a software renderer
+    // half the tool's time (bench/web at 10^3 vertices, where the tool is large on screen: 6.6 ms
+    // a frame with it, 3.2 with Lambert; the screenshots are the same to the eye).
+    const material = new THREE.MeshLambertMaterial({ vertexColors: true, transparent: true, depthWrite: false, depthTest: false });
     super(geometry, material);
     this.renderOrder = 10;
     // The arrow's vertices move: a bounding sphere would be stale.
