@@ -3,8 +3,9 @@
 // centre, scaled to the force's magnitude, drawn over the sphere. As two objects (a sphere and
 // three.js's ArrowHelper, itself a line and a cone) they were three draws; on a machine without a
 // GPU (headless Chromium's SwiftShader) each draw of a few hundred triangles costs a fixed part of
-// a 75 ms frame, more than its pixels: 0.6 ms unlit and 1.6 lit in one batch, up to 4.5 in
-// another (bench/web, `--variants "bare bare,sphere"`, beside the bare page). Only the arrow's
+// a 75 ms frame, and its lit pixels more: 0.6 ms unlit and 1.6 lit in one batch, up to 4.5 in
+// another (bench/web, `--variants "bare bare,sphere"`, beside the bare page; the material below
+// says what lighting costs). Only the arrow's
 // vertices are rewritten when the force changes, and only they are uploaded; nothing is allocated.
 import * as THREE from 'three';
 
