@@ -21,7 +21,7 @@ import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
-import { framedSphere, placeCamera } from '../../viewer-web/src/view/surface.js';
+import { framedBox, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
@@ -198,11 +198,11 @@ async function barePage() {
   scene.add(new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide })));
   // The live view's camera: fitted to the surface and the tool where the first samples put it
   // (of the live view's default radius), so that both draw the mesh at the same size.
-  const s = /** @type {THREE.Sphere} */ (geometry.boundingSphere);
+  geometry.computeBoundingBox();
   const p = samplesOf(0)[16].toolPos;
   const tool = new THREE.Sphere(new THREE.Vector3(p.x, p.y, p.z), 1.5);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
-  placeCamera(camera, framedSphere(s, tool, new THREE.Sphere()));
+  placeCamera(camera, framedBox(/** @type {THREE.Box3} */ (geometry.boundingBox), tool, new THREE.Box3()));
   if (flags.has('sphere')) {
     // One more draw: a lit sphere the tool's size where the tool is.
     const sphere = new THREE.Mesh(new THREE.SphereGeometry(1.5, 32, 16), new THREE.MeshStandardMaterial({ color: 0x4f7cac }));

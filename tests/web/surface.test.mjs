@@ -2,7 +2,8 @@
 // vertices of a C++-encoded stream applied, then the normals around them recomputed once per frame
 // drawn, as the live view does. It must give the normals a full recomputation gives, upload only
 // the spans that moved, and allocate nothing per frame (the issue's "nothing is allocated per
-// frame"; a three-argument Math.hypot there once made about 160 kB of garbage a frame).
+// frame"; a three-argument Math.hypot there once made about 160 kB of garbage a frame). And the
+// camera's fit (surface.js's placeCamera and framedBox): all of what it frames in view, tightly.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
@@ -14,6 +15,7 @@ import * as THREE from '../../viewer-web/node_modules/three/build/three.module.j
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { SurfaceGeometry } from '../../viewer-web/src/view/surface_geometry.js';
+import { framedBox, placeCamera } from '../../viewer-web/src/view/surface.js';
 
 const bin = process.env.IDMS_WEB_MESH_FRAMES_BIN;
 
@@ -190,4 +192,41 @@ test('the bounds are those of the surface shown, not of a larger one before it l
   assert.equal(surface.geometry.boundingBox?.max.y, 10);
   // Nothing shown: empty.
   assert.ok(new SurfaceGeometry().boundingSphere(new THREE.Sphere()).isEmpty());
+});
+
+test('the camera shows every corner of the box it frames, as near as it can, whatever the view\'s shape', () => {
+  const boxes = {
+    'a flat sheet': new THREE.Box3(new THREE.Vector3(-10, -8, 0), new THREE.Vector3(10, 8, 0.1)),
+    'a cube off the origin': new THREE.Box3(new THREE.Vector3(3, 4, 5), new THREE.Vector3(5, 6, 7)),
+    'a tall column': new THREE.Box3(new THREE.Vector3(-1, -1, 0), new THREE.Vector3(1, 1, 12)),
+  };
+  for (const [name, box] of Object.entries(boxes)) {
+    for (const aspect of [0.45, 1, 818 / 388, 3]) {
+      const camera = new THREE.PerspectiveCamera(40, aspect);
+      placeCamera(camera, box);
+      camera.updateMatrixWorld();
+      let edge = 0;
+      for (let i = 0; i < 8; i++) {
+        const q = new THREE.Vector3(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z).project(camera);
+        assert.ok(Math.abs(q.x) <= 1 && Math.abs(q.y) <= 1 && q.z > -1 && q.z < 1, `${name} at aspect ${aspect.toFixed(2)}: corner ${i} at ${q.toArray()}`);
+        edge = Math.max(edge, Math.abs(q.x), Math.abs(q.y));
+      }
+      // Tight: some corner reaches the view's edge, less its 5% margin (a bounding sphere fitted
+      // into the narrower field of view left a flat sheet in a wide view at a third of it).
+      assert.ok(edge > 0.9, `${name} at aspect ${aspect.toFixed(2)}: the farthest corner at ${edge.toFixed(3)} of the view`);
+      assert.equal(camera.up.z, 1);
+      assert.ok(camera.position.z > box.getCenter(new THREE.Vector3()).z, 'from above');
+    }
+  }
+});
+
+test('the framed box takes in a tool near the surface and leaves a far one out', () => {
+  const sheet = new THREE.Box3(new THREE.Vector3(-10, -8, 0), new THREE.Vector3(10, 8, 0.1));
+  const near = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(9, 0, 4), 1.5), new THREE.Box3());
+  assert.ok(near.containsBox(sheet) && near.max.z === 5.5 && near.max.x === 10.5, `near: ${near.min.toArray()} ${near.max.toArray()}`);
+  const far = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(0, 0, 60), 1.5), new THREE.Box3());
+  assert.ok(far.equals(sheet), 'a tool far above is left out: the tissue stays the subject');
+  // Grown from what was framed before: the frame only grows as the tool travels.
+  const grown = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(-9, 0, 3), 1.5), new THREE.Box3(), near);
+  assert.ok(grown.containsBox(near) && grown.min.x === -10.5, `grown: ${grown.min.toArray()} ${grown.max.toArray()}`);
 });

@@ -81,6 +81,13 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   assert.ok(Math.abs(duration2 - now1) < 1, `the header says ${duration2} s, the session's time is ${now1} s`);
   await page.evaluate(() => scrollTo(0, 0));
   await shot(page, 'live-view.png');
+  // What an instructor watches is on the first screen at 1280x720, without scrolling: the view,
+  // the force plot and the note field (the plots beside the view, the notes under it).
+  const offScreen = await page.evaluate(() => ['view3d', 'force-plot', 'note'].filter((id) => {
+    const r = /** @type {HTMLElement} */ (document.getElementById(id)).getBoundingClientRect();
+    return r.top < 0 || r.bottom > innerHeight || r.left < 0 || r.right > innerWidth || r.height === 0;
+  }));
+  assert.deepEqual(offScreen, [], 'not on the first screen at 1280x720');
   const health = await page.locator('#health').innerText();
   assert.match(health, /Tick compute p99\s+\d+ µs/);
   assert.match(health, /Overruns\s+\d+ of [1-9]\d* ticks/);

@@ -24,8 +24,11 @@ const kWindowS = 5;
  */
 
 /**
- * The page's elements, laid out: the title, header and timeline, the 3D view with its toolbar,
- * and the side panels (the commands on top, for admins of a live session).
+ * The page's elements, laid out for watching: the 3D view, the plots beside it (what an instructor
+ * looks at rather than reads), and under the view the annotations, the loop health as a strip,
+ * the commands (for admins of a live session) and the events. At 1280x720 the view, the force
+ * plot and the note field are on the first screen; on a phone it is one column, the plots after
+ * the view (style.css, .session-grid).
  * @param {string} id @param {'live' | 'replay'} mode
  * @param {{meta: HTMLElement, timeline: HTMLElement, health: HTMLElement, notes: HTMLElement,
  *   annotate: HTMLElement | null, events: HTMLElement, commands: HTMLElement | null}} panels
@@ -40,13 +43,15 @@ function layout(id, mode, panels) {
     gapNote: h('p', { class: 'gap-note', id: 'gap-note', role: 'status' }),
   };
   const wire = h('input', { type: 'checkbox', id: 'wireframe' });
-  const side = h('aside', { class: 'side' }, [
-    panels.commands,
-    h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), panels.health]),
+  const plots = h('aside', { class: 'side plots-side' }, [
     h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }),
       hosts.force, hosts.position, hosts.depth]),
+  ]);
+  const below = h('div', { class: 'side below-view' }, [
     h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
       panels.annotate, panels.notes]),
+    h('section', { 'aria-labelledby': 'health-title' }, [h('h2', { id: 'health-title', text: 'Loop health' }), panels.health]),
+    panels.commands,
     h('section', { 'aria-labelledby': 'events-title' }, [h('h2', { id: 'events-title', text: 'Events' }), panels.events]),
   ]);
   page(`${mode === 'live' ? 'Live' : 'Replay'} ${id}`, [
@@ -58,7 +63,8 @@ function layout(id, mode, panels) {
         hosts.view,
         h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
       ]),
-      side,
+      plots,
+      below,
     ]),
   ].filter((x) => x !== null));
   return { hosts, wire };

@@ -88,8 +88,10 @@ export class HealthPanel {
       'Stability fallbacks', 'Samples dropped', 'Mesh frames'];
     /** @type {Text[]} */
     this.values = labels.map(() => document.createTextNode(''));
+    // A pair per div (as HTML allows in a dl), so that the pairs flow into as many columns as the
+    // width holds: a strip under the view, one column on a phone.
     this.el = h('dl', { class: 'health', id: 'health' },
-      labels.flatMap((label, i) => [h('dt', { text: label }), h('dd', {}, [this.values[i]])]));
+      labels.map((label, i) => h('div', {}, [h('dt', { text: label }), h('dd', {}, [this.values[i]])])));
     loop.add(this);
   }
 

@@ -21,8 +21,10 @@ export class DepthPlot {
     this.canvas.style.width = '100%';
     this.canvas.style.height = '160px';
     host.append(this.canvas);
-    // Redrawn at its box's width whenever that changes (kept here: no layout read per frame).
-    this.width = 100;
+    // Redrawn at its box's width whenever that changes (kept here: no layout read per frame); the
+    // box's width now, so that a plot below the fold is not left drawn at a placeholder's width,
+    // stretched, until the observer's first report.
+    this.width = Math.max(100, Math.round(host.clientWidth));
     this.resizeObserver = new ResizeObserver((entries) => {
       this.width = Math.max(100, Math.round(entries[entries.length - 1].contentRect.width));
       this.invalidate();

@@ -15,48 +15,72 @@ const kToolFree = 0x4f7cac;
 const kToolContact = 0xe08a1e;
 const kToolGrasp = 0xc0392b;
 
+/** The camera's direction from what it looks at: in front, a little above and to the side. */
+const kViewFrom = new THREE.Vector3(0.3, -2.6, 1.0).normalize();
+/** The view's margin around what it frames: the distance placeCamera finds, times this. */
+const kFrameMargin = 1.05;
+const scratchRight = new THREE.Vector3();
+const scratchUp = new THREE.Vector3();
+const scratchCorner = new THREE.Vector3();
+
 /**
- * Looks at a bounding sphere from the front, a little above and to the side, z up (the bench's
- * bare page uses it too, so that both draw the same pixels).
- * @param {THREE.PerspectiveCamera} camera
- * @param {THREE.Sphere} sphere
+ * Looks at a box from the front, a little above and to the side, z up, from as near as shows all
+ * of it: every corner inside the view, whatever the view's shape. A flat tissue seen from above
+ * fills a wide view this way, where fitting its bounding sphere into the narrower field of view
+ * left it a third of the width. The bench's bare page uses it too, so that both draw the same pixels.
+ * @param {THREE.PerspectiveCamera} camera its fov and aspect already set
+ * @param {THREE.Box3} box not empty
  */
-export function placeCamera(camera, sphere) {
-  const r = sphere.radius;
-  const c = sphere.center;
-  // Far enough that the whole sphere lies inside the narrower of the two fields of view: a sphere
-  // at distance d fills a half-angle of asin(r / d) (r / tan(half) left its rim outside, and a
-  // tool at the frame's edge cut off).
-  const half = THREE.MathUtils.degToRad(camera.fov) / 2;
-  const d = r / Math.sin(Math.min(half, Math.atan(Math.tan(half) * camera.aspect)));
-  const k = d / Math.hypot(0.3, 2.6, 1.0);
-  camera.position.set(c.x + 0.3 * k, c.y - 2.6 * k, c.z + 1.0 * k);
+export function placeCamera(camera, box) {
+  const c = box.getCenter(new THREE.Vector3());
+  const r = Math.max(box.getSize(scratchCorner).length() / 2, 1e-9);
+  // The camera's axes for this direction (they do not depend on its distance).
   camera.up.set(0, 0, 1);
+  camera.position.copy(c).add(kViewFrom);
+  camera.lookAt(c);
+  camera.updateMatrixWorld();
+  const right = scratchRight.setFromMatrixColumn(camera.matrixWorld, 0);
+  const up = scratchUp.setFromMatrixColumn(camera.matrixWorld, 1);
+  const tanY = Math.tan(THREE.MathUtils.degToRad(camera.fov) / 2);
+  const tanX = tanY * camera.aspect;
+  // A corner at x across, y up and z towards the camera from the centre is in view from distance
+  // d when |x| <= (d - z) tanX and |y| <= (d - z) tanY.
+  let d = 0;
+  for (let i = 0; i < 8; i++) {
+    const q = scratchCorner.set(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z).sub(c);
+    const z = q.dot(kViewFrom);
+    d = Math.max(d, z + Math.abs(q.dot(right)) / tanX, z + Math.abs(q.dot(up)) / tanY);
+  }
+  d = kFrameMargin * Math.max(d, r);
+  camera.position.copy(c).addScaledVector(kViewFrom, d);
   camera.near = r / 100;
-  camera.far = r * 100;
+  camera.far = d + r * 100;
   camera.lookAt(c);
   camera.updateProjectionMatrix();
 }
 
 /**
- * The sphere the camera frames: `from` (the surface's, or what was framed before), grown to hold
- * the tool's sphere too when it is near the surface (the smallest sphere around both), so that
- * the view shows the tissue with the tool in sight. A tool further than the surface's diameter
- * from it is left out: the tissue stays the subject (the camera fitted to the surface alone had
- * the tool hovering above it fill the view's top, cut off).
- * @param {THREE.Sphere} surface @param {THREE.Sphere | null} tool @param {THREE.Sphere} out
- * @param {THREE.Sphere} [from] grown from, surface when not given; may be out
- * @returns {THREE.Sphere} out
+ * Whether the tool is near enough to the surface to be framed with it: within the surface's
+ * diameter of its bounding sphere. A tool further off is left out, the tissue staying the subject
+ * (the camera fitted to the surface alone had the tool hovering above it fill the view's top, cut
+ * off; fitted to a far tool, the tissue shrank to a few pixels).
+ * @param {THREE.Sphere} surface @param {THREE.Sphere} tool
  */
-export function framedSphere(surface, tool, out, from = surface) {
+export function toolNear(surface, tool) {
+  return surface.center.distanceTo(tool.center) - tool.radius <= 2 * surface.radius;
+}
+
+/**
+ * The box the camera frames: `from` (the surface's, or what was framed before), grown to hold the
+ * tool's sphere too when it is near the surface (toolNear), so that the view shows the tissue with
+ * the tool in sight.
+ * @param {THREE.Box3} surface the surface's box @param {THREE.Sphere | null} tool @param {THREE.Box3} out
+ * @param {THREE.Box3} [from] grown from, surface when not given; may be out
+ * @returns {THREE.Box3} out
+ */
+export function framedBox(surface, tool, out, from = surface) {
   out.copy(from);
-  if (!tool || surface.center.distanceTo(tool.center) - tool.radius > 2 * surface.radius) return out;
-  const d = out.center.distanceTo(tool.center);
-  if (d + tool.radius <= out.radius) return out;
-  const r = (out.radius + d + tool.radius) / 2;
-  out.center.lerp(tool.center, (r - out.radius) / d);
-  // 5% more: placeCamera's distance shows a sphere's middle whole, not its rim at the view's edge.
-  out.radius = 1.05 * r;
+  if (tool && toolNear(surface.getBoundingSphere(new THREE.Sphere()), tool)) out.union(tool.getBoundingBox(new THREE.Box3()));
   return out;
 }
 
@@ -102,14 +126,16 @@ export class SurfaceView {
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
     // The camera is fitted at the first surface, and again whenever the tool goes where it has
-    // not been (the framed sphere only grows: the view settles on the tool's travel rather than
-    // following it), until the viewer moves it.
+    // not been (the framed box only grows: the view settles on the tool's travel rather than
+    // following it) or the view changes shape, until the viewer moves it.
     this.toolFitted = false;
     this.userMoved = false;
     this.controls.addEventListener('start', () => { this.userMoved = true; });
     this.toolSphere = new THREE.Sphere();
+    this.toolBox = new THREE.Box3();
+    this.surfaceBox = new THREE.Box3();
     this.surfaceSphere = new THREE.Sphere();
-    this.framed = new THREE.Sphere();
+    this.framed = new THREE.Box3();
     this.dirty = true;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
     this.onRender = null;
@@ -127,6 +153,8 @@ export class SurfaceView {
     this.renderer.domElement.style.height = '100%';
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
+    // The distance that shows the framed box depends on the view's shape.
+    if (this.fitted && !this.userMoved) this.fit();
     this.invalidate();
   }
 
@@ -211,30 +239,27 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Whether the tool is where the camera has not framed it and could (framedSphere). */
+  /** Whether the tool is near the surface where the camera has not framed it (framedBox). */
   toolOutOfFrame() {
     if (!this.toolFitted) return true;
-    const p = this.tool.position, r = this.toolRadius;
-    const surface = this.surfaceSphere;
-    return this.framed.distanceToPoint(p) + r > 1e-6 * this.framed.radius &&
-      surface.distanceToPoint(p) - r <= surface.radius;
+    const sphere = this.toolSphere.set(this.tool.position, this.toolRadius);
+    return toolNear(this.surfaceSphere, sphere) && !this.framed.containsBox(sphere.getBoundingBox(this.toolBox));
   }
 
   /**
-   * Points the camera at the surface, and the tool when it shows (framedSphere), from above and
-   * in front. The surface's sphere is the first surface's.
+   * Points the camera at the surface, and the tool when it is near (framedBox), from above and in
+   * front. The surface's box is the first surface's.
    */
   fit() {
     if (!this.fitted) {
-      const s = this.surface.boundingSphere(new THREE.Sphere());
-      if (!Number.isFinite(s.radius) || s.radius <= 0) return;
-      this.surfaceSphere.copy(s);
+      const b = this.surface.boundingBox(this.surfaceBox);
+      if (b.isEmpty() || b.min.equals(b.max) || !Number.isFinite(b.min.x + b.max.x + b.min.y + b.max.y + b.min.z + b.max.z)) return;
+      b.getBoundingSphere(this.surfaceSphere);
     }
-    const sphere = this.surfaceSphere;
-    this.forceScale = sphere.radius / 4;
+    this.forceScale = this.surfaceSphere.radius / 4;
     const tool = this.tool.visible ? this.toolSphere.set(this.tool.position, this.toolRadius) : null;
-    const framed = framedSphere(sphere, tool, this.framed, this.toolFitted ? this.framed : sphere);
-    this.controls.target.copy(framed.center);
+    const framed = framedBox(this.surfaceBox, tool, this.framed, this.toolFitted ? this.framed : this.surfaceBox);
+    framed.getCenter(this.controls.target);
     placeCamera(this.camera, framed);
     this.controls.update();
     this.fitted = true;
@@ -266,9 +291,9 @@ export class SurfaceView {
     const up = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1).multiplyScalar(this.toolRadius);
     const c = this.tool.position;
     const tool = span([c.clone().add(right), c.clone().sub(right), c.clone().add(up), c.clone().sub(up)]);
-    // Near: where framedSphere takes the tool in (toolOutOfFrame's test); a tool further off is
-    // left out of the frame on purpose, the tissue staying the subject.
-    const near = this.surfaceSphere.distanceToPoint(c) - this.toolRadius <= this.surfaceSphere.radius;
+    // Near: where framedBox takes the tool in; a tool further off is left out of the frame on
+    // purpose, the tissue staying the subject.
+    const near = toolNear(this.surfaceSphere, new THREE.Sphere(c.clone(), this.toolRadius));
     return { surfaceSpan: span(corners).span, toolShown: this.tool.visible, toolSpan: tool.span, toolInView: tool.inside,
       toolNear: near };
   }
