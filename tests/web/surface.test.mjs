@@ -15,7 +15,7 @@ import * as THREE from '../../viewer-web/node_modules/three/build/three.module.j
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { SurfaceGeometry } from '../../viewer-web/src/view/surface_geometry.js';
-import { framedBox, placeCamera } from '../../viewer-web/src/view/surface.js';
+import { placeCamera, toolNear } from '../../viewer-web/src/view/surface.js';
 
 const bin = process.env.IDMS_WEB_MESH_FRAMES_BIN;
 
@@ -194,39 +194,61 @@ test('the bounds are those of the surface shown, not of a larger one before it l
   assert.ok(new SurfaceGeometry().boundingSphere(new THREE.Sphere()).isEmpty());
 });
 
-test('the camera shows every corner of the box it frames, as near as it can, whatever the view\'s shape', () => {
+test('the camera shows every corner of the box it frames and the tool wherever it went, as near as it can, whatever the view\'s shape', () => {
   const boxes = {
     'a flat sheet': new THREE.Box3(new THREE.Vector3(-10, -8, 0), new THREE.Vector3(10, 8, 0.1)),
     'a cube off the origin': new THREE.Box3(new THREE.Vector3(3, 4, 5), new THREE.Vector3(5, 6, 7)),
     'a tall column': new THREE.Box3(new THREE.Vector3(-1, -1, 0), new THREE.Vector3(1, 1, 12)),
   };
+  // The tool pressing down at one end of the sheet, or nowhere.
+  const travels = { 'no tool': new THREE.Box3(), 'a tool pressing': new THREE.Box3(new THREE.Vector3(8, 0, 1), new THREE.Vector3(8, 0, 6)) };
+  const radius = 1.5;
   for (const [name, box] of Object.entries(boxes)) {
-    for (const aspect of [0.45, 1, 818 / 388, 3]) {
-      const camera = new THREE.PerspectiveCamera(40, aspect);
-      placeCamera(camera, box);
-      camera.updateMatrixWorld();
-      let edge = 0;
-      for (let i = 0; i < 8; i++) {
-        const q = new THREE.Vector3(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z).project(camera);
-        assert.ok(Math.abs(q.x) <= 1 && Math.abs(q.y) <= 1 && q.z > -1 && q.z < 1, `${name} at aspect ${aspect.toFixed(2)}: corner ${i} at ${q.toArray()}`);
-        edge = Math.max(edge, Math.abs(q.x), Math.abs(q.y));
+    for (const [tool, travel] of Object.entries(travels)) {
+      for (const aspect of [0.45, 1, 818 / 388, 3]) {
+        const camera = new THREE.PerspectiveCamera(40, aspect);
+        const target = new THREE.Vector3();
+        placeCamera(camera, box, travel, radius, target);
+        camera.updateMatrixWorld();
+        const what = `${name}, ${tool}, aspect ${aspect.toFixed(2)}`;
+        let edge = 0;
+        /** @param {THREE.Vector3} p */
+        const seen = (p) => {
+          const q = p.clone().project(camera);
+          assert.ok(Math.abs(q.x) <= 1 + 1e-9 && Math.abs(q.y) <= 1 + 1e-9 && q.z > -1 && q.z < 1, `${what}: ${p.toArray()} at ${q.toArray()}`);
+          edge = Math.max(edge, Math.abs(q.x), Math.abs(q.y));
+        };
+        for (let i = 0; i < 8; i++) seen(new THREE.Vector3(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z));
+        if (!travel.isEmpty()) {
+          // The tool's silhouette at both ends of its travel: its centre +- its radius along the
+          // camera's right and up (and along the view, which shows it wider).
+          const right = new THREE.Vector3().setFromMatrixColumn(camera.matrixWorld, 0);
+          const up = new THREE.Vector3().setFromMatrixColumn(camera.matrixWorld, 1);
+          for (const c of [travel.min, travel.max]) {
+            const toward = camera.position.clone().sub(c).normalize();
+            for (const dir of [right, up]) {
+              // The silhouette's edge as seen from the camera: the tangent point, tilted towards it.
+              const tangent = dir.clone().sub(toward.clone().multiplyScalar(dir.dot(toward))).normalize();
+              const sinA = radius / camera.position.distanceTo(c);
+              for (const sign of [1, -1]) {
+                seen(c.clone().addScaledVector(tangent, sign * radius * Math.sqrt(1 - sinA * sinA)).addScaledVector(toward, radius * sinA));
+              }
+            }
+          }
+        }
+        // Tight: something reaches the view's edge, less its 5% margin (a bounding sphere fitted
+        // into the narrower field of view left a flat sheet in a wide view at a third of it).
+        assert.ok(edge > 0.9, `${what}: the farthest point at ${edge.toFixed(3)} of the view`);
+        assert.equal(camera.up.z, 1);
+        assert.ok(camera.position.z > target.z, `${what}: from above`);
       }
-      // Tight: some corner reaches the view's edge, less its 5% margin (a bounding sphere fitted
-      // into the narrower field of view left a flat sheet in a wide view at a third of it).
-      assert.ok(edge > 0.9, `${name} at aspect ${aspect.toFixed(2)}: the farthest corner at ${edge.toFixed(3)} of the view`);
-      assert.equal(camera.up.z, 1);
-      assert.ok(camera.position.z > box.getCenter(new THREE.Vector3()).z, 'from above');
     }
   }
 });
 
-test('the framed box takes in a tool near the surface and leaves a far one out', () => {
-  const sheet = new THREE.Box3(new THREE.Vector3(-10, -8, 0), new THREE.Vector3(10, 8, 0.1));
-  const near = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(9, 0, 4), 1.5), new THREE.Box3());
-  assert.ok(near.containsBox(sheet) && near.max.z === 5.5 && near.max.x === 10.5, `near: ${near.min.toArray()} ${near.max.toArray()}`);
-  const far = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(0, 0, 60), 1.5), new THREE.Box3());
-  assert.ok(far.equals(sheet), 'a tool far above is left out: the tissue stays the subject');
-  // Grown from what was framed before: the frame only grows as the tool travels.
-  const grown = framedBox(sheet, new THREE.Sphere(new THREE.Vector3(-9, 0, 3), 1.5), new THREE.Box3(), near);
-  assert.ok(grown.containsBox(near) && grown.min.x === -10.5, `grown: ${grown.min.toArray()} ${grown.max.toArray()}`);
+test('a tool near the surface is framed with it, a far one is not', () => {
+  const sheet = new THREE.Sphere(new THREE.Vector3(0, 0, 0), 12.8);
+  assert.ok(toolNear(sheet, new THREE.Sphere(new THREE.Vector3(9, 0, 4), 1.5)));
+  assert.ok(toolNear(sheet, new THREE.Sphere(new THREE.Vector3(0, 0, 26), 1.5)), 'within the diameter of the surface\'s sphere');
+  assert.ok(!toolNear(sheet, new THREE.Sphere(new THREE.Vector3(0, 0, 60), 1.5)), 'a tool far above is left out: the tissue stays the subject');
 });

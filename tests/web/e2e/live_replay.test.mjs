@@ -43,6 +43,16 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await row.waitFor();
   assert.match(await row.innerText(), /hex_4x5_home/);
   await shot(page, 'sessions-live.png');
+  // The list refreshes in place: a link with the keyboard's focus keeps it through a refresh, and
+  // the table with its summary figures fits the 1280 px window.
+  const link = row.locator('a').first();
+  await link.focus();
+  const listed = await page.locator('p[role=status]:has-text("updated")').innerText();
+  await page.waitForFunction((text) => [...document.querySelectorAll('p[role=status]')].some((p) => /updated/.test(p.textContent ?? '') && p.textContent !== text),
+    listed, { timeout: 10000 });
+  assert.ok(await link.evaluate((a) => a === document.activeElement), 'the focused link lost its focus when the list refreshed');
+  const right = await page.evaluate(() => /** @type {HTMLElement} */ (document.getElementById('sessions')).getBoundingClientRect().right);
+  assert.ok(right <= 1280, `the session list is ${right} px wide at 1280`);
   await Promise.all([page.waitForURL(`**/session/${sessionId}`), row.locator('a').first().click()]);
 
   // The surface arrives and moves; the plots fill at 1 kHz.

@@ -78,7 +78,9 @@ export class RollingPlot {
       title: spec.title,
       width,
       height: 170,
-      scales: { x: { time: false } },
+      // A flat series (no force yet) spans +-1 around its value, where uPlot's default made 0 to
+      // 100 of a zero force, as if it had been large.
+      scales: { x: { time: false }, y: { range: (_u, min, max) => (min === max ? [min - 1, max + 1] : uPlot.rangeNum(min, max, 0.1, true)) } },
       legend: { live: false },
       cursor: { show: false },
       series: [{ label: 't (s)' }, ...spec.series.map((s) => ({ label: s.label, stroke: s.color, width: 1, points: { show: false } }))],

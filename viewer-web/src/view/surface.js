@@ -22,18 +22,27 @@ const kFrameMargin = 1.05;
 const scratchRight = new THREE.Vector3();
 const scratchUp = new THREE.Vector3();
 const scratchCorner = new THREE.Vector3();
+const scratchBox = new THREE.Box3();
 
 /**
- * Looks at a box from the front, a little above and to the side, z up, from as near as shows all
- * of it: every corner inside the view, whatever the view's shape. A flat tissue seen from above
- * fills a wide view this way, where fitting its bounding sphere into the narrower field of view
- * left it a third of the width. The bench's bare page uses it too, so that both draw the same pixels.
+ * Looks from the front, a little above and to the side, z up, from as near as shows all of a box
+ * (the surface's) and of a sphere wherever its centre has been in another (the tool's travel):
+ * every corner of the first, and a sphere of the radius at every corner of the second, inside the
+ * view, whatever the view's shape. A flat tissue seen from above fills a wide view this way, where
+ * fitting a bounding sphere of both into the narrower field of view left it a third of the width.
+ * The bench's bare page uses it too, so that both draw the same pixels.
  * @param {THREE.PerspectiveCamera} camera its fov and aspect already set
  * @param {THREE.Box3} box not empty
+ * @param {THREE.Box3} [centres] where the sphere's centre has been; empty or not given: no sphere
+ * @param {number} [radius] the sphere's
+ * @param {THREE.Vector3} [target] set to the point looked at (the middle of all of it)
  */
-export function placeCamera(camera, box) {
-  const c = box.getCenter(new THREE.Vector3());
-  const r = Math.max(box.getSize(scratchCorner).length() / 2, 1e-9);
+export function placeCamera(camera, box, centres, radius = 0, target = new THREE.Vector3()) {
+  const all = scratchBox.copy(box);
+  const sphere = centres !== undefined && !centres.isEmpty();
+  if (sphere) all.union(centres.clone().expandByScalar(radius));
+  const c = all.getCenter(target);
+  const r = Math.max(all.getSize(scratchCorner).length() / 2, 1e-9);
   // The camera's axes for this direction (they do not depend on its distance).
   camera.up.set(0, 0, 1);
   camera.position.copy(c).add(kViewFrom);
@@ -41,17 +50,31 @@ export function placeCamera(camera, box) {
   camera.updateMatrixWorld();
   const right = scratchRight.setFromMatrixColumn(camera.matrixWorld, 0);
   const up = scratchUp.setFromMatrixColumn(camera.matrixWorld, 1);
-  const tanY = Math.tan(THREE.MathUtils.degToRad(camera.fov) / 2);
-  const tanX = tanY * camera.aspect;
-  // A corner at x across, y up and z towards the camera from the centre is in view from distance
-  // d when |x| <= (d - z) tanX and |y| <= (d - z) tanY.
-  let d = 0;
-  for (let i = 0; i < 8; i++) {
-    const q = scratchCorner.set(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z).sub(c);
-    const z = q.dot(kViewFrom);
-    d = Math.max(d, z + Math.abs(q.dot(right)) / tanX, z + Math.abs(q.dot(up)) / tanY);
-  }
-  d = kFrameMargin * Math.max(d, r);
+  const halfY = THREE.MathUtils.degToRad(camera.fov) / 2;
+  const halfX = Math.atan(Math.tan(halfY) * camera.aspect);
+  const cosX = Math.cos(halfX), sinX = Math.sin(halfX), cosY = Math.cos(halfY), sinY = Math.sin(halfY);
+  // A sphere of radius s at x across, y up and z towards the camera from c is inside the view's
+  // right side from distance d when (d - z) sin(halfX) >= x cos(halfX) + s; likewise its left
+  // (-x), top (y, halfY) and bottom (-y). The distance each side needs, the farthest thing's:
+  let right0 = 0, left0 = 0, top0 = 0, bottom0 = 0;
+  /** @param {THREE.Box3} b @param {number} s */
+  const fit = (b, s) => {
+    for (let i = 0; i < 8; i++) {
+      const q = scratchCorner.set(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z).sub(c);
+      const x = q.dot(right), y = q.dot(up), z = q.dot(kViewFrom);
+      right0 = Math.max(right0, z + (x * cosX + s) / sinX);
+      left0 = Math.max(left0, z + (-x * cosX + s) / sinX);
+      top0 = Math.max(top0, z + (y * cosY + s) / sinY);
+      bottom0 = Math.max(bottom0, z + (-y * cosY + s) / sinY);
+    }
+  };
+  fit(box, 0);
+  if (sphere) fit(/** @type {THREE.Box3} */ (centres), radius);
+  // Moving what the camera looks at by u along its right takes u / tan(halfX) off what the right
+  // side needs and adds it to the left's: the two meet at u = (right0 - left0) tan(halfX) / 2,
+  // at their mean. Likewise up. So the picture is centred, and as near as its longer axis allows.
+  c.addScaledVector(right, ((right0 - left0) * Math.tan(halfX)) / 2).addScaledVector(up, ((top0 - bottom0) * Math.tan(halfY)) / 2);
+  const d = kFrameMargin * Math.max((right0 + left0) / 2, (top0 + bottom0) / 2, r);
   camera.position.copy(c).addScaledVector(kViewFrom, d);
   camera.near = r / 100;
   camera.far = d + r * 100;
@@ -68,20 +91,6 @@ export function placeCamera(camera, box) {
  */
 export function toolNear(surface, tool) {
   return surface.center.distanceTo(tool.center) - tool.radius <= 2 * surface.radius;
-}
-
-/**
- * The box the camera frames: `from` (the surface's, or what was framed before), grown to hold the
- * tool's sphere too when it is near the surface (toolNear), so that the view shows the tissue with
- * the tool in sight.
- * @param {THREE.Box3} surface the surface's box @param {THREE.Sphere | null} tool @param {THREE.Box3} out
- * @param {THREE.Box3} [from] grown from, surface when not given; may be out
- * @returns {THREE.Box3} out
- */
-export function framedBox(surface, tool, out, from = surface) {
-  out.copy(from);
-  if (tool && toolNear(surface.getBoundingSphere(new THREE.Sphere()), tool)) out.union(tool.getBoundingBox(new THREE.Box3()));
-  return out;
 }
 
 export class SurfaceView {
@@ -132,10 +141,10 @@ export class SurfaceView {
     this.userMoved = false;
     this.controls.addEventListener('start', () => { this.userMoved = true; });
     this.toolSphere = new THREE.Sphere();
-    this.toolBox = new THREE.Box3();
     this.surfaceBox = new THREE.Box3();
     this.surfaceSphere = new THREE.Sphere();
-    this.framed = new THREE.Box3();
+    /** Where the tool's centre has been near the surface, framed (empty until it shows). */
+    this.travel = new THREE.Box3();
     this.dirty = true;
     /** Called after each render (the page counts frames). @type {(() => void) | null} */
     this.onRender = null;
@@ -239,16 +248,16 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Whether the tool is near the surface where the camera has not framed it (framedBox). */
+  /** Whether the tool is near the surface where the camera has not framed it (its travel). */
   toolOutOfFrame() {
     if (!this.toolFitted) return true;
-    const sphere = this.toolSphere.set(this.tool.position, this.toolRadius);
-    return toolNear(this.surfaceSphere, sphere) && !this.framed.containsBox(sphere.getBoundingBox(this.toolBox));
+    const p = this.tool.position;
+    return !this.travel.containsPoint(p) && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius));
   }
 
   /**
-   * Points the camera at the surface, and the tool when it is near (framedBox), from above and in
-   * front. The surface's box is the first surface's.
+   * Points the camera at the surface, and the tool's travel while it is near (toolNear), from
+   * above and in front (placeCamera). The surface's box is the first surface's.
    */
   fit() {
     if (!this.fitted) {
@@ -257,13 +266,12 @@ export class SurfaceView {
       b.getBoundingSphere(this.surfaceSphere);
     }
     this.forceScale = this.surfaceSphere.radius / 4;
-    const tool = this.tool.visible ? this.toolSphere.set(this.tool.position, this.toolRadius) : null;
-    const framed = framedBox(this.surfaceBox, tool, this.framed, this.toolFitted ? this.framed : this.surfaceBox);
-    framed.getCenter(this.controls.target);
-    placeCamera(this.camera, framed);
+    const p = this.tool.position;
+    if (this.tool.visible && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius))) this.travel.expandByPoint(p);
+    placeCamera(this.camera, this.surfaceBox, this.travel, this.toolRadius, this.controls.target);
     this.controls.update();
     this.fitted = true;
-    this.toolFitted = tool !== null;
+    this.toolFitted = this.tool.visible;
   }
 
   /**
@@ -291,11 +299,13 @@ export class SurfaceView {
     const up = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1).multiplyScalar(this.toolRadius);
     const c = this.tool.position;
     const tool = span([c.clone().add(right), c.clone().sub(right), c.clone().add(up), c.clone().sub(up)]);
-    // Near: where framedBox takes the tool in; a tool further off is left out of the frame on
-    // purpose, the tissue staying the subject.
+    // Near: where the frame takes the tool in (fit); a tool further off is left out of the frame
+    // on purpose, the tissue staying the subject.
     const near = toolNear(this.surfaceSphere, new THREE.Sphere(c.clone(), this.toolRadius));
+    const round = (/** @type {THREE.Vector3} */ v) => v.toArray().map((x) => Number(x.toFixed(2)));
     return { surfaceSpan: span(corners).span, toolShown: this.tool.visible, toolSpan: tool.span, toolInView: tool.inside,
-      toolNear: near };
+      toolNear: near, surface: [round(b.min), round(b.max)], travel: [round(this.travel.min), round(this.travel.max)],
+      tool: round(c), aspect: Number(this.camera.aspect.toFixed(3)) };
   }
 
   dispose() {
