@@ -135,7 +135,7 @@ export class SurfaceView {
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
     this.fitted = false;
     // The camera is fitted at the first surface, and again whenever the tool goes where it has
-    // not been (the framed box only grows: the view settles on the tool's travel rather than
+    // not been (its framed travel only grows: the view settles on the tool's travel rather than
     // following it) or the view changes shape, until the viewer moves it.
     this.toolFitted = false;
     this.userMoved = false;
@@ -162,7 +162,7 @@ export class SurfaceView {
     this.renderer.domElement.style.height = '100%';
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
-    // The distance that shows the framed box depends on the view's shape.
+    // The distance that shows what is framed depends on the view's shape.
     if (this.fitted && !this.userMoved) this.fit();
     this.invalidate();
   }
