@@ -139,3 +139,24 @@ export async function shot(target, name) {
   writeFileSync(join(artifacts(), name), buffer);
   return buffer;
 }
+
+/**
+ * What is wider than the page's window (a phone's, say), once the layout has settled (plots follow
+ * their box a frame later): each as tag#id.class and width; [] when nothing is. What is inside a
+ * `.scroll` box (a wide table) scrolls within it and counts only if the box itself is too wide.
+ * @param {import('playwright-core').Page} page
+ */
+export async function tooWide(page) {
+  // Functions, not strings: a string predicate that has to be polled is evaluated in the page,
+  // which the viewer's Content-Security-Policy (no 'unsafe-eval') refuses with an EvalError.
+  /** @param {boolean} settled true: whether nothing is too wide; false: what is */
+  const wide = (settled) => {
+    const found = [...document.querySelectorAll('body *')]
+      .filter((el) => el.getBoundingClientRect().right > innerWidth + 1 && !el.parentElement?.closest('.scroll'))
+      .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`)
+      .concat(document.documentElement.scrollWidth > innerWidth ? [`the page scrolls sideways: ${document.documentElement.scrollWidth} px`] : []);
+    return settled ? found.length === 0 : found;
+  };
+  await page.waitForFunction(wide, true, { timeout: 10000, polling: 100 }).catch(() => {});
+  return page.evaluate(wide, false);
+}

@@ -5,7 +5,7 @@
 // opened or sought past keyframes (every 5 s), paused, the plots hold the whole 5 s before the time.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, shot, startAgent } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, shot, startAgent, tooWide } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -114,16 +114,7 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await shot(late.locator('#view3d'), 'live-late-join.png');
   // Phone-sized: one column, nothing wider than the screen.
   await late.setViewportSize({ width: 390, height: 844 });
-  // (Plots follow their box a frame later: wait for the layout to settle, then name what is wide.)
-  const tooWide = () => [...document.querySelectorAll('body *')]
-    .filter((el) => el.getBoundingClientRect().right > innerWidth + 1)
-    .map((el) => `${el.tagName.toLowerCase()}#${el.id}.${el.className} ${el.getBoundingClientRect().width.toFixed(0)} px`);
-  // A function, not a string: a string predicate that has to be polled is evaluated in the page,
-  // which the viewer's Content-Security-Policy (no 'unsafe-eval') refuses with an EvalError.
-  await late.waitForFunction(() => [...document.querySelectorAll('body *')]
-    .every((el) => el.getBoundingClientRect().right <= innerWidth + 1) && document.documentElement.scrollWidth <= innerWidth,
-  undefined, { timeout: 10000 }).catch(() => {});
-  assert.deepEqual(await late.evaluate(tooWide), [], 'wider than a 390 px screen');
+  assert.deepEqual(await tooWide(late), [], 'wider than a 390 px screen');
   await shot(late, 'live-phone.png');
 
   // An admin's keyframe request reaches the agent: a new keyframe comes to every viewer.

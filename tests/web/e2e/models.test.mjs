@@ -5,7 +5,7 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { Server, tempDir, launchBrowser, login, shot, sourceDir } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, shot, sourceDir, tooWide } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -51,6 +51,11 @@ test('library: list, preview, bad upload shows file:line:column, good upload lis
     assert.ok(shown.includes(expected.error.replace(`${expected.file}:${expected.line}:${expected.column}: `, '')), shown);
     assert.equal(shown.split(`${expected.line}:${expected.column}`).length, 2, shown);
     await shot(page, 'models-upload-error.png');
+    // On a phone: one column, the form and its error within the screen.
+    await page.setViewportSize({ width: 390, height: 844 });
+    assert.deepEqual(await tooWide(page), [], 'wider than a 390 px screen');
+    await shot(page, 'models-phone.png');
+    await page.setViewportSize({ width: 1280, height: 720 });
     assert.equal((await server.get('/api/models/broken')).status, 404);
 
     // A good one: stored, listed (the library socket refreshes the list), previewed.
