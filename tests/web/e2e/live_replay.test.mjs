@@ -191,6 +191,9 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   const noteTime = Number(await page.locator('#annotations li').first().getAttribute('data-time'));
   await mark.click();
   await page.waitForFunction((t) => Math.abs(Number(new URL(location.href).searchParams.get('t')) - t) < 0.02, noteTime);
+  // The picture once the seek's catch-up has come (the plots' last seconds before the note).
+  await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.forceShown > 0 && Math.abs(s.timeS - t) < 0.1; },
+    noteTime, { timeout: 10000 }).catch(() => {});
   await shot(page, 'replay-seek.png');
   // The slider from the keyboard: Home goes back to the start.
   await page.focus('#seek');

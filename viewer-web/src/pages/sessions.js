@@ -16,7 +16,8 @@ class SessionRow {
     this.id = id;
     this.role = role;
     this.refresh = refresh;
-    this.cells = kColumns.map(() => h('td'));
+    // The model wraps (a path); the summary figures are numbers, right-aligned.
+    this.cells = kColumns.map((_, i) => h('td', { class: i === 3 ? 'model' : i >= 5 && i <= 9 ? 'num' : undefined }));
     this.tr = h('tr', { 'data-id': id }, this.cells);
     /** What each cell shows, as a key: rewritten only when it differs. @type {string[]} */
     this.shown = kColumns.map(() => '\u0000');
@@ -55,7 +56,6 @@ class SessionRow {
     const under = `${fixed(s.duration_s, 1)} s` + (live ? ` · ${s.viewers} watching` : '');
     this.set(2, `${s.state}|${under}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
       h('div', { class: 'under', text: under })]);
-    this.cells[3].className = 'model';
     this.text(3, s.model);
     // The device, and the agent's identity under it when it says more (it often names the device).
     const identity = s.identity && s.identity !== s.device ? s.identity : '';
@@ -63,10 +63,7 @@ class SessionRow {
     const sum = s.summary || {};
     const figures = [fixed(sum.peak_force ?? NaN), `${fixed(sum.contact_time_s ?? NaN, 1)} s`, fixed(sum.path_length ?? NaN),
       sum.tick_p99_us !== undefined ? `${sum.tick_p99_us} µs` : '–', String(sum.warnings ?? '–')];
-    for (let k = 0; k < figures.length; k++) {
-      this.cells[5 + k].className = 'num';
-      this.text(5 + k, figures[k]);
-    }
+    for (let k = 0; k < figures.length; k++) this.text(5 + k, figures[k]);
     const deletable = this.role === 'admin' && !live;
     this.set(10, String(deletable), () => [deletable
       ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
