@@ -212,13 +212,20 @@ test('the camera shows every corner of the box it frames and the tool wherever i
         camera.updateMatrixWorld();
         const what = `${name}, ${tool}, aspect ${aspect.toFixed(2)}`;
         let edge = 0;
+        const lo = new THREE.Vector2(Infinity, Infinity), hi = new THREE.Vector2(-Infinity, -Infinity);
         /** @param {THREE.Vector3} p */
         const seen = (p) => {
           const q = p.clone().project(camera);
           assert.ok(Math.abs(q.x) <= 1 + 1e-9 && Math.abs(q.y) <= 1 + 1e-9 && q.z > -1 && q.z < 1, `${what}: ${p.toArray()} at ${q.toArray()}`);
           edge = Math.max(edge, Math.abs(q.x), Math.abs(q.y));
+          lo.min(new THREE.Vector2(q.x, q.y));
+          hi.max(new THREE.Vector2(q.x, q.y));
         };
         for (let i = 0; i < 8; i++) seen(new THREE.Vector3(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z));
+        // Centred: the box's corners reach as far left as right, and as far down as up.
+        if (travel.isEmpty()) {
+          assert.ok(Math.abs(lo.x + hi.x) < 1e-6 && Math.abs(lo.y + hi.y) < 1e-6, `${what}: spans x ${lo.x}..${hi.x}, y ${lo.y}..${hi.y}`);
+        }
         if (!travel.isEmpty()) {
           // The tool's silhouette at both ends of its travel: its centre +- its radius along the
           // camera's right and up (and along the view, which shows it wider).

@@ -23,6 +23,8 @@ const scratchRight = new THREE.Vector3();
 const scratchUp = new THREE.Vector3();
 const scratchCorner = new THREE.Vector3();
 const scratchBox = new THREE.Box3();
+/** placeCamera's points: x across, y up, z towards the camera and radius, for 16 at most. */
+const scratchPoints = new Float64Array(16 * 4);
 
 /**
  * Looks from the front, a little above and to the side, z up, from as near as shows all of a box
@@ -56,12 +58,20 @@ export function placeCamera(camera, box, centres, radius = 0, target = new THREE
   // A sphere of radius s at x across, y up and z towards the camera from c is inside the view's
   // right side from distance d when (d - z) sin(halfX) >= x cos(halfX) + s; likewise its left
   // (-x), top (y, halfY) and bottom (-y). The distance each side needs, the farthest thing's:
-  let right0 = 0, left0 = 0, top0 = 0, bottom0 = 0;
+  let right0 = 0, left0 = 0, top0 = 0, bottom0 = 0, front = 0;
+  const points = scratchPoints;
+  let n = 0;
   /** @param {THREE.Box3} b @param {number} s */
   const fit = (b, s) => {
     for (let i = 0; i < 8; i++) {
       const q = scratchCorner.set(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z).sub(c);
       const x = q.dot(right), y = q.dot(up), z = q.dot(kViewFrom);
+      points[4 * n] = x;
+      points[4 * n + 1] = y;
+      points[4 * n + 2] = z;
+      points[4 * n + 3] = s;
+      n++;
+      front = Math.max(front, z + s);
       right0 = Math.max(right0, z + (x * cosX + s) / sinX);
       left0 = Math.max(left0, z + (-x * cosX + s) / sinX);
       top0 = Math.max(top0, z + (y * cosY + s) / sinY);
@@ -71,10 +81,33 @@ export function placeCamera(camera, box, centres, radius = 0, target = new THREE
   fit(box, 0);
   if (sphere) fit(/** @type {THREE.Box3} */ (centres), radius);
   // Moving what the camera looks at by u along its right takes u / tan(halfX) off what the right
-  // side needs and adds it to the left's: the two meet at u = (right0 - left0) tan(halfX) / 2,
-  // at their mean. Likewise up. So the picture is centred, and as near as its longer axis allows.
-  c.addScaledVector(right, ((right0 - left0) * Math.tan(halfX)) / 2).addScaledVector(up, ((top0 - bottom0) * Math.tan(halfY)) / 2);
-  const d = kFrameMargin * Math.max((right0 + left0) / 2, (top0 + bottom0) / 2, r);
+  // side needs and adds it to the left's: the two meet at their mean, the nearest the camera can
+  // be for that axis. Likewise up; the farther of the two is the distance. Whatever is nearest the
+  // camera stays beyond the near plane (r / 100).
+  const d = Math.max(kFrameMargin * Math.max((right0 + left0) / 2, (top0 + bottom0) / 2), front + r / 50);
+  // From there, each axis centred: moved by u, the farthest thing on one side as far from the
+  // middle of the view as the farthest on the other (by angle, a sphere's silhouette included).
+  // Moving further along an axis turns everything the other way, so the u that balances them is
+  // found by halving.
+  /** @param {number} k 0 across, 1 up @returns {number} u */
+  const centre = (k) => {
+    let lo = -(d + r), hi = d + r;
+    for (let it = 0; it < 60; it++) {
+      const u = (lo + hi) / 2;
+      let first = -Infinity, last = Infinity;
+      for (let i = 0; i < n; i++) {
+        const a = points[4 * i + k] - u, depth = d - points[4 * i + 2];
+        const angle = Math.atan2(a, depth), spread = Math.asin(Math.min(1, points[4 * i + 3] / Math.sqrt(a * a + depth * depth)));
+        first = Math.max(first, angle + spread);
+        last = Math.min(last, angle - spread);
+      }
+      if (first + last > 0) lo = u;
+      else hi = u;
+    }
+    return (lo + hi) / 2;
+  };
+  const across = centre(0), upward = centre(1);
+  c.addScaledVector(right, across).addScaledVector(up, upward);
   camera.position.copy(c).addScaledVector(kViewFrom, d);
   camera.near = r / 100;
   camera.far = d + r * 100;
