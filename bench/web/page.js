@@ -21,7 +21,7 @@ import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
-import { placeCamera, toolNear } from '../../viewer-web/src/view/surface.js';
+import { frameTool, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
@@ -203,9 +203,7 @@ async function barePage() {
   const tool = new THREE.Sphere(new THREE.Vector3(p.x, p.y, p.z), 1.5);
   const camera = new THREE.PerspectiveCamera(40, host.clientWidth / host.clientHeight);
   const box = /** @type {THREE.Box3} */ (geometry.boundingBox);
-  const travel = new THREE.Box3();
-  if (toolNear(box.getBoundingSphere(new THREE.Sphere()), tool)) travel.expandByPoint(tool.center);
-  placeCamera(camera, box, travel, tool.radius);
+  placeCamera(camera, box, frameTool(new THREE.Box3(), box.getBoundingSphere(new THREE.Sphere()), tool), tool.radius);
   if (flags.has('sphere')) {
     // One more draw: a lit sphere the tool's size where the tool is.
     const sphere = new THREE.Mesh(new THREE.SphereGeometry(1.5, 32, 16), new THREE.MeshStandardMaterial({ color: 0x4f7cac }));

@@ -126,6 +126,17 @@ export function toolNear(surface, tool) {
   return surface.center.distanceTo(tool.center) - tool.radius <= 2 * surface.radius;
 }
 
+/**
+ * The tool's framed travel grown by where it is now, when it is near the surface (toolNear): what
+ * placeCamera frames besides the surface (the live view's and the bench's bare page's one rule).
+ * @param {THREE.Box3} travel grown in place @param {THREE.Sphere} surface @param {THREE.Sphere} tool
+ * @returns {THREE.Box3} travel
+ */
+export function frameTool(travel, surface, tool) {
+  if (toolNear(surface, tool)) travel.expandByPoint(tool.center);
+  return travel;
+}
+
 export class SurfaceView {
   /**
    * @param {HTMLElement} host
@@ -299,8 +310,7 @@ export class SurfaceView {
       b.getBoundingSphere(this.surfaceSphere);
     }
     this.forceScale = this.surfaceSphere.radius / 4;
-    const p = this.tool.position;
-    if (this.tool.visible && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius))) this.travel.expandByPoint(p);
+    if (this.tool.visible) frameTool(this.travel, this.surfaceSphere, this.toolSphere.set(this.tool.position, this.toolRadius));
     placeCamera(this.camera, this.surfaceBox, this.travel, this.toolRadius, this.controls.target);
     this.controls.update();
     this.fitted = true;
