@@ -399,7 +399,8 @@ int Main(int argc, char** argv) {
   up.token = a.token;
   char host[256] = "?";
   gethostname(host, sizeof(host) - 1);
-  up.identity = Cat({"idms-agent ", host}) + " pid " + std::to_string(getpid()) + " " + device->name();
+  up.identity = Cat({"idms-agent ", host}) + " pid " + std::to_string(getpid());
+  up.device = device->name();
   up.scene = scene;
   up.backlog_samples = a.backlog;
   up.flush_timeout_s = a.flush_timeout_s;

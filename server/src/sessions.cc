@@ -673,8 +673,7 @@ std::shared_ptr<LiveSession> SessionHub::OpenForAgent(const v1::Hello& hello, co
   row.state = "live";
   row.model = !hello.scene().model().empty() ? hello.scene().model() : hello.scene().model_file();
   row.identity = hello.identity();
-  const size_t space = row.identity.rfind(' ');
-  row.device = space == std::string::npos ? "" : row.identity.substr(space + 1);
+  row.device = hello.device();
   row.started = UtcNow();
   row.recording = row.id + ".live.mcap";
   google::protobuf::TextFormat::PrintToString(hello.scene(), &row.scene_text);

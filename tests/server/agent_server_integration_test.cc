@@ -38,6 +38,11 @@ TEST(AgentAndServer, ABacklogThatOverflowsWhileTheServerIsDownIsDroppedCountedAn
                      dir + "/agent.log");
   const std::string id = WaitForLiveSession(server->port(), observer, 800);
   ASSERT_FALSE(id.empty()) << server->Log() << agent.Log();
+  // The session list names the device the agent drives (Hello.device) and the agent apart.
+  const json row = Sessions(server->port(), observer)[0];
+  EXPECT_EQ(row["device"], "scripted:stroke-slow");
+  EXPECT_TRUE(std::regex_match(row["identity"].get<std::string>(), std::regex("idms-agent .+ pid [0-9]+")))
+      << row["identity"];
   server->process().Signal(SIGKILL);
   ASSERT_TRUE(server->process().Wait(seconds(30)));
   std::this_thread::sleep_for(milliseconds(1500));  // the outage itself is what is tested

@@ -42,6 +42,9 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   const row = page.locator(`#sessions tr[data-id="${sessionId}"][data-state="live"]`);
   await row.waitFor();
   assert.match(await row.innerText(), /hex_4x5_home/);
+  // The device the agent drives, and the agent (its host and pid) under it, said once each.
+  const device = await row.locator('td').nth(4).innerText();
+  assert.match(device, /^scripted:palpate\n+idms-agent \S+ pid \d+$/);
   await shot(page, 'sessions-live.png');
   // The list refreshes in place: a link with the keyboard's focus keeps it through a refresh, and
   // the table with its summary figures fits the 1280 px window.

@@ -57,7 +57,7 @@ class SessionRow {
     this.set(2, `${s.state}|${under}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
       h('div', { class: 'under', text: under })]);
     this.text(3, s.model);
-    // The device, and the agent's identity under it when it says more (it often names the device).
+    // The device (Hello.device), and the agent's identity (its host and pid) under it when it says more.
     const identity = s.identity && s.identity !== s.device ? s.identity : '';
     this.set(4, `${s.device}|${identity}`, () => [s.device, identity ? h('div', { class: 'under identity', text: identity }) : null]);
     const sum = s.summary || {};
