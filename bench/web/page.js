@@ -17,12 +17,17 @@
 //   nohealth      the loop-health panel not updated
 //   nomesh        the mesh deltas decoded but not applied
 //   align         the plots and the panel drawn only in the same frames, at most 10 a second
+//   bare,panel    the bare page with the page's plots and loop-health panel beside it, drawn once
+//                 and then left standing (what a panel's composited content costs, unchanging)
 import * as THREE from 'three';
 import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
 import { frameTool, placeCamera } from '../../viewer-web/src/view/surface.js';
 import { LiveView } from '../../viewer-web/src/pages/live_view.js';
+import { FrameLoop } from '../../viewer-web/src/view/frame_loop.js';
+import { RollingPlot } from '../../viewer-web/src/plots/rolling.js';
+import { DepthPlot } from '../../viewer-web/src/plots/depth.js';
 import { HealthPanel } from '../../viewer-web/src/pages/session_panels.js';
 
 const Envelope = idms.v1.Envelope;
@@ -215,6 +220,7 @@ async function barePage() {
       scene.add(second);
     }
   }
+  if (flags.has('panel')) standingPanel();
   const stats = { renders: 0, calls: 0, ...describe(renderer.domElement, renderer) };
   w.__bench = stats;
   const loop = () => {
@@ -224,6 +230,31 @@ async function barePage() {
     requestAnimationFrame(loop);
   };
   loop();
+}
+
+/** The page's plots and loop-health panel in #plots, fed 5 s of samples once and drawn once. */
+function standingPanel() {
+  const panel = /** @type {HTMLElement} */ (document.getElementById('plots'));
+  const loop = new FrameLoop();
+  const hosts = ['force', 'position', 'depth'].map(() => panel.appendChild(document.createElement('div')));
+  const force = new RollingPlot(hosts[0], { title: 'Force on the device', unit: 'force', capacity: 5000, series: [
+    { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] }, loop);
+  const position = new RollingPlot(hosts[1], { title: 'Tool position', unit: 'model units', capacity: 5000, series: [
+    { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] }, loop);
+  const depth = new DepthPlot(hosts[2], 5000, loop);
+  for (let n = 0; n < 300; n++) {
+    for (const s of samplesOf(n)) {
+      const f = s.force, p = s.toolPos;
+      force.push(s.timeS, f.x, f.y, f.z, Math.hypot(f.x, f.y, f.z));
+      position.push(s.timeS, p.x, p.y, p.z);
+      depth.push(p.x, p.y, p.z, f.x, f.y, f.z, s.contact);
+    }
+  }
+  const st = { frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 5100, renders: 0, timeS: 5.1, warnings: 0,
+    fallbacks: 0, lastError: '', lastInvalid: '', movedVertices: 0, peakForce: 0.6, contactSamples: 2550 };
+  const health = new HealthPanel(st, loop);
+  panel.append(health.el);
+  health.setStats({ ticks: 5100, computeP99Us: 40, periodP99Us: 1010 }, 0);
 }
 
 (flags.has('bare') ? barePage() : viewerPage()).catch((e) => { w.__benchError = String(e); });

@@ -11,7 +11,8 @@
 //     [--variants "page bare still,notool ..."]
 // --variants runs the named variants of the two pages in turn instead (page.js lists the switches:
 // a part of the page switched off, or one more draw on the bare page), and prints each one's frame
-// rate and CPU per frame drawn: how a part's cost is found.
+// rate and CPU per frame drawn, and its frame rate against the last variant's round by round: how
+// a part's cost is found.
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
 import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
@@ -177,6 +178,13 @@ for (const [nx, ny] of sizes) {
       console.log(`  ${variants[v].padEnd(22)} fps ${median(xs.map((x) => x.fps)).toFixed(1).padStart(5)} (${xs.map((x) => x.fps.toFixed(1)).join(' ')}), ` +
         `CPU ms per frame drawn ${(r + g).toFixed(1)} (renderer ${r.toFixed(1)} + GPU process ${g.toFixed(1)}), draw calls ${median(xs.map((x) => x.calls)).toFixed(1)}`);
     }
+    // Each variant against the last one named, round by round (runs taken minutes apart differ by
+    // more than most parts cost).
+    const last = results[variants.length - 1];
+    for (let v = 0; v < variants.length - 1; v++) {
+      const ratios = results[v].map((x, r) => x.fps / last[r].fps);
+      console.log(`  ${variants[v]} / ${variants[variants.length - 1]} fps per round: median ${median(ratios).toFixed(2)} (in order: ${ratios.map((x) => x.toFixed(2)).join(' ')})`);
+    }
     console.log(`  load average ${load()}`);
     continue;
   }
@@ -204,6 +212,14 @@ for (const [nx, ny] of sizes) {
     const r = median(xs.map((x) => x.rendererMs)), g = median(xs.map((x) => x.gpuMs));
     return { text: `${(r + g).toFixed(1)} (renderer ${r.toFixed(1)} + GPU process ${g.toFixed(1)})`, total: r + g };
   };
+  // Each round's two runs were taken back to back: their ratio leaves out the load's slower
+  // swings, which move both. Its median and quartiles over the rounds (a spread the ratio of the
+  // medians above does not show).
+  const ratios = viewer.map((v, r) => v.fps / bare[r].fps);
+  const rounds = [...ratios].sort((x, y) => x - y);
+  const quartile = (/** @type {number} */ q) => rounds[Math.round(q * (rounds.length - 1))];
+  console.log(`  page/bare per round: median ${median(rounds).toFixed(2)}, quartiles ${quartile(0.25).toFixed(2)}-${quartile(0.75).toFixed(2)}, ` +
+    `${rounds.filter((x) => x >= 0.9).length} of ${rounds.length} rounds at 0.90 or more (in order: ${ratios.map((x) => x.toFixed(2)).join(' ')})`);
   const [cv, cb] = [cpu(viewer), cpu(bare)];
   console.log(`  CPU ms per frame drawn: page ${cv.text}, bare ${cb.text}, bare/page ${(cb.total / cv.total).toFixed(2)}`);
   console.log(`  draw calls per render: page ${median(viewer.map((x) => x.calls)).toFixed(1)}, bare ${median(bare.map((x) => x.calls)).toFixed(1)}; load average ${load()}`);

@@ -1,7 +1,8 @@
 // The tool and force as one mesh (viewer-web/src/view/tool.js): the arrow starts at the tool's
 // centre and ends at the force's length along its direction, its faces and normals point
-// outward, it is drawn after the sphere and only while there is a force, and the sphere takes
-// its state's colour, half see-through.
+// outward, it is drawn after the sphere and only while there is a force, and the sphere (a square
+// of two triangles the shader makes round; tool_render.test.mjs checks it as Chromium draws it)
+// takes its state's colour, half see-through.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import * as THREE from '../../viewer-web/node_modules/three/build/three.module.js';
@@ -37,25 +38,43 @@ test('the arrow runs from the centre along the force, its length and head as ask
   for (const p of widest) assert.ok(Math.abs(p.dot(dir) - (length - headLength)) < 1e-5);
 });
 
-test('the sphere has the radius, and every face of the mesh faces outward', () => {
+test('the sphere is a square of two triangles at the centre, its radius the shader\'s; every arrow face faces outward', () => {
   const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
   m.setRadius(2);
-  const dir = new THREE.Vector3(0, 0, -1);
-  m.setForce(dir, 5, 1, 0.7);
-  for (let v = 0; v < m.numSphere; v++) assert.ok(Math.abs(vertex(m, v).length() - 2) < 1e-5);
+  assert.equal(m.radius.value, 2);
+  assert.equal(m.numSphere, 4);
+  assert.equal(m.numSphereIndices, 6);
+  const corner = /** @type {THREE.BufferAttribute} */ (m.geometry.attributes.toolCorner).array;
   const index = /** @type {THREE.BufferAttribute} */ (m.geometry.index).array;
-  let faces = 0;
-  for (let t = 0; t < index.length; t += 3) {
+  // The corners: at the centre (the shader places them), marked, at (+-1, +-1); the two
+  // triangles counter-clockwise in those coordinates (facing the eye).
+  for (let v = 0; v < m.numSphere; v++) {
+    assert.deepEqual(Array.from(m.positions.subarray(3 * v, 3 * v + 3)), [0, 0, 0]);
+    assert.equal(corner[3 * v + 2], 1);
+    assert.equal(Math.abs(corner[3 * v]) + Math.abs(corner[3 * v + 1]), 2);
+  }
+  let area = 0;
+  for (let t = 0; t < m.numSphereIndices; t += 3) {
     const [a, b, c] = [index[t], index[t + 1], index[t + 2]];
+    const cross = (corner[3 * b] - corner[3 * a]) * (corner[3 * c + 1] - corner[3 * a + 1]) -
+      (corner[3 * b + 1] - corner[3 * a + 1]) * (corner[3 * c] - corner[3 * a]);
+    assert.ok(cross > 0, `triangle ${t / 3} is clockwise`);
+    area += cross / 2;
+  }
+  assert.equal(area, 4, 'the two triangles cover the square');
+  m.setForce(new THREE.Vector3(0, 0, -1), 5, 1, 0.7);
+  let faces = 0;
+  for (let t = m.numSphereIndices; t < index.length; t += 3) {
+    const [a, b, c] = [index[t], index[t + 1], index[t + 2]];
+    assert.equal(corner[3 * a + 2] + corner[3 * b + 2] + corner[3 * c + 2], 0, 'arrow vertices are not corners');
     const pa = vertex(m, a), pb = vertex(m, b), pc = vertex(m, c);
     const face = pb.clone().sub(pa).cross(pc.clone().sub(pb));
-    if (face.lengthSq() < 1e-16) continue;  // the sphere's poles
     // Counter-clockwise seen from outside: the face normal agrees with the vertices' normals.
     const avg = normal(m, a).add(normal(m, b)).add(normal(m, c));
     assert.ok(face.dot(avg) > 0, `triangle ${t / 3} (${a}, ${b}, ${c}) faces inward`);
     faces++;
   }
-  assert.ok(faces > m.numSphereIndices / 3, 'the arrow has faces');
+  assert.equal(faces, 4 * 12, 'the arrow: shaft, head and base');
   for (let v = 0; v < m.positions.length / 3; v++) assert.ok(Math.abs(normal(m, v).length() - 1) < 1e-5, `normal ${v}`);
 });
 
@@ -98,9 +117,11 @@ test('every change is uploaded, also when its range is still pending from the fi
   const uploaded = color.version;
   m.setColor(0xe08a1e);
   assert.ok(color.version > uploaded, 'the new colour is uploaded');
+  const arrowStart = 3 * m.numSphere;
   const pos = /** @type {THREE.BufferAttribute} */ (m.geometry.attributes.position);
   const before = pos.version;
-  m.setRadius(3);
-  assert.ok(pos.version > before, 'the new radius is uploaded');
-  assert.equal(pos.updateRanges.filter((r) => r.start === 0).length, 1, 'its range once');
+  m.setForce(new THREE.Vector3(0, 0, 1), 2, 0.5, 0.3);
+  m.setForce(new THREE.Vector3(0, 1, 0), 3, 0.5, 0.3);
+  assert.ok(pos.version > before, 'the new force is uploaded');
+  assert.equal(pos.updateRanges.filter((r) => r.start === arrowStart).length, 1, 'its range once');
 });

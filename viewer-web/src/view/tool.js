@@ -1,12 +1,16 @@
 // The tool and the force on it as one mesh, drawn in one draw call: the tool a sphere of its
 // radius (thesis 6.1), half see-through, in the colour of its state; the force an arrow from its
 // centre, scaled to the force's magnitude, drawn over the sphere. As two objects (a sphere and
-// three.js's ArrowHelper, itself a line and a cone) they were three draws; on a machine without a
-// GPU (headless Chromium's SwiftShader) each draw of a few hundred triangles costs a fixed part of
-// a 75 ms frame, and its lit pixels more: 0.6 ms unlit and 1.6 lit in one batch, up to 4.5 in
-// another (bench/web, `--variants "bare bare,sphere"`, beside the bare page; the material below
-// says what lighting costs). Only the arrow's
-// vertices are rewritten when the force changes, and only they are uploaded; nothing is allocated.
+// three.js's ArrowHelper, itself a line and a cone) they were three draws.
+//
+// The sphere is an impostor: a square of two triangles facing the eye, whose shader keeps the
+// pixels inside the sphere's silhouette and shades each with the sphere's normal where its ray
+// meets it. Round at any zoom, and two triangles where a tessellated sphere of 32x16 segments
+// was 960: on a machine without a GPU (headless Chromium's SwiftShader) each triangle costs
+// its setup whatever it covers, and that sphere's triangles were about 5% of a 10^4-vertex
+// frame's (bench/web: the sphere at 12x6 segments drew the page 3% faster over 8 paired runs).
+// Only the arrow's vertices are rewritten when the force changes, and only they are uploaded;
+// nothing is allocated.
 import * as THREE from 'three';
 
 /** Segments around the arrow's shaft and head. */
@@ -19,20 +23,73 @@ const kSeeThrough = 0.5;
 const kSideCos = Float64Array.from({ length: kSides }, (_, i) => Math.cos((2 * Math.PI * i) / kSides));
 const kSideSin = Float64Array.from({ length: kSides }, (_, i) => Math.sin((2 * Math.PI * i) / kSides));
 
+/** The impostor's corners, in units of the silhouette's radius, counter-clockwise facing the eye. */
+const kCorners = [[-1, -1], [1, -1], [1, 1], [-1, 1]];
+
+/**
+ * What the shader adds to three.js's Lambert material. Vertex: the corners (toolCorner.z = 1) are
+ * placed around the sphere's centre in the plane through it square to the line of sight, at the
+ * radius of the silhouette there: the eye's tangent cone to a sphere of radius r at distance d
+ * meets that plane in a circle of radius r d / sqrt(d^2 - r^2). Fragment: outside that circle
+ * nothing (its edge smoothed over a pixel); inside, the normal where the pixel's ray meets the
+ * sphere. The arrow's vertices (toolCorner.z = 0) are drawn as they are.
+ */
+const kVertexPars = /* glsl */ `
+attribute vec3 toolCorner;
+uniform float toolRadius;
+varying vec3 vToolCorner;
+varying vec3 vToolCentre;
+`;
+const kVertexMain = /* glsl */ `
+vToolCorner = toolCorner;
+vToolCentre = vec3(0.0);
+if (toolCorner.z > 0.5) {
+  vec3 c = (modelViewMatrix * vec4(0.0, 0.0, 0.0, 1.0)).xyz;
+  float d2 = dot(c, c), r2 = toolRadius * toolRadius;
+  vec3 ahead = c * inversesqrt(d2);
+  vec3 u = normalize(cross(ahead, abs(ahead.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+  vec3 v = cross(u, ahead);
+  // The eye inside the sphere: nothing drawn (a square of size 0).
+  float k = d2 > 1.0001 * r2 ? sqrt(r2 * d2 / (d2 - r2)) : 0.0;
+  mvPosition = vec4(c + (u * toolCorner.x + v * toolCorner.y) * k, 1.0);
+  gl_Position = projectionMatrix * mvPosition;
+  vToolCentre = c;
+}
+`;
+const kFragmentPars = /* glsl */ `
+uniform float toolRadius;
+varying vec3 vToolCorner;
+varying vec3 vToolCentre;
+`;
+const kFragmentNormal = /* glsl */ `
+if (vToolCorner.z > 0.5) {
+  float q = length(vToolCorner.xy);
+  diffuseColor.a *= clamp((1.0 - q) / max(fwidth(q), 1e-6) + 0.5, 0.0, 1.0);
+  if (diffuseColor.a <= 0.0) discard;
+  vec3 ray = normalize(-vViewPosition);
+  float b = dot(ray, vToolCentre);
+  float h = max(b * b - dot(vToolCentre, vToolCentre) + toolRadius * toolRadius, 0.0);
+  normal = (ray * (b - sqrt(h)) - vToolCentre) / toolRadius;
+  nonPerturbedNormal = normal;
+}
+`;
+
 export class ToolMesh extends THREE.Mesh {
   /** @param {number} color the tool's colour @param {number} arrowColor */
   constructor(color, arrowColor) {
-    const sphere = new THREE.SphereGeometry(1, 32, 16);
-    const numSphere = sphere.attributes.position.count;
+    const numSphere = kCorners.length;
     const n = numSphere + kArrowVertices;
     const positions = new Float32Array(3 * n);
     const normals = new Float32Array(3 * n);
     const colors = new Float32Array(4 * n);
-    // The unit sphere's normals are its positions; setRadius scales them into place.
-    normals.set(/** @type {Float32Array} */ (sphere.attributes.normal.array));
-    const index = Array.from(/** @type {THREE.BufferAttribute} */ (sphere.index).array);
+    const corners = new Float32Array(3 * n);
+    for (let v = 0; v < numSphere; v++) {
+      corners.set([kCorners[v][0], kCorners[v][1], 1], 3 * v);
+      // Unused (the shader makes the sphere's normals); facing the eye, as the square does.
+      normals[3 * v + 2] = 1;
+    }
+    const index = [0, 1, 2, 0, 2, 3];
     const numSphereIndices = index.length;
-    sphere.dispose();
     // The arrow's triangles after the sphere's, so that it is drawn over it. Counter-clockwise
     // seen from outside; rings as in arrowVertex.
     const a = numSphere;
@@ -47,6 +104,7 @@ export class ToolMesh extends THREE.Mesh {
     geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute('normal', new THREE.BufferAttribute(normals, 3));
     geometry.setAttribute('color', new THREE.BufferAttribute(colors, 4));
+    geometry.setAttribute('toolCorner', new THREE.BufferAttribute(corners, 3));
     geometry.setIndex(index);
     // No depth test: the force shows through the tissue (a grasp pulls the hand towards it) and
     // the tool where the tissue hides it; drawn after the tissue (renderOrder). Lambert: the
@@ -55,13 +113,24 @@ export class ToolMesh extends THREE.Mesh {
     // half the tool's time (bench/web at 10^3 vertices, where the tool is large on screen: 6.6 ms
     // a frame with it, 3.2 with Lambert; the screenshots are the same to the eye).
     const material = new THREE.MeshLambertMaterial({ vertexColors: true, transparent: true, depthWrite: false, depthTest: false });
+    const radius = { value: 1 };
+    material.onBeforeCompile = (shader) => {
+      shader.uniforms.toolRadius = radius;
+      shader.vertexShader = shader.vertexShader
+        .replace('#include <common>', `#include <common>\n${kVertexPars}`)
+        .replace('#include <project_vertex>', `#include <project_vertex>\n${kVertexMain}`);
+      shader.fragmentShader = shader.fragmentShader
+        .replace('#include <common>', `#include <common>\n${kFragmentPars}`)
+        .replace('#include <normal_fragment_begin>', `#include <normal_fragment_begin>\n${kFragmentNormal}`);
+    };
     super(geometry, material);
     this.renderOrder = 10;
-    // The arrow's vertices move: a bounding sphere would be stale.
+    // The square follows the eye and the arrow's vertices move: a bounding sphere would be stale.
     this.frustumCulled = false;
     this.numSphere = numSphere;
     this.numSphereIndices = numSphereIndices;
-    this.unit = Float32Array.from(normals.subarray(0, 3 * numSphere));
+    /** The sphere's radius, model units (the shader's uniform). */
+    this.radius = radius;
     this.positions = positions;
     this.normals = normals;
     this.colors = colors;
@@ -78,9 +147,7 @@ export class ToolMesh extends THREE.Mesh {
 
   /** @param {number} radius model units */
   setRadius(radius) {
-    const p = this.positions, u = this.unit;
-    for (let i = 0; i < u.length; i++) p[i] = radius * u[i];
-    this.upload('position', 0, this.numSphere);
+    this.radius.value = radius;
   }
 
   /** @param {number} color the sphere's, as a hex number; rewritten only when it changes */
