@@ -32,7 +32,8 @@ const kCorners = [[-1, -1], [1, -1], [1, 1], [-1, 1]];
  * radius of the silhouette there: the eye's tangent cone to a sphere of radius r at distance d
  * meets that plane in a circle of radius r d / sqrt(d^2 - r^2). Fragment: outside that circle
  * nothing (its edge smoothed over a pixel); inside, the normal where the pixel's ray meets the
- * sphere. The arrow's vertices (toolCorner.z = 0) are drawn as they are.
+ * sphere. The arrow's vertices (toolCorner.z = 0) are drawn as they are. For a perspective camera
+ * (rays from the eye), as the views' are.
  */
 const kVertexPars = /* glsl */ `
 attribute vec3 toolCorner;
