@@ -24,7 +24,7 @@ import { idms } from '../../viewer-web/src/codec/proto.js';
 import { MeshState } from '../../viewer-web/src/codec/mesh.js';
 import { FrameDecoder } from '../../viewer-web/src/codec/frames.js';
 import { frameTool, placeCamera } from '../../viewer-web/src/view/surface.js';
-import { LiveView } from '../../viewer-web/src/pages/live_view.js';
+import { LiveView, kForcePlot, kPositionPlot } from '../../viewer-web/src/pages/live_view.js';
 import { FrameLoop } from '../../viewer-web/src/view/frame_loop.js';
 import { RollingPlot } from '../../viewer-web/src/plots/rolling.js';
 import { DepthPlot } from '../../viewer-web/src/plots/depth.js';
@@ -237,10 +237,8 @@ function standingPanel() {
   const panel = /** @type {HTMLElement} */ (document.getElementById('plots'));
   const loop = new FrameLoop();
   const hosts = ['force', 'position', 'depth'].map(() => panel.appendChild(document.createElement('div')));
-  const force = new RollingPlot(hosts[0], { title: 'Force on the device', unit: 'force', capacity: 5000, series: [
-    { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] }, loop);
-  const position = new RollingPlot(hosts[1], { title: 'Tool position', unit: 'model units', capacity: 5000, series: [
-    { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] }, loop);
+  const force = new RollingPlot(hosts[0], { ...kForcePlot, capacity: 5000 }, loop);
+  const position = new RollingPlot(hosts[1], { ...kPositionPlot, capacity: 5000 }, loop);
   const depth = new DepthPlot(hosts[2], 5000, loop);
   for (let n = 0; n < 300; n++) {
     for (const s of samplesOf(n)) {

@@ -21,6 +21,12 @@ import { length3 } from '../length3.js';
  *   toolState: HTMLElement, gapNote: HTMLElement}} ViewHosts
  */
 
+/** The time plots' titles, units and series (the bench's standing panel draws the same). */
+export const kForcePlot = { title: 'Force on the device', unit: 'force', series: [
+  { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] };
+export const kPositionPlot = { title: 'Tool position', unit: 'model units', series: [
+  { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] };
+
 export class LiveView {
   /**
    * @param {ViewState} st counted into
@@ -36,10 +42,8 @@ export class LiveView {
     this.view = new SurfaceView(hosts.view, this.loop);
     this.view.onRender = () => st.renders++;
     const capacity = windowS * 1000;
-    this.forcePlot = new RollingPlot(hosts.force, { title: 'Force on the device', unit: 'force', capacity, series: [
-      { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] }, this.loop);
-    this.posPlot = new RollingPlot(hosts.position, { title: 'Tool position', unit: 'model units', capacity, series: [
-      { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] }, this.loop);
+    this.forcePlot = new RollingPlot(hosts.force, { ...kForcePlot, capacity }, this.loop);
+    this.posPlot = new RollingPlot(hosts.position, { ...kPositionPlot, capacity }, this.loop);
     this.depthPlot = new DepthPlot(hosts.depth, capacity, this.loop);
     this.shownToolState = '';
   }
