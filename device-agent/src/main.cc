@@ -35,7 +35,7 @@ constexpr int kExitRefused = 2;  // the server refused the token or the session
 struct Args {
   std::string server, token, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
   std::string rotation, offset;
-  double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5;
+  double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
   int cpu = -1;
   int64_t spin_us = 0;
@@ -224,6 +224,11 @@ void AddOptions(CLI::App& app, Args& a) {
       ->check(CLI::Range(int64_t{1}, int64_t{100000000}));
   app.add_option("--flush-timeout", a.flush_timeout_s, "Seconds allowed at exit to deliver the rest")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--idle-timeout", a.idle_timeout_s,
+                 "Seconds of silence from the server (pinged at half of it) before the link counts as dead and "
+                 "the session is resumed on a new connection")
+      ->check(CLI::Range(0.2, 600.0))
+      ->capture_default_str();
   app.add_option("--scale", a.scale, "Registration: model units per device unit (overrides the scene)")
       ->check(CLI::PositiveNumber);
   app.add_option("--rotation", a.rotation,
@@ -404,6 +409,7 @@ int Main(int argc, char** argv) {
   up.scene = scene;
   up.backlog_samples = a.backlog;
   up.flush_timeout_s = a.flush_timeout_s;
+  up.idle_timeout_s = a.idle_timeout_s;
   Uplink uplink(loop, up);
   std::signal(SIGPIPE, SIG_IGN);
   bool ok = false;

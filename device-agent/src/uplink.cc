@@ -38,6 +38,7 @@ ConnectionOptions MakeConnectionOptions(const UplinkOptions& o) {
   c.target = o.target;
   c.token = o.token;
   c.connect_timeout_s = o.connect_timeout_s;
+  c.idle_timeout_s = o.idle_timeout_s;
   return c;
 }
 
@@ -242,7 +243,27 @@ struct Uplink::Impl final : ConnectionHandler {
     if (!ParseEnvelope(payload, &envelope, &error)) {
       return Fatal("the server's answer to Hello is not an Envelope: " + error);
     }
-    if (envelope.has_session_event() && envelope.session_event().kind() == v1::SessionEvent::KIND_ERROR) {
+    const v1::SessionEvent::Kind refusal =
+        envelope.has_session_event() ? envelope.session_event().kind() : v1::SessionEvent::KIND_UNSPECIFIED;
+    if (refusal == v1::SessionEvent::KIND_RESUME_LATER) {
+      // The session is being closed on the server (its recording finishing): ask again shortly.
+      return Retry(asio::error::try_again, "resume (" + envelope.session_event().message() + ")");
+    }
+    if (refusal == v1::SessionEvent::KIND_ENDED) {
+      // The session is complete. After our ENDED that is the final word we were waiting for (its
+      // Ack was lost with the connection); otherwise it ended without us: start a new one.
+      if (ended_sent) {
+        stats.ended_cleanly = true;
+        DropConnection();
+        return Done();
+      }
+      std::fprintf(stderr, "idms-agent: session %s has ended on the server; starting a new session\n",
+                   session_id.c_str());
+      session_id.clear();
+      resume_token.clear();
+      return Retry(asio::error::connection_refused, "resume");
+    }
+    if (refusal == v1::SessionEvent::KIND_ERROR) {
       // A refused resume (the server lost the session): start a new one; a refused new session is final.
       if (!session_id.empty()) {
         std::fprintf(stderr, "idms-agent: the server refused to resume session %s (%s); starting a new session\n",
@@ -317,6 +338,11 @@ struct Uplink::Impl final : ConnectionHandler {
       if (status != 0) return Retry(ec, step + " (HTTP " + std::to_string(status) + ")");
     }
     if (phase == Phase::kHello) return Retry(ec, step == "write" ? "send Hello" : "read Welcome");
+    // The server closes after its final Ack: the session has ended cleanly.
+    if (phase == Phase::kClosing && stats.ended_cleanly) {
+      DropConnection();
+      return Done();
+    }
     Retry(ec, step);
   }
 
@@ -350,6 +376,7 @@ struct Uplink::Impl final : ConnectionHandler {
   // Online: commands in, frames out.
 
   void OnServerFrame(const v1::Envelope& envelope) {
+    if (envelope.has_ack()) return OnAck(envelope.ack());
     if (envelope.has_session_event() && envelope.session_event().kind() == v1::SessionEvent::KIND_ERROR) {
       std::fprintf(stderr, "idms-agent: server: %s\n", envelope.session_event().message().c_str());
       return;
@@ -378,6 +405,15 @@ struct Uplink::Impl final : ConnectionHandler {
     if (!loop.PushCommand(lc))
       std::fprintf(stderr, "idms-agent: command %llu dropped: the loop has not taken the previous ones yet\n",
                    static_cast<unsigned long long>(command.id()));
+  }
+
+  // The server has stored every tick before ack.next_tick(); a final Ack (after our ENDED) says
+  // the recording is finished: the session has ended cleanly, and the close follows.
+  void OnAck(const v1::Ack& ack) {
+    stats.acked_next_tick = std::max(stats.acked_next_tick, ack.next_tick());
+    if (!ack.final() || !ended_sent) return;
+    stats.ended_cleanly = true;
+    if (phase == Phase::kClosing && !write_in_flight) conn->Close();
   }
 
   // Sends the next frame FrameOrder picks, if any; ENDED when everything has been delivered.
@@ -495,7 +531,11 @@ struct Uplink::Impl final : ConnectionHandler {
   void OnWritten() override {
     io_thread.Check("Uplink::OnWritten");
     write_in_flight = false;
-    if (phase == Phase::kClosing) return conn->Close();
+    // ENDED went out: the close waits for the server's final Ack (the recording finished).
+    if (phase == Phase::kClosing) {
+      if (stats.ended_cleanly) conn->Close();
+      return;
+    }
     MaybeWrite();  // nothing while the Hello waits for its Welcome (phase kHello)
   }
 
@@ -507,13 +547,13 @@ struct Uplink::Impl final : ConnectionHandler {
     event->set_message("the agent stopped");
     SerializeEnvelope(envelope, &frame);
     phase = Phase::kClosing;
+    ended_sent = true;
     StartWrite();
   }
 
   void OnClosed(const beast::error_code& ec) override {
     io_thread.Check("Uplink::OnClosed");
-    stats.ended_cleanly = !ec;
-    if (ec) std::fprintf(stderr, "idms-agent: closing the session: %s\n", ec.message().c_str());
+    if (ec && !stats.ended_cleanly) std::fprintf(stderr, "idms-agent: closing the session: %s\n", ec.message().c_str());
     Done();
   }
 
@@ -537,6 +577,7 @@ struct Uplink::Impl final : ConnectionHandler {
 
   // Session.
   std::string session_id, resume_token;
+  bool ended_sent = false;           // our ENDED went out (on some connection)
   std::deque<v1::Envelope> control;  // session events waiting to be sent
   v1::Envelope scratch;
   std::string frame;  // the next frame, serialized

@@ -59,6 +59,8 @@ const char* EnvelopeBodyName(const v1::Envelope& envelope) {
       return "command";
     case v1::Envelope::kAnnotation:
       return "annotation";
+    case v1::Envelope::kAck:
+      return "ack";
     case v1::Envelope::BODY_NOT_SET:
       return "none";
   }

@@ -50,6 +50,13 @@ CodecContext::~CodecContext() {
   ZSTD_freeDCtx(impl_->dctx);
 }
 
+void CodecContext::ReleaseScratchAbove(size_t keep_bytes) {
+  if (impl_->raw.capacity() > keep_bytes) std::string().swap(impl_->raw);
+  if (impl_->compressed.capacity() > keep_bytes) std::string().swap(impl_->compressed);
+  if (impl_->ids.capacity() * sizeof(int32_t) > keep_bytes) std::vector<int32_t>().swap(impl_->ids);
+  if (impl_->dq.capacity() * sizeof(int32_t) > keep_bytes) std::vector<int32_t>().swap(impl_->dq);
+}
+
 namespace internal {
 
 v1::Compression CompressPayload(CodecContext::Impl& ctx, std::string* out) {

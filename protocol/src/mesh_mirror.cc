@@ -2,6 +2,7 @@
 // without touching what it shows.
 #include "idms/protocol/mesh_mirror.h"
 
+#include <algorithm>
 #include <string>
 
 namespace idms {
@@ -21,8 +22,12 @@ const char* MirrorStatusName(MirrorStatus status) {
 MeshMirror::MeshMirror(const DecodeLimits& limits) : limits_(limits) {}
 
 MirrorStatus MeshMirror::Apply(const v1::MeshKeyframe& keyframe, std::string* error) {
-  // Decode into scratch; only a fully valid keyframe replaces the state.
-  if (!DecodeKeyframe(keyframe, limits_, ctx_, &scratch_, error)) return MirrorStatus::kInvalid;
+  // Decode into scratch; only a fully valid keyframe replaces the state. A refused frame leaves
+  // no buffer behind, whatever it inflated to.
+  if (!DecodeKeyframe(keyframe, limits_, ctx_, &scratch_, error)) {
+    ctx_.ReleaseScratchAbove(KeepBytes());
+    return MirrorStatus::kInvalid;
+  }
   has_keyframe_ = true;
   sequence_ = scratch_.sequence;
   topology_version_ = scratch_.topology_version;
@@ -33,7 +38,13 @@ MirrorStatus MeshMirror::Apply(const v1::MeshKeyframe& keyframe, std::string* er
   pos_.resize(q_.size());
   Dequantize(q_, quant_step_, pos_);
   changed_.clear();
+  ctx_.ReleaseScratchAbove(KeepBytes());
   return MirrorStatus::kOk;
+}
+
+size_t MeshMirror::KeepBytes() const {
+  // What a frame of the current surface can need: 10-byte varints for every value.
+  return std::max<size_t>(size_t{1} << 20, 10 * (q_.size() + tri_verts_.size()));
 }
 
 MirrorStatus MeshMirror::Apply(const v1::MeshDelta& delta, std::string* error) {
@@ -66,7 +77,10 @@ MirrorStatus MeshMirror::Apply(const v1::MeshDelta& delta, std::string* error) {
     return MirrorStatus::kInvalid;
   }
   // Decode and apply (all or nothing), then refresh the moved vertices' float positions.
-  if (!ApplyDelta(delta, limits_, ctx_, q_, &changed_, error)) return MirrorStatus::kInvalid;
+  if (!ApplyDelta(delta, limits_, ctx_, q_, &changed_, error)) {
+    ctx_.ReleaseScratchAbove(KeepBytes());
+    return MirrorStatus::kInvalid;
+  }
   for (const int32_t v : changed_) {
     const size_t k = 3 * static_cast<size_t>(v);
     for (size_t a = 0; a < 3; ++a) pos_[k + a] = static_cast<float>(q_[k + a] * quant_step_);

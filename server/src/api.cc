@@ -143,10 +143,6 @@ std::vector<Route> MakeRoutes() {
       {V::put, "/api/models/{name}", P::kWrite, true, false, PutModel, true},
       {V::delete_, "/api/models/{name}", P::kWrite, false, false, DeleteModel, true},
       {V::get, "/api/models/{name}/{file}", P::kRead, false, false, GetModelFile, true},
-      {V::get, "/ws/library", P::kRead, false, true, nullptr},
-      {V::get, "/ws/agent", P::kPublish, false, true, nullptr},
-      {V::get, "/ws/session/{id}", P::kRead, false, true, nullptr},
-      {V::get, "/ws/replay/{id}", P::kRead, false, true, nullptr},
   };
   AppendViewerRoutes(&routes);  // the web viewer's pages and assets (static_files.cc)
   return routes;

@@ -157,6 +157,8 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
   if (!s.models) return false;
   s.sessions = OpenSqliteSessionIndex((fs::path(data_dir) / "idms.db").string(), error);
   if (!s.sessions) return false;
+  s.recordings = OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
+  if (!s.recordings) return false;
   // A crash between a blob's rename and its row's commit leaves a blob nobody names.
   for (const std::string& sha : s.blobs->List()) {
     if (!s.models->BlobReferenced(sha)) s.blobs->Remove(sha);

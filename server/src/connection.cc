@@ -30,8 +30,9 @@ namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
-constexpr uint64_t kLargeBody = 1 << 20;     // bodies above this take an upload slot
-constexpr size_t kMaxQueuedMessages = 1024;  // per WebSocket; the oldest is dropped beyond (as Foxglove's SDK)
+constexpr uint64_t kLargeBody = 1 << 20;              // bodies above this take an upload slot
+constexpr size_t kMaxQueuedMessages = 1024;           // per WebSocket; the oldest is dropped beyond (as Foxglove's SDK)
+constexpr size_t kMaxQueuedBytes = size_t{32} << 20;  // likewise in bytes (a keyframe of 10^6 vertices fits)
 // A WebSocket told to close that has not finished within this long (a peer that stopped reading,
 // so neither its queue nor the close frame can go out) loses its TCP connection.
 constexpr auto kCloseGrace = std::chrono::seconds(5);
@@ -74,7 +75,9 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
       beast::get_lowest_layer(ws_).socket().set_option(
           asio::socket_base::send_buffer_size(core_.options.ws_send_buffer_bytes), ignored);
     }
-    ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+    // A peer silent for the endpoint's idle time is pinged at half of it and dropped at the end:
+    // a link that died without a close (a Wi-Fi drop) is noticed, not held open for ever.
+    ws_.set_option(websocket::stream_base::timeout{std::chrono::seconds(30), endpoint_->idle_timeout(), true});
     ws_.set_option(websocket::stream_base::decorator(
         [](websocket::response_type& res) { res.set(http::field::server, "idms-server"); }));
     ws_.read_message_max(static_cast<uint64_t>(core_.options.max_ws_message_bytes));
@@ -84,10 +87,16 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   void Send(std::shared_ptr<const std::string> message, bool binary) override {
     asio::post(ws_.get_executor(), [self = this->shared_from_this(), message = std::move(message), binary]() mutable {
       if (!self->open_ || self->close_pending_) return;
-      // Bounded: the oldest queued message (never the one being written) goes first.
-      if (self->queue_.size() >= kMaxQueuedMessages) self->queue_.erase(self->queue_.begin() + 1);
+      // Bounded in messages and in bytes: the oldest queued messages (never the one being
+      // written) go first.
+      while (self->queue_.size() > 1 &&
+             (self->queue_.size() >= kMaxQueuedMessages || self->queued_bytes_ + message->size() > kMaxQueuedBytes)) {
+        self->queued_bytes_ -= self->queue_[1].bytes->size();
+        self->queue_.erase(self->queue_.begin() + 1);
+      }
+      self->queued_bytes_ += message->size();
       self->queue_.push_back({std::move(message), binary});
-      self->queued_.store(self->queue_.size(), std::memory_order_relaxed);
+      self->Published();
       if (self->queue_.size() == 1) self->DoWrite();
     });
   }
@@ -109,6 +118,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   }
 
   size_t queued() const override { return queued_.load(std::memory_order_relaxed); }
+  size_t queued_bytes() const override { return queued_bytes_shared_.load(std::memory_order_relaxed); }
   const std::string& peer() const override { return peer_; }
   void Drain() override { Close(static_cast<uint16_t>(websocket::close_code::going_away), "server shutting down"); }
 
@@ -123,7 +133,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
     open_ = true;
     core_.Register(this, this->weak_from_this());
     window_start_ = Clock::now();
-    endpoint_->OnOpen(this->shared_from_this());
+    endpoint_->OnOpen(std::weak_ptr<WsPeer>(this->shared_from_this()));
     DoRead();
   }
 
@@ -156,8 +166,9 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   void OnWrite(beast::error_code ec, size_t bytes) {
     if (ec) return Fail(ec, "write");
     core_.metrics.AddBytesOut(bytes);
+    queued_bytes_ -= queue_.front().bytes->size();
     queue_.erase(queue_.begin());
-    queued_.store(queue_.size(), std::memory_order_relaxed);
+    Published();
     if (!queue_.empty()) return DoWrite();
     if (close_pending_) return DoClose();
     endpoint_->OnDrained();
@@ -165,6 +176,12 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
 
   void DoClose() {
     ws_.async_close(close_reason_, [self = this->shared_from_this()](beast::error_code) { self->Closed(); });
+  }
+
+  // The queue's size for other threads' back-pressure decisions.
+  void Published() {
+    queued_.store(queue_.size(), std::memory_order_relaxed);
+    queued_bytes_shared_.store(queued_bytes_, std::memory_order_relaxed);
   }
 
   void Fail(beast::error_code ec, const char* what) {
@@ -177,7 +194,8 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   void Closed() {
     close_timer_.cancel();
     queue_.clear();
-    queued_.store(0, std::memory_order_relaxed);
+    queued_bytes_ = 0;
+    Published();
     if (!open_) return;
     open_ = false;
     endpoint_->OnClose();
@@ -187,7 +205,8 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   websocket::stream<Stream> ws_;
   beast::flat_buffer buffer_;
   std::deque<Outgoing> queue_;
-  std::atomic<size_t> queued_{0};
+  size_t queued_bytes_ = 0;  // of queue_
+  std::atomic<size_t> queued_{0}, queued_bytes_shared_{0};
   std::string peer_;
   std::shared_ptr<WsEndpoint> endpoint_;
   bool open_ = false;
@@ -339,7 +358,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
 
   void Upgrade() {
     std::string refusal;
-    std::shared_ptr<WsEndpoint> endpoint = MakeEndpoint(core_, req_, &refusal);
+    std::shared_ptr<WsEndpoint> endpoint = admission_.route->open_websocket(req_, &refusal);
     if (!endpoint) return Write(JsonError(req_, http::status::not_found, refusal), false);
     auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_),
                                                   std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));

@@ -91,6 +91,13 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 3600))
       ->capture_default_str();
 
+  int agent_idle_timeout_ms = static_cast<int>(o.agent_idle_timeout.count());
+  app.add_option("--agent-idle-timeout-ms", agent_idle_timeout_ms,
+                 "An agent's link silent this long is dropped (pinged at half of it), so that its resume on a "
+                 "new connection is not held up by a dead one")
+      ->check(CLI::Range(200, 600000))
+      ->capture_default_str();
+
   app.add_option("--ws-send-buffer-kb", ws_send_buffer_kb,
                  "Kernel send buffer of each WebSocket in KiB (bounds a slow viewer's latency; 0: autotuned)")
       ->check(CLI::Range(0, 65536))
@@ -130,6 +137,7 @@ int main(int argc, char** argv) {
   o.body_timeout = std::chrono::seconds(body_timeout_s);
   o.resume_window = std::chrono::seconds(resume_window_s);
   o.viewer_stall_timeout = std::chrono::seconds(viewer_stall_timeout_s);
+  o.agent_idle_timeout = std::chrono::milliseconds(agent_idle_timeout_ms);
   o.ws_send_buffer_bytes = ws_send_buffer_kb << 10;
   idms::server::SetLogFormat(o.log_format);
 

@@ -35,7 +35,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
   ReplayEndpoint(ServerCore& core, std::string path, std::string id)
       : strand_(asio::make_strand(core.workers)), timer_(strand_), path_(std::move(path)), id_(std::move(id)) {}
 
-  void OnOpen(std::shared_ptr<WsPeer> peer) override {
+  void OnOpen(std::weak_ptr<WsPeer> peer) override {
     peer_ = std::move(peer);
     asio::post(strand_, [self = shared_from_this()] { self->Open(); });
   }
@@ -54,7 +54,6 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
     asio::post(strand_, [self = shared_from_this()] {
       self->closed_ = true;
       self->timer_.cancel();
-      self->peer_.reset();
     });
   }
 
@@ -69,7 +68,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
   void Send(const v1::Envelope& e) {
     auto bytes = std::make_shared<std::string>();
     SerializeEnvelope(e, bytes.get());
-    if (peer_) peer_->Send(std::move(bytes), true);
+    if (auto p = peer_.lock()) p->Send(std::move(bytes), true);
   }
 
   double TimeS(uint64_t ns) const { return ns <= reader_.start_ns() ? 0 : (ns - reader_.start_ns()) * 1e-9; }
@@ -80,7 +79,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
     options.device_history_ns = kPlotWindowNs;
     if (!reader_.Open(path_, options, &error)) {
       Error("cannot read the recording: " + error);
-      if (peer_) peer_->Close(1011, "cannot read the recording");
+      if (auto p = peer_.lock()) p->Close(1011, "cannot read the recording");
       return;
     }
     // Welcome with the recorded scene, then the surface at the start, paused.
@@ -228,7 +227,8 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
       const double due_s =
           (static_cast<double>(pending_->log_time_ns) - static_cast<double>(anchor_ns_)) * 1e-9 / speed_;
       const auto due = anchor_wall_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(due_s));
-      if (peer_ && peer_->queued() >= kReplayQueueLimit) return Wait(Clock::now() + std::chrono::milliseconds(10));
+      if (auto p = peer_.lock(); p && p->queued() >= kReplayQueueLimit)
+        return Wait(Clock::now() + std::chrono::milliseconds(10));
       if (due > Clock::now()) return Wait(due);
       position_ns_ = pending_->log_time_ns;
       Send(pending_->envelope);
@@ -267,7 +267,7 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
   asio::strand<asio::thread_pool::executor_type> strand_;
   asio::steady_timer timer_;
   std::unique_ptr<asio::steady_timer> heartbeat_;
-  std::shared_ptr<WsPeer> peer_;
+  std::weak_ptr<WsPeer> peer_;  // set before Open is posted, then read on the replay's strand
   std::string path_, id_;
   RecordingReader reader_;
   std::optional<RecordedMessage> pending_;

@@ -138,10 +138,11 @@ bool Server::Impl::Start(std::string* error) {
   };
   core.ctx.publish_library_event = [this](std::string text) { core.Publish(text); };
   core.ctx.more_metrics = [this] { return hub->MetricsText(); };
-  hub = std::make_unique<SessionHub>(core, storage.sessions.get(), (fs::path(o.data_dir) / "recordings").string());
+  hub = std::make_unique<SessionHub>(core, storage.sessions.get(), storage.recordings.get());
   core.hub = hub.get();
   hub->RecoverInterrupted();
   core.routes = MakeRoutes();
+  AppendWebSocketRoutes(core, &core.routes);
   AppendSessionRoutes(core, &core.routes);
   AppendRenderRoutes(core, &core.routes);
   core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
@@ -225,9 +226,10 @@ int Server::Run() {
   for (int i = 1; i < impl_->threads; ++i) extra.emplace_back([this] { impl_->core.ioc.run(); });
   impl_->core.ioc.run();
   for (std::thread& t : extra) t.join();
-  // Handlers still on a worker finish before the database closes.
+  // Recordings finished first (their last rows go to the workers), then handlers and index writes
+  // still on a worker finish before the database closes.
+  impl_->core.recorder.join();
   impl_->core.workers.join();
-  impl_->core.recorder.join();  // recordings finished
   Log(LogLevel::kInfo, "stopped");
   return 0;
 }

@@ -46,8 +46,9 @@ struct ServerCore {
   std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
   std::atomic<bool> draining{false};
   std::atomic<int> uploads_in_flight{0};
-  SessionHub* hub = nullptr;             // live sessions (sessions.cc)
-  boost::asio::thread_pool recorder{1};  // recordings' disk writes, off the network threads
+  std::atomic<uint64_t> next_endpoint_id{1};  // WebSocket endpoints' ids (a session tells its connections apart)
+  SessionHub* hub = nullptr;                  // live sessions (sessions.cc)
+  boost::asio::thread_pool recorder{1};       // recordings' disk writes, off the network threads
 
   ServerCore(ServerOptions o, int io_threads, int worker_threads)
       : options(std::move(o)), ioc(io_threads), workers(static_cast<size_t>(worker_threads)) {}
@@ -67,11 +68,15 @@ struct ServerCore {
   std::unordered_map<TextSink*, std::weak_ptr<TextSink>> sinks_;
 };
 
-class WsEndpoint;
+// The WebSocket routes (ws_endpoints.cc): /ws/library, /ws/agent, /ws/session/{id} and
+// /ws/replay/{id}, each with the function that builds its endpoint.
+void AppendWebSocketRoutes(ServerCore& core, std::vector<Route>* routes);
 
-// The endpoint for an admitted WebSocket upgrade (by route: /ws/library, /ws/agent,
-// /ws/session/{id}); null with *refusal when there is nothing to connect to (an unknown session).
-std::shared_ptr<WsEndpoint> MakeEndpoint(ServerCore& core, const ApiRequest& req, std::string* refusal);
+// Wall-clock helpers (clock.cc). Unix time in ns; "2026-11-23T19:04:05Z" as Unix ns (0 when it
+// does not parse); `bytes` random bytes as hex.
+uint64_t UnixNs();
+uint64_t ParseUtcNs(const std::string& iso);
+std::string RandomHex(size_t bytes);
 
 // The sessions' REST routes (sessions_api.cc).
 void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes);

@@ -146,9 +146,16 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
       const bool ok = ParseEnvelope(beast::buffers_to_string(buffer.data()), &in, &error);
       buffer.consume(buffer.size());
       bool drop = false;
+      std::string final_ack;  // the answer to ENDED, as the server's: everything is stored
       {
         std::lock_guard lock(impl.mu);
         ConnectionRecord& r = impl.connections[static_cast<size_t>(record)];
+        if (ok && in.has_session_event() && in.session_event().kind() == v1::SessionEvent::KIND_ENDED) {
+          v1::Envelope ack;
+          ack.mutable_ack()->set_next_tick(static_cast<uint64_t>(impl.next_tick));
+          ack.mutable_ack()->set_final(true);
+          SerializeEnvelope(ack, &final_ack);
+        }
         if (ok) {
           if (in.has_device_samples()) {
             impl.samples += in.device_samples().samples_size();
@@ -173,6 +180,7 @@ struct TestEndpoint::Impl : std::enable_shared_from_this<TestEndpoint::Impl> {
         beast::get_lowest_layer(*ws).socket().close(ignored);
         return;
       }
+      if (!final_ack.empty()) Send(std::move(final_ack));
       DoRead();
     }
 

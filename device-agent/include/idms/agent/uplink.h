@@ -26,6 +26,9 @@ struct UplinkOptions {
   double backoff_max_s = 5.0;
   double connect_timeout_s = 5.0;  // TCP connect, WebSocket upgrade, Hello -> Welcome
   double flush_timeout_s = 5.0;    // after the loop ends: time allowed to deliver the rest and close
+  // A server link silent this long (no frame, no pong) is dropped and the session resumed on a
+  // new connection; the server is pinged at half of it.
+  double idle_timeout_s = 2.0;
   double poll_interval_s = 0.002;  // how often the rings are drained
 };
 
@@ -40,8 +43,11 @@ struct UplinkStats {
   uint64_t mesh_bytes = 0;  // mesh payload bytes sent
   uint64_t reconnects = 0;  // sessions resumed after a lost connection
   uint64_t connect_failures = 0;
-  uint64_t commands = 0;       // Commands received
-  bool ended_cleanly = false;  // SessionEvent ENDED sent and the WebSocket close handshake done
+  uint64_t commands = 0;  // Commands received
+  // SessionEvent ENDED sent and acknowledged by the server's final Ack: the recording is finished
+  // and holds every tick the agent did not count as dropped.
+  bool ended_cleanly = false;
+  uint64_t acked_next_tick = 0;  // the server has stored every tick before this one
   std::string session_id;
   std::string fatal_error;  // why the server refused us (bad token, protocol mismatch), or ""
 };

@@ -43,6 +43,10 @@ class CodecContext {
   struct Impl;
   Impl& impl() { return *impl_; }
 
+  // Frees the scratch buffers whose capacity is above `keep_bytes`: a frame that inflated hugely
+  // (or claimed to) leaves no memory behind; buffers of the usual size stay for reuse.
+  void ReleaseScratchAbove(size_t keep_bytes);
+
  private:
   std::unique_ptr<Impl> impl_;
 };

@@ -50,6 +50,8 @@ class MeshMirror {
   std::span<const int32_t> changed() const { return changed_; }
 
  private:
+  size_t KeepBytes() const;  // scratch kept between frames
+
   DecodeLimits limits_;
   CodecContext ctx_;
   bool has_keyframe_ = false;

@@ -55,6 +55,11 @@ struct ApiRequest {
 
 using Handler = std::function<ApiResponse(ApiContext&, ApiRequest&)>;
 
+class WsEndpoint;  // server/src/ws_endpoint.h
+// A WebSocket route's endpoint for an admitted upgrade; null with *refusal when there is nothing
+// to connect to (an unknown session).
+using WsOpener = std::function<std::shared_ptr<WsEndpoint>(const ApiRequest&, std::string* refusal)>;
+
 struct Route {
   http::verb method;
   std::string pattern;                   // "/api/models/{name}/{file}"; also the metrics label
@@ -66,6 +71,7 @@ struct Route {
   // runs on the connection's strand (a few microseconds of SQLite read, no file I/O): a thread
   // hand-off costs more than such a handler.
   bool blocking = false;
+  WsOpener open_websocket;  // WebSocket routes only
 };
 
 // The routes of this server, in match order.

@@ -35,6 +35,9 @@ struct ServerOptions {
   std::chrono::seconds resume_window{600};
   // A live viewer that stays this long more than a queue's worth of frames behind is closed.
   std::chrono::seconds viewer_stall_timeout{10};
+  // An agent's WebSocket silent this long (no frame, no pong) is dropped; pinged at half of it.
+  // Short, so that a dead link is noticed within 2 s and the agent's resume is not held up.
+  std::chrono::milliseconds agent_idle_timeout{2000};
   // SO_SNDBUF of every WebSocket: a fixed kernel send buffer instead of Linux's autotuning (up to
   // 4 MiB), so that a slow peer's backlog builds in the server's queue, where deltas are skipped
   // and keyframes resynchronise, not as seconds of stale frames in the kernel. 0: the system's.

@@ -90,12 +90,33 @@ class SessionIndex {
   virtual bool Delete(const std::string& id) = 0;
 };
 
-// The data directory's stores: DIR/idms.db (SQLite, WAL) and DIR/blobs/. Creates what is
-// missing; removes stray temporary files and blobs no row names (what a crash can leave).
+// Where the sessions' recordings are kept: each session's MCAP file is written live under one
+// name and moved into place when finished; readers get a path to read. No other code spells a
+// recording's file name. Thread-safe (the names are pure functions of the id).
+class RecordingStore {
+ public:
+  virtual ~RecordingStore() = default;
+  virtual std::string LivePath(const std::string& id) const = 0;      // written while the session is live
+  virtual std::string FinishedPath(const std::string& id) const = 0;  // once finished
+  // The file to read for a session in `state` ("live" reads the file being written).
+  std::string PathFor(const std::string& id, const std::string& state) const {
+    return state == "live" ? LivePath(id) : FinishedPath(id);
+  }
+  // The live file, closed, becomes the finished one. False with *error.
+  virtual bool Publish(const std::string& id, std::string* error) = 0;
+  virtual void Remove(const std::string& id) = 0;  // both files, whichever exist
+};
+// Recordings as files in `dir` (created): ID.live.mcap while live, ID.mcap once finished.
+std::unique_ptr<RecordingStore> OpenRecordingDirectory(const std::string& dir, std::string* error);
+
+// The data directory's stores: DIR/idms.db (SQLite, WAL), DIR/blobs/ and DIR/recordings/.
+// Creates what is missing; removes stray temporary files and blobs no row names (what a crash
+// can leave).
 struct Storage {
   std::unique_ptr<BlobStore> blobs;
   std::unique_ptr<ModelStore> models;
   std::unique_ptr<SessionIndex> sessions;
+  std::unique_ptr<RecordingStore> recordings;
 };
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
 

@@ -1,0 +1,434 @@
+// A live session on its strand: the agent's frames checked, mirrored, recorded and fanned out;
+// viewers joined with a keyframe and resynchronised when slow; a resume that replaces the agent's
+// connection without losing or repeating a tick; the recording acknowledged to the agent once
+// stored.
+#include "live_session.h"
+
+#include <boost/asio/post.hpp>
+#include <cmath>
+
+#include "idms/protocol/envelope.h"
+#include "idms/server/log.h"
+#include "recordings.h"
+#include "sessions.h"
+
+namespace idms::server {
+
+namespace asio = boost::asio;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr size_t kViewerQueueLimit = 256;              // frames queued for a viewer before it counts as behind
+constexpr size_t kViewerQueueBytes = size_t{8} << 20;  // bytes queued for a viewer, likewise
+constexpr uint16_t kNormal = 1000;
+constexpr uint16_t kGoingAway = 1001;
+constexpr uint16_t kPolicyError = 1008;
+
+// The simulation time a frame speaks of, s; 0 when it carries none.
+double FrameTimeS(const v1::Envelope& e) {
+  switch (e.body_case()) {
+    case v1::Envelope::kDeviceSamples: {
+      const auto& s = e.device_samples().samples();
+      return s.empty() ? 0 : s[s.size() - 1].time_s();
+    }
+    case v1::Envelope::kMeshKeyframe:
+      return e.mesh_keyframe().time_s();
+    case v1::Envelope::kMeshDelta:
+      return e.mesh_delta().time_s();
+    case v1::Envelope::kTopologyEvent:
+      return e.topology_event().time_s();
+    case v1::Envelope::kSessionEvent:
+      return e.session_event().time_s();
+    case v1::Envelope::kAnnotation:
+      return e.annotation().time_s();
+    default:
+      return 0;
+  }
+}
+
+}  // namespace
+
+LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::Scene scene,
+                         std::shared_ptr<Recorder> recorder, const DecodeLimits& limits)
+    : core_(core),
+      hub_(hub),
+      id_(row.id),
+      scene_(std::move(scene)),
+      strand_(asio::make_strand(core.ioc)),
+      timer_(strand_),
+      recorder_(std::move(recorder)),
+      mirror_(limits),
+      next_tick_(row.next_tick),
+      row_(std::move(row)) {
+  epoch_ns_ = ParseUtcNs(row_.started);
+  if (epoch_ns_ == 0) epoch_ns_ = UnixNs();
+}
+
+LiveSession::~LiveSession() = default;
+
+void LiveSession::Start() {
+  asio::post(strand_, [self = shared_from_this()] { self->Tick(); });
+}
+
+void LiveSession::AssertOnStrand() const {
+  if (!strand_.running_in_this_thread()) {
+    Log(LogLevel::kError, "LiveSession used off its strand", {{"session", id_}});
+    std::abort();
+  }
+}
+
+SessionRow LiveSession::Snapshot() const {
+  std::lock_guard lock(row_mu_);
+  return row_;
+}
+
+void LiveSession::Persist(std::function<void()> then) { hub_.StoreRow(Snapshot(), std::move(then)); }
+
+void LiveSession::Tick() {
+  timer_.expires_after(std::chrono::seconds(1));
+  timer_.async_wait([self = shared_from_this()](boost::system::error_code ec) {
+    if (ec || !self->live_) return;
+    // An agent gone past the resume window: the session is closed, nothing recorded is lost.
+    if (self->agent_conn_ == 0 && Clock::now() - self->agent_gone_since_ > self->core_.options.resume_window) {
+      Log(LogLevel::kInfo, "session closed: its agent did not come back", {{"session", self->id_}});
+      return self->End("interrupted", "the agent did not come back");
+    }
+    // The open chunk to the file; then the agent may forget every tick before this one.
+    const uint64_t stored = self->next_tick_;
+    self->recorder_->Flush([w = std::weak_ptr<LiveSession>(self), stored](bool ok) {
+      if (auto s = w.lock(); s && ok) {
+        asio::post(s->strand_, [s, stored] {
+          if (!s->live_) return;
+          v1::Envelope ack;
+          ack.mutable_ack()->set_next_tick(stored);
+          s->SendToAgent(ack);
+        });
+      }
+    });
+    self->Persist();
+    self->Tick();
+  });
+}
+
+void LiveSession::Record(std::shared_ptr<const v1::Envelope> envelope) {
+  // On the session's clock (a frame without a time of its own: the session's latest); the
+  // publish time is when the server got it. Times were checked at the door (finite, in range).
+  double t_s = FrameTimeS(*envelope);
+  if (!(t_s > 0)) t_s = std::max(summary_.last_time_s, 0.0);
+  const uint64_t log_ns = epoch_ns_ + static_cast<uint64_t>(std::llround(t_s * 1e9));
+  recorder_->Write(std::move(envelope), log_ns, UnixNs());
+}
+
+void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer) {
+  auto e = std::make_shared<v1::Envelope>();
+  v1::SessionEvent* ev = e->mutable_session_event();
+  ev->set_kind(kind);
+  ev->set_message(message);
+  ev->set_peer(peer);
+  ev->set_tick(next_tick_);
+  ev->set_time_s(summary_.last_time_s);
+  Broadcast(Serialized(*e), false, false);
+  Record(std::move(e));
+}
+
+void LiveSession::SendToAgent(const v1::Envelope& e) {
+  if (auto agent = agent_.lock()) agent->Send(Serialized(e), true);
+}
+
+void LiveSession::Broadcast(const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples) {
+  for (Viewer& v : viewers_) Offer(v, bytes, is_delta, is_samples);
+}
+
+// Deltas are skipped while the viewer is behind (until a keyframe); sample batches and events
+// are dropped and counted; nothing waits.
+void LiveSession::Offer(Viewer& v, const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples) {
+  const std::shared_ptr<WsPeer> peer = v.peer.lock();
+  if (!peer || v.closed) return;
+  if (is_delta && v.skipping) return void(++hub_.deltas_skipped);
+  if (peer->queued() >= kViewerQueueLimit || peer->queued_bytes() >= kViewerQueueBytes) {
+    // Behind: a viewer stalled past the limit is closed; until then it loses deltas (and is
+    // resynchronised with a keyframe once it drains), sample batches and events (counted).
+    const auto now = Clock::now();
+    if (!v.behind_since) v.behind_since = now;
+    const std::chrono::seconds limit = core_.options.viewer_stall_timeout;
+    if (now - *v.behind_since > limit) {
+      ++hub_.stalled_closed;
+      v.closed = true;
+      peer->Close(kPolicyError, "viewer stalled: more than " + std::to_string(kViewerQueueLimit) + " frames or " +
+                                    std::to_string(kViewerQueueBytes >> 20) + " MiB behind for " +
+                                    std::to_string(limit.count()) + " s");
+      return;
+    }
+    if (is_delta) {
+      ++hub_.deltas_skipped;
+      v.skipping = true;
+      v.drain_wanted->store(true);
+      return;
+    }
+    return void(is_samples ? ++hub_.samples_dropped : ++hub_.events_dropped);
+  }
+  v.behind_since.reset();
+  SendTo(v, bytes);
+}
+
+void LiveSession::SendTo(Viewer& v, const std::shared_ptr<const std::string>& bytes) {
+  const std::shared_ptr<WsPeer> peer = v.peer.lock();
+  if (!peer || v.closed) return;
+  ++hub_.viewer_frames;
+  hub_.viewer_bytes += bytes->size();
+  peer->Send(bytes, true);
+}
+
+void LiveSession::KeyframeFor(Viewer& v) {
+  v1::Envelope e;
+  std::string error;
+  if (!mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return;
+  v.skipping = false;
+  ++hub_.resyncs;
+  SendTo(v, Serialized(e));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The agent.
+
+void LiveSession::AgentAttached(uint64_t conn, std::weak_ptr<WsPeer> agent, bool resumed,
+                                const std::string& resume_token) {
+  AssertOnStrand();
+  const std::shared_ptr<WsPeer> peer = agent.lock();
+  if (!peer) return;  // gone before it was attached: its close is on its way
+  if (!live_) {
+    // Ended (or closing) since the hub let the Hello in: the agent acts on the kind.
+    const SessionRow row = Snapshot();
+    v1::Envelope refusal =
+        ErrorEvent("session " + id_ + (row.state == "ended" ? " has ended" : " is being closed; retry"));
+    refusal.mutable_session_event()->set_kind(row.state == "ended" ? v1::SessionEvent::KIND_ENDED
+                                                                   : v1::SessionEvent::KIND_RESUME_LATER);
+    peer->Send(Serialized(refusal), true);
+    peer->Close(kNormal, "session " + id_ + " is not live");
+    return;
+  }
+  // A resume while the old connection is still open (or half-open): the old one is closed and
+  // whatever it still says is ignored; the new one resends from next_tick_.
+  if (agent_conn_ != 0 && agent_conn_ != conn) {
+    if (auto old = agent_.lock()) old->Close(kPolicyError, "replaced by a resumed connection");
+  }
+  agent_ = std::move(agent);
+  agent_conn_ = conn;
+  v1::Envelope w;
+  v1::Welcome* welcome = w.mutable_welcome();
+  welcome->set_protocol_version(kProtocolVersion);
+  welcome->set_role(v1::ROLE_AGENT);
+  welcome->set_identity("idms-server");
+  welcome->set_session_id(id_);
+  welcome->set_resume_token(resume_token);
+  welcome->set_next_tick(next_tick_);
+  peer->Send(Serialized(w), true);
+  RecordEvent(resumed ? v1::SessionEvent::KIND_AGENT_RESUMED : v1::SessionEvent::KIND_STARTED,
+              resumed ? "the agent resumed" : "session started", peer->peer());
+  Persist();
+}
+
+void LiveSession::Refuse(const std::string& what) {
+  Log(LogLevel::kWarn, "agent frame refused", {{"session", id_}, {"error", what}});
+  const std::shared_ptr<WsPeer> agent = agent_.lock();
+  agent_.reset();
+  agent_conn_ = 0;
+  agent_gone_since_ = Clock::now();
+  if (!agent) return;
+  agent->Send(Serialized(ErrorEvent(what)), true);
+  agent->Close(kPolicyError, what.substr(0, 120));
+  RecordEvent(v1::SessionEvent::KIND_ERROR, what, agent->peer());
+}
+
+void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> envelope,
+                             std::shared_ptr<const std::string> bytes) {
+  AssertOnStrand();
+  // A replaced connection's frames: the new connection resends them from its Welcome's next_tick.
+  if (!live_ || conn != agent_conn_) return;
+  const v1::Envelope& e = *envelope;
+  if (e.has_device_samples()) {
+    const v1::DeviceSamples& ds = e.device_samples();
+    // Ticks in order: the first at or after next_tick (after, when the agent's backlog dropped
+    // some), consecutive within the batch. (Ticks are below 2^63: checked at the door.)
+    for (int i = 0; i < ds.samples_size(); ++i) {
+      const uint64_t tick = ds.samples(i).tick();
+      if ((i == 0 && tick < next_tick_) || (i > 0 && tick != ds.samples(i - 1).tick() + 1)) {
+        return Refuse("tick " + std::to_string(tick) + " out of order (expected " +
+                      std::to_string(i == 0 ? next_tick_ : ds.samples(i - 1).tick() + 1) + ")");
+      }
+    }
+    summary_.Add(ds);
+    if (ds.samples_size() > 0) next_tick_ = ds.samples(ds.samples_size() - 1).tick() + 1;
+    {
+      std::lock_guard lock(row_mu_);
+      row_.samples += ds.samples_size();
+      row_.next_tick = next_tick_;
+      row_.duration_s = summary_.first_time_s < 0 ? 0 : summary_.last_time_s - summary_.first_time_s;
+      row_.summary_json = summary_.Json();
+    }
+    Broadcast(bytes, false, true);
+    return Record(std::move(envelope));
+  }
+  if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+    std::string error;
+    switch (mirror_.Apply(e, &error)) {
+      case MirrorStatus::kOk:
+        Broadcast(bytes, e.has_mesh_delta(), false);
+        return Record(std::move(envelope));
+      case MirrorStatus::kGap: {
+        // A delta for a base the server does not hold: ask the agent for a keyframe.
+        v1::Envelope ask;
+        ask.mutable_command()->set_kind(v1::Command::KIND_KEYFRAME_REQUEST);
+        return SendToAgent(ask);
+      }
+      case MirrorStatus::kInvalid:
+        return Refuse("mesh frame refused: " + error);
+    }
+  }
+  if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ENDED) {
+    // The agent ended the session: recorded, then finished; the agent hears it in a final Ack.
+    Broadcast(bytes, false, false);
+    Record(std::move(envelope));
+    return End("ended", "the session ended");
+  }
+  if (e.has_session_event() || e.has_topology_event()) {
+    Broadcast(bytes, false, false);
+    return Record(std::move(envelope));
+  }
+  Refuse(std::string("unexpected ") + EnvelopeBodyName(e) + " from the agent");
+}
+
+void LiveSession::AgentDetached(uint64_t conn) {
+  AssertOnStrand();
+  // Only the current connection detaches the agent: a replaced one leaving changes nothing.
+  if (conn != agent_conn_) return;
+  agent_.reset();
+  agent_conn_ = 0;
+  agent_gone_since_ = Clock::now();
+  if (!live_) return;
+  RecordEvent(v1::SessionEvent::KIND_AGENT_DISCONNECTED, "the agent's connection dropped; it may resume", "");
+  Persist();
+}
+
+// ---------------------------------------------------------------------------------------------
+// The end of a session.
+
+void LiveSession::End(const std::string& state, const std::string& why) {
+  AssertOnStrand();
+  if (!live_.exchange(false)) return;
+  timer_.cancel();
+  {
+    std::lock_guard lock(row_mu_);
+    row_.state = state;
+    row_.recording = id_ + ".mcap";
+  }
+  for (Viewer& v : viewers_) {
+    if (auto peer = v.peer.lock()) peer->Close(kNormal, why);
+  }
+  viewers_.clear();
+  num_viewers_ = 0;
+  // Once the file is closed and published: the row stored, the hub told, the agent acknowledged.
+  const bool ended = state == "ended";
+  recorder_->Finish([self = shared_from_this(), ended](bool ok) {
+    self->Persist([self] { self->hub_.Forget(self->id_, self.get()); });
+    asio::post(self->strand_, [self, ended, ok] {
+      const std::shared_ptr<WsPeer> agent = self->agent_.lock();
+      if (!agent || !ended) return;
+      if (ok) {
+        v1::Envelope ack;
+        ack.mutable_ack()->set_next_tick(self->next_tick_);
+        ack.mutable_ack()->set_final(true);
+        agent->Send(Serialized(ack), true);
+        agent->Close(kNormal, "session ended");
+      } else {
+        agent->Send(Serialized(ErrorEvent("the recording could not be finished (see the server's log)")), true);
+        agent->Close(1011, "recording failed");
+      }
+    });
+  });
+}
+
+void LiveSession::Stop(const std::string& why) {
+  AssertOnStrand();
+  if (!live_) return;
+  v1::Envelope bye;
+  bye.mutable_session_event()->set_kind(v1::SessionEvent::KIND_RECORDING_STOPPED);
+  bye.mutable_session_event()->set_message(why);
+  const auto bytes = Serialized(bye);
+  if (auto agent = agent_.lock()) agent->Send(bytes, true), agent->Close(kGoingAway, why);
+  for (Viewer& v : viewers_) SendTo(v, bytes);
+  agent_.reset();
+  agent_conn_ = 0;
+  End("interrupted", why);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Viewers.
+
+void LiveSession::ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer_weak, bool admin,
+                                 std::shared_ptr<std::atomic<bool>> drain_wanted) {
+  AssertOnStrand();
+  const std::shared_ptr<WsPeer> peer = peer_weak.lock();
+  if (!peer) return;
+  if (!live_) return peer->Close(kNormal, "the session has ended");
+  // Welcome with the scene, then at once the surface from the mirror.
+  v1::Envelope w;
+  v1::Welcome* welcome = w.mutable_welcome();
+  welcome->set_protocol_version(kProtocolVersion);
+  welcome->set_role(admin ? v1::ROLE_ADMIN : v1::ROLE_OBSERVER);
+  welcome->set_identity("idms-server");
+  welcome->set_session_id(id_);
+  *welcome->mutable_scene() = scene_;
+  Viewer& v = viewers_.emplace_back();
+  v.id = viewer;
+  v.peer = std::move(peer_weak);
+  v.admin = admin;
+  v.drain_wanted = std::move(drain_wanted);
+  SendTo(v, Serialized(w));
+  if (mirror_.has_keyframe()) KeyframeFor(v);
+  num_viewers_ = static_cast<int>(viewers_.size());
+  RecordEvent(v1::SessionEvent::KIND_VIEWER_JOINED, "a viewer joined", peer->peer());
+}
+
+void LiveSession::ViewerDetached(uint64_t viewer) {
+  AssertOnStrand();
+  const size_t before = viewers_.size();
+  std::erase_if(viewers_, [&](const Viewer& v) { return v.id == viewer; });
+  num_viewers_ = static_cast<int>(viewers_.size());
+  if (viewers_.size() != before && live_) RecordEvent(v1::SessionEvent::KIND_VIEWER_LEFT, "a viewer left", "");
+}
+
+void LiveSession::ViewerDrained(uint64_t viewer) {
+  AssertOnStrand();
+  // Caught up after skipping: a keyframe from the session's mirror puts the viewer right.
+  for (Viewer& v : viewers_) {
+    if (v.id == viewer && v.skipping) KeyframeFor(v);
+  }
+}
+
+void LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
+  AssertOnStrand();
+  if (!live_) return;
+  // Stamped here: who, which, and when (now, in session time, unless the viewer named a time).
+  auto e = std::make_shared<v1::Envelope>();
+  v1::Annotation* a = e->mutable_annotation();
+  *a = note;
+  a->set_author(peer);
+  a->set_id(++annotations_);
+  if (!(note.time_s() > 0)) a->set_time_s(summary_.last_time_s);
+  Broadcast(Serialized(*e), false, false);
+  Record(std::move(e));
+}
+
+void LiveSession::ViewerCommand(const v1::Command& command, const std::string& peer) {
+  AssertOnStrand();
+  if (!live_ || agent_conn_ == 0) return;
+  v1::Envelope e;
+  *e.mutable_command() = command;
+  SendToAgent(e);
+  RecordEvent(v1::SessionEvent::KIND_COMMAND,
+              "command " + v1::Command::Kind_Name(command.kind()) + " relayed to the agent", peer);
+}
+
+}  // namespace idms::server

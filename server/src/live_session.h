@@ -1,0 +1,136 @@
+// One live session: an agent publishes, viewers watch, everything is recorded. A LiveSession lives
+// on its own strand: the agent's frames, viewers joining, leaving and draining, commands and the
+// once-a-second tick are all serialised there, and every member below the public API belongs to
+// that strand (asserted). Connections are held weakly (ws_endpoint.h): a session never keeps a
+// closed connection alive, and a connection that is not the session's current agent is ignored.
+#pragma once
+
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "idms/protocol/mesh_mirror.h"
+#include "idms/server/storage.h"
+#include "server_internal.h"
+#include "ws_endpoint.h"
+
+namespace idms::server {
+
+class Recorder;
+class SessionHub;
+
+// The session's figures, updated as samples arrive (on the session's strand).
+struct SessionSummary {
+  double peak_force = 0;            // |force| maximum, force units
+  double force_sum_in_contact = 0;  // for the mean contact force
+  int64_t contact_samples = 0;
+  double contact_time_s = 0;
+  double path_length = 0;  // of the tool centre, model units
+  int64_t warnings = 0;
+  uint64_t overruns = 0;
+  uint32_t tick_p99_us = 0;      // compute time p99 (the agent's LoopStats)
+  uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
+  bool have_last = false;
+  double last_pos[3] = {0, 0, 0};
+  double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample
+  void Add(const v1::DeviceSamples& batch);
+  std::string Json() const;
+};
+
+class LiveSession : public std::enable_shared_from_this<LiveSession> {
+ public:
+  using Strand = boost::asio::strand<boost::asio::io_context::executor_type>;
+
+  // `limits`: what the session's model can need of a mesh frame (the mirror refuses more).
+  LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::Scene scene, std::shared_ptr<Recorder> recorder,
+              const DecodeLimits& limits);
+  ~LiveSession();
+  const std::string& id() const { return id_; }
+  Strand& strand() { return strand_; }
+
+  void Start();  // the once-a-second timer (after construction: it needs shared_from_this)
+
+  // On the strand (post there). `conn` identifies the agent's connection (ServerCore ids): a
+  // resume replaces the current one, and whatever a replaced connection still says is ignored.
+  // The Welcome is sent from here, so its next_tick is exact: the first tick the new connection
+  // must send.
+  void AgentAttached(uint64_t conn, std::weak_ptr<WsPeer> agent, bool resumed, const std::string& resume_token);
+  void AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> envelope,
+                  std::shared_ptr<const std::string> bytes);
+  void AgentDetached(uint64_t conn);
+  // `drain_wanted`: shared with the viewer's endpoint, set here when the viewer starts skipping,
+  // so that its connection reports the next drain (ViewerDrained) and no other.
+  void ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer, bool admin,
+                      std::shared_ptr<std::atomic<bool>> drain_wanted);
+  void ViewerDetached(uint64_t viewer);
+  void ViewerDrained(uint64_t viewer);  // its queue emptied: a keyframe if it was skipping
+  void ViewerCommand(const v1::Command& command, const std::string& peer);
+  void ViewerAnnotation(const v1::Annotation& note, const std::string& peer);
+  void Stop(const std::string& why);  // server shutdown: tell everyone, finish the recording
+
+  // Any thread.
+  SessionRow Snapshot() const;
+  int viewers() const { return num_viewers_.load(); }
+  // False once the session is ending (ENDED, the resume window, shutdown): no resume, no viewer.
+  bool live() const { return live_.load(); }
+  const v1::Scene& scene() const { return scene_; }
+
+ private:
+  // A viewer, as the session sees it: its connection and its back-pressure state.
+  struct Viewer {
+    uint64_t id = 0;
+    std::weak_ptr<WsPeer> peer;
+    bool admin = false;
+    bool closed = false;    // closed by the session (stalled); detaching
+    bool skipping = false;  // behind: deltas skipped until a keyframe
+    std::shared_ptr<std::atomic<bool>> drain_wanted;
+    std::optional<std::chrono::steady_clock::time_point> behind_since;
+  };
+
+  void AssertOnStrand() const;
+  void Refuse(const std::string& what);
+  void Broadcast(const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples);
+  void Offer(Viewer& v, const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples);
+  void SendTo(Viewer& v, const std::shared_ptr<const std::string>& bytes);
+  void KeyframeFor(Viewer& v);
+  void Record(std::shared_ptr<const v1::Envelope> envelope);
+  void RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer);
+  void SendToAgent(const v1::Envelope& e);
+  void Tick();  // once a second: flush the recording, acknowledge it, store the row
+  // No longer live: "ended" or "interrupted"; viewers are closed with `why`. Once the recording
+  // is finished and its row stored, the hub forgets the session (and an ENDED agent gets its
+  // final Ack).
+  void End(const std::string& state, const std::string& why);
+  void Persist(std::function<void()> then = nullptr);  // the row, on the index's strand
+
+  ServerCore& core_;
+  SessionHub& hub_;
+  std::string id_;
+  v1::Scene scene_;
+  Strand strand_;
+  boost::asio::steady_timer timer_;
+  std::shared_ptr<Recorder> recorder_;
+  MeshMirror mirror_;
+  std::weak_ptr<WsPeer> agent_;
+  uint64_t agent_conn_ = 0;  // 0: no agent
+  std::chrono::steady_clock::time_point agent_gone_since_ = std::chrono::steady_clock::now();
+  std::vector<Viewer> viewers_;
+  SessionSummary summary_;
+  uint64_t next_tick_ = 0;
+  uint64_t annotations_ = 0;
+  // Recordings are on the session's clock: log time = epoch + the frame's simulation time, so the
+  // replay's timeline, seek times, annotations and ?t= links all speak session time, however late
+  // frames arrived. The epoch is the session's start (second precision), stable across restarts.
+  uint64_t epoch_ns_ = 0;
+  mutable std::mutex row_mu_;  // row_ is read by the REST handlers
+  SessionRow row_;
+  std::atomic<int> num_viewers_{0};
+  std::atomic<bool> live_{true};
+};
+
+}  // namespace idms::server

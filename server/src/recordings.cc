@@ -1,0 +1,105 @@
+// A live session's recording on the recorder thread, and recordings copied into a writer.
+#include "recordings.h"
+
+#include <boost/asio/post.hpp>
+#include <filesystem>
+
+#include "idms/server/log.h"
+#include "server_internal.h"
+
+namespace idms::server {
+
+namespace asio = boost::asio;
+namespace fs = std::filesystem;
+
+bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* stats, std::string* error) {
+  RecordingReader reader;
+  if (!reader.Open(path, RecordingReaderOptions{}, error)) return false;
+  RecordedMessage m;
+  while (reader.Next(&m, error)) {
+    if (m.envelope.has_device_samples()) {
+      for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) {
+        ++stats->samples;
+        stats->any_tick = true;
+        stats->last_tick = s.tick();
+        if (stats->first_time_s < 0) stats->first_time_s = s.time_s();
+        stats->last_time_s = s.time_s();
+      }
+    }
+    if (writer != nullptr && !writer->Write(m.envelope, m.log_time_ns, m.publish_time_ns, error)) return false;
+  }
+  return error->empty();
+}
+
+Recorder::Recorder(asio::thread_pool& pool, RecordingStore& store, std::string id, std::atomic<uint64_t>* bytes,
+                   std::atomic<uint64_t>* failures)
+    : strand_(asio::make_strand(pool)),
+      store_(store),
+      id_(std::move(id)),
+      bytes_counter_(bytes),
+      failures_counter_(failures) {}
+
+void Recorder::Start(RecordingWriterOptions options, bool continue_finished) {
+  asio::post(strand_, [self = shared_from_this(), options = std::move(options), continue_finished] {
+    std::string error;
+    if (!self->writer_.Open(self->store_.LivePath(self->id_), options, &error)) return self->Failed(error);
+    self->open_ = true;
+    const std::string finished = self->store_.FinishedPath(self->id_);
+    if (continue_finished && fs::exists(finished)) {
+      CopyStats stats;
+      if (!CopyRecording(finished, &self->writer_, &stats, &error)) return self->Failed(error);
+    }
+  });
+}
+
+void Recorder::Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t log_ns, uint64_t publish_ns) {
+  asio::post(strand_, [self = shared_from_this(), envelope = std::move(envelope), log_ns, publish_ns] {
+    std::string error;
+    if (self->open_ && !self->writer_.Write(*envelope, log_ns, publish_ns, &error)) self->Failed(error);
+    self->CountBytes();
+  });
+}
+
+void Recorder::Flush(std::function<void(bool)> done) {
+  asio::post(strand_, [self = shared_from_this(), done = std::move(done)] {
+    std::string error;
+    if (self->open_ && !self->writer_.Flush(UnixNs(), &error)) self->Failed(error);
+    self->CountBytes();
+    if (done) done(self->open_ && !self->failed_);
+  });
+}
+
+void Recorder::Finish(std::function<void(bool)> done) {
+  asio::post(strand_, [self = shared_from_this(), done = std::move(done)] {
+    std::string error;
+    bool ok = false;
+    if (self->open_) {
+      self->open_ = false;
+      if (!self->writer_.Close(&error)) {
+        self->Failed(error);
+      } else if (!self->store_.Publish(self->id_, &error)) {
+        // The finished file stays under its live name; the next start-up repairs and indexes it.
+        self->Failed(error);
+      } else {
+        ok = !self->failed_;
+      }
+      self->CountBytes();
+    }
+    if (done) done(ok);
+  });
+}
+
+void Recorder::Failed(const std::string& error) {
+  open_ = false;
+  failed_ = true;
+  ++*failures_counter_;
+  Log(LogLevel::kError, "recording failed", {{"session", id_}, {"error", error}});
+}
+
+void Recorder::CountBytes() {
+  const uint64_t now = writer_.mcap().bytes_written();
+  if (now > bytes_counted_) *bytes_counter_ += now - bytes_counted_;
+  bytes_counted_ = now;
+}
+
+}  // namespace idms::server

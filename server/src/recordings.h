@@ -1,0 +1,61 @@
+// A live session's recording, written on the recorder thread (never on a network thread), and the
+// copy of a recording into a writer (a resume after a restart; the repair after a crash).
+#pragma once
+
+#include <atomic>
+#include <boost/asio/strand.hpp>
+#include <boost/asio/thread_pool.hpp>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "idms/protocol/recording.h"
+#include "idms/server/storage.h"
+
+namespace idms::server {
+
+// What CopyRecording read: the device samples, the last tick and the first and last sample times.
+struct CopyStats {
+  int64_t samples = 0;
+  bool any_tick = false;
+  uint64_t last_tick = 0;
+  double first_time_s = -1, last_time_s = 0;
+};
+// Reads every message of a recording (finished, or unfinished after a crash: the reader recovers
+// by a scan) into `writer` (null: only counts). False with *error on unreadable data.
+bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* stats, std::string* error);
+
+// The recording of one session. Every call posts to the recorder's strand and returns at once;
+// the writer, its file and its buffers belong to that strand alone.
+class Recorder : public std::enable_shared_from_this<Recorder> {
+ public:
+  // `bytes` and `failures` are the hub's counters for /metrics; `store` outlives the recorder.
+  Recorder(boost::asio::thread_pool& pool, RecordingStore& store, std::string id, std::atomic<uint64_t>* bytes,
+           std::atomic<uint64_t>* failures);
+
+  // Opens the live file; continue_finished: first copies the finished recording back in (a
+  // resume after a restart).
+  void Start(RecordingWriterOptions options, bool continue_finished);
+  void Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t log_ns, uint64_t publish_ns);
+  // Closes the open chunk, so that everything written so far is in the file; `done(ok)` then
+  // runs on the recorder's strand (ok: the recording is healthy).
+  void Flush(std::function<void(bool ok)> done = nullptr);
+  // Closes the file (summary, indexes) and publishes it; `done(ok)` runs on the recorder's strand.
+  void Finish(std::function<void(bool ok)> done = nullptr);
+
+ private:
+  void Failed(const std::string& error);
+  void CountBytes();
+
+  boost::asio::strand<boost::asio::thread_pool::executor_type> strand_;
+  RecordingStore& store_;
+  std::string id_;
+  RecordingWriter writer_;
+  bool open_ = false;
+  bool failed_ = false;
+  std::atomic<uint64_t>* bytes_counter_;
+  std::atomic<uint64_t>* failures_counter_;
+  uint64_t bytes_counted_ = 0;
+};
+
+}  // namespace idms::server
