@@ -87,6 +87,15 @@ bool CheckAgentFrame(const v1::Envelope& e, std::string* error) {
   }
 }
 
+bool CheckPlaybackControl(const v1::PlaybackControl& c, std::string* error) {
+  if (!v1::PlaybackControl::Action_IsValid(c.action()) || c.action() == v1::PlaybackControl::ACTION_UNSPECIFIED) {
+    return Fail(error, "PlaybackControl.action " + std::to_string(c.action()) + " is not an action");
+  }
+  if (!std::isfinite(c.seek_time_s())) return Fail(error, "PlaybackControl.seek_time_s must be finite");
+  if (!std::isfinite(c.speed())) return Fail(error, "PlaybackControl.speed must be finite");
+  return true;
+}
+
 bool CheckAnnotation(const v1::Annotation& note, std::string* error) {
   if (note.text().empty() || note.text().size() > kMaxAnnotationBytes) {
     return Fail(error, "an annotation's text must have 1 to 1000 bytes");

@@ -25,6 +25,9 @@ inline constexpr int kMaxSamplesPerBatch = 10000;    // DeviceSamples.samples
 bool CheckAgentHello(const v1::Hello& hello, std::string* error);
 // A frame an agent sends after its Hello: samples, mesh frames, events.
 bool CheckAgentFrame(const v1::Envelope& e, std::string* error);
+// A replay viewer's control: a known action, a finite seek time and speed (the replay clamps the
+// time to the recording and checks the speed's range).
+bool CheckPlaybackControl(const v1::PlaybackControl& c, std::string* error);
 // A viewer's annotation: 1 to 1000 bytes of text, a time that is 0 (now) or a session time.
 bool CheckAnnotation(const v1::Annotation& note, std::string* error);
 

@@ -98,6 +98,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(200, 600000))
       ->capture_default_str();
 
+  app.add_option("--max-live-sessions", o.max_live_sessions,
+                 "Live sessions at once; an agent opening one more is refused (resumes are not)")
+      ->check(CLI::Range(1, 1 << 16))
+      ->capture_default_str();
+
   app.add_option("--ws-send-buffer-kb", ws_send_buffer_kb,
                  "Kernel send buffer of each WebSocket in KiB (bounds a slow viewer's latency; 0: autotuned)")
       ->check(CLI::Range(0, 65536))

@@ -10,6 +10,7 @@
 #include <boost/asio/strand.hpp>
 #include <cmath>
 
+#include "frame_checks.h"
 #include "idms/protocol/envelope.h"
 #include "idms/protocol/mesh_mirror.h"
 #include "idms/protocol/recording.h"
@@ -40,13 +41,15 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
     asio::post(strand_, [self = shared_from_this()] { self->Open(); });
   }
 
-  void OnMessage(std::string_view bytes, bool) override {
+  void OnMessage(std::string_view bytes, bool binary) override {
     auto e = std::make_shared<v1::Envelope>();
     std::string error;
+    if (!binary) return Error("frames must be binary Envelopes");
     if (!ParseEnvelope(bytes, e.get(), &error, 1 << 16) || !e->has_playback_control()) {
       return Error(error.empty() ? std::string("a replay takes PlaybackControl frames only")
                                  : "malformed frame: " + error);
     }
+    if (!CheckPlaybackControl(e->playback_control(), &error)) return Error(error);
     asio::post(strand_, [self = shared_from_this(), e] { self->Control(e->playback_control()); });
   }
 

@@ -129,7 +129,11 @@ AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::strin
     a.resume_token = hello.resume_token();
     return a;
   }
-  // A new session.
+  // A new session, within the server's bound.
+  if (static_cast<int>(live_.size()) >= core_.options.max_live_sessions) {
+    return Refused(K::KIND_ERROR, "the server holds its maximum of " + std::to_string(core_.options.max_live_sessions) +
+                                      " live sessions (--max-live-sessions); end one, or try another server");
+  }
   SessionRow row;
   row.id = UtcNow().substr(0, 10) + "-" + RandomHex(6);
   row.state = "live";

@@ -16,6 +16,9 @@ set(IDMS_FUZZ_LIBS_http_fuzz idms_server_api)
 # A WebSocket's first frames on /ws/agent and /ws/session/{id} (the sessions' endpoints).
 list(APPEND IDMS_FUZZ_TARGETS ws_fuzz)
 set(IDMS_FUZZ_LIBS_ws_fuzz idms_server)
+# A replay's controls on /ws/replay/{id} (play, pause, seek, speed) against a recorded session.
+list(APPEND IDMS_FUZZ_TARGETS replay_fuzz)
+set(IDMS_FUZZ_LIBS_replay_fuzz idms_server)
 # idms-render's and the render endpoints' parameters (size, camera, seconds).
 list(APPEND IDMS_FUZZ_TARGETS render_params_fuzz)
 set(IDMS_FUZZ_LIBS_render_params_fuzz idms_render_params)

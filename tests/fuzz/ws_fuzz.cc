@@ -116,7 +116,7 @@ FuzzConnection Open(World& world, const std::string& pattern, std::vector<std::s
     if (r.pattern == pattern) c.endpoint = r.open_websocket(req, &refusal);
   }
   if (!c.endpoint) return c;
-  c.peer = std::make_shared<FuzzPeer>(path);
+  c.peer = std::make_shared<FuzzPeer>(pattern);
   c.endpoint->OnOpen(c.peer);
   return c;
 }

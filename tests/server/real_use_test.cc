@@ -122,6 +122,18 @@ TEST(RealUse, AnEndedSessionCannotBeResumedAndATickCannotWrap) {
     EXPECT_FALSE(answer->has_welcome()) << "resume " << i << " of an ended session accepted";
     EXPECT_EQ(answer->session_event().kind(), v1::SessionEvent::KIND_ENDED) << answer->DebugString();
   }
+  // A replay's controls are checked at the door: a NaN seek time or speed is refused, by name.
+  {
+    FakeAgent replay(server.port(), server.Token("observer"), "/ws/replay/" + welcome->welcome().session_id());
+    ASSERT_TRUE(replay.connected());
+    v1::Envelope seek;
+    seek.mutable_playback_control()->set_action(v1::PlaybackControl::ACTION_SEEK);
+    seek.mutable_playback_control()->set_seek_time_s(std::nan(""));
+    ASSERT_TRUE(replay.Send(seek));
+    const auto error = ErrorAfter(replay);
+    ASSERT_TRUE(error);
+    EXPECT_NE(error->session_event().message().find("seek_time_s must be finite"), std::string::npos);
+  }
   // A tick at 2^64 - 1 is refused at the door (tick + 1 would wrap to 0).
   FakeAgent wrap(server.port(), token);
   ASSERT_TRUE(IsWelcome(wrap.Hello()));
@@ -158,6 +170,24 @@ TEST(RealUse, AnAgentSilencedByADeadLinkResumesThroughTheProxyWithEveryTickRecor
   const uint64_t ticks = summary["ticks"];
   EXPECT_EQ(ticks, 6000u);
   EXPECT_EQ(RecordedTicks(dir + "/rec.mcap"), Range(0, ticks)) << agent.Log();
+}
+
+TEST(RealUse, LiveSessionsAreBoundedAndResumesStillPass) {
+  const std::string dir = TempDir("real-use-max-live");
+  ServerProcess server(dir + "/data", {"--max-live-sessions", "2"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string token = server.Token("agent");
+  FakeAgent a(server.port(), token), b(server.port(), token), c(server.port(), token);
+  const auto first = a.Hello();
+  ASSERT_TRUE(IsWelcome(first));
+  ASSERT_TRUE(IsWelcome(b.Hello()));
+  const auto third = c.Hello();
+  ASSERT_TRUE(third);
+  EXPECT_FALSE(third->has_welcome());
+  EXPECT_NE(third->session_event().message().find("--max-live-sessions"), std::string::npos);
+  // A resume of a session live here is not a new one.
+  FakeAgent again(server.port(), token);
+  EXPECT_TRUE(IsWelcome(again.Hello(first->welcome().session_id(), first->welcome().resume_token())));
 }
 
 TEST(RealUse, ASilentAgentIsNoticedWithinItsIdleTimeout) {

@@ -22,13 +22,13 @@ namespace beast = boost::beast;
 namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
 
-FakeAgent::FakeAgent(uint16_t port, const std::string& token) {
+FakeAgent::FakeAgent(uint16_t port, const std::string& token, const std::string& target) {
   beast::error_code ec;
   beast::get_lowest_layer(ws_).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
   if (ec) return;
   ws_.set_option(websocket::stream_base::decorator(
       [token](websocket::request_type& req) { req.set(beast::http::field::authorization, "Bearer " + token); }));
-  ws_.handshake("127.0.0.1:" + std::to_string(port), "/ws/agent", ec);
+  ws_.handshake("127.0.0.1:" + std::to_string(port), target, ec);
   connected_ = !ec;
   ws_.binary(true);
 }

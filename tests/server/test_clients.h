@@ -22,10 +22,11 @@
 
 namespace idms::test {
 
-// A synchronous agent on /ws/agent: Hello, frames, reads with a deadline.
+// A synchronous agent on /ws/agent (or any other WebSocket target): Hello, frames, reads with a
+// deadline.
 class FakeAgent {
  public:
-  FakeAgent(uint16_t port, const std::string& token);
+  FakeAgent(uint16_t port, const std::string& token, const std::string& target = "/ws/agent");
   bool connected() const { return connected_; }
   // Hello for a new session (empty id) or a resume; returns the server's answer (Welcome, or a
   // SessionEvent refusal), nullopt when nothing came within the timeout.

@@ -38,6 +38,9 @@ struct ServerOptions {
   // An agent's WebSocket silent this long (no frame, no pong) is dropped; pinged at half of it.
   // Short, so that a dead link is noticed within 2 s and the agent's resume is not held up.
   std::chrono::milliseconds agent_idle_timeout{2000};
+  // Live sessions at once (each holds a recorder, a mirror and its viewers); a new one beyond is
+  // refused with a reason, resumes of sessions live here are not.
+  int max_live_sessions = 256;
   // SO_SNDBUF of every WebSocket: a fixed kernel send buffer instead of Linux's autotuning (up to
   // 4 MiB), so that a slow peer's backlog builds in the server's queue, where deltas are skipped
   // and keyframes resynchronise, not as seconds of stale frames in the kernel. 0: the system's.
