@@ -152,6 +152,15 @@ std::vector<Route> MakeRoutes() {
   return routes;
 }
 
+std::string_view MethodLabel(const std::vector<Route>& routes, http::verb method) {
+  if (method == http::verb::unknown) return "other";
+  const http::verb served = method == http::verb::head ? http::verb::get : method;
+  for (const Route& r : routes) {
+    if (r.method == served) return Sv(http::to_string(method));
+  }
+  return "other";
+}
+
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req) {
   Admission a;
   auto fail = [&](http::status status, const std::string& message) {

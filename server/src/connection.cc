@@ -383,7 +383,9 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     const double seconds = std::chrono::duration<double>(Clock::now() - started_).count();
     const std::string route = admission_.route != nullptr ? admission_.route->pattern : "(none)";
     const std::string method(req_.message.method_string());
-    core_.metrics.CountRequest(method, route, static_cast<int>(status), seconds, bytes_in_, bytes_out);
+    // Labels from the route table only, so that clients cannot grow /metrics.
+    core_.metrics.CountRequest(std::string(MethodLabel(core_.routes, req_.message.method())), route,
+                               static_cast<int>(status), seconds, bytes_in_, bytes_out);
     // The path only: no query string, no header, so no secret can reach the log.
     Log(LogLevel::kInfo, "request",
         {{"method", method},

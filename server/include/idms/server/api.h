@@ -88,6 +88,10 @@ struct Admission {
 // role. Pure apart from reading the token table and login sessions.
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req);
 
+// The request's method as a metrics label: a verb some route takes (HEAD with GET), else
+// "other". Methods are the client's to choose; a label per spelling would grow without bound.
+std::string_view MethodLabel(const std::vector<Route>& routes, http::verb method);
+
 // A JSON text for a response: bytes that are not UTF-8 (a client's path, a parser's quote of a
 // file) are replaced, never thrown on.
 std::string JsonText(const nlohmann::json& j);

@@ -13,7 +13,8 @@ namespace idms::server {
 
 class Metrics {
  public:
-  // One finished HTTP request. `route` is the route's pattern (bounded cardinality), not the path.
+  // One finished HTTP request. `method` and `route` are bounded labels (MethodLabel, the route's
+  // pattern or "(none)"), never the client's spelling or path: every label set is kept forever.
   void CountRequest(const std::string& method, const std::string& route, int status, double seconds, uint64_t bytes_in,
                     uint64_t bytes_out);
   void AddBytesOut(uint64_t n) { bytes_out_ += n; }
