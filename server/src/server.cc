@@ -2,6 +2,7 @@
 // on SIGHUP), TLS, the listener, the I/O threads, and a graceful stop on SIGTERM / SIGINT.
 #include "idms/server/server.h"
 
+#include <openssl/ssl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -55,6 +56,10 @@ struct Server::Impl {
 };
 
 namespace {
+
+constexpr const char* kTls12Suites =
+    "ECDHE-ECDSA-AES128-GCM-SHA256:ECDHE-RSA-AES128-GCM-SHA256:ECDHE-ECDSA-AES256-GCM-SHA384:"
+    "ECDHE-RSA-AES256-GCM-SHA384:ECDHE-ECDSA-CHACHA20-POLY1305:ECDHE-RSA-CHACHA20-POLY1305";
 
 // The shipped models/ directory: $IDMS_MODELS_DIR, beside the build (build/bin/../../models), an
 // installed share/idms/models, or the source tree this binary was built from.
@@ -118,6 +123,14 @@ bool Server::Impl::Start(std::string* error) {
     boost::system::error_code ec;
     core.tls->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
                           asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 | asio::ssl::context::no_tlsv1_1);
+    // TLS 1.2: forward-secret AEAD suites only (Mozilla's "intermediate" without finite-field
+    // DHE, slow and needing parameters): no static-RSA key exchange, no CBC. TLS 1.3 keeps
+    // OpenSSL's suites, all of which are. No client-initiated renegotiation (a CPU sink).
+    SSL_CTX_set_options(core.tls->native_handle(), SSL_OP_NO_RENEGOTIATION);
+    if (SSL_CTX_set_cipher_list(core.tls->native_handle(), kTls12Suites) != 1) {
+      *error = "this OpenSSL offers none of the TLS 1.2 suites " + std::string(kTls12Suites);
+      return false;
+    }
     if (core.tls->use_certificate_chain_file(o.tls_cert, ec); ec) {
       *error = "--tls-cert " + o.tls_cert + ": " + ec.message();
       return false;

@@ -4,10 +4,12 @@
 // SIGHUP, SIGTERM with a request in flight, SIGKILL during uploads, and the real idms-agent
 // fetching its model from it.
 #include <gtest/gtest.h>
+#include <openssl/ssl.h>
 #include <signal.h>
 
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/ssl/context.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
 #include <filesystem>
@@ -327,14 +329,19 @@ TEST(ServerIntegration, MetricLabelsStayBoundedWhateverTheClientSends) {
   std::printf("/metrics: %zu bytes before, %zu after 201 requests with unknown methods\n", before, metrics.size());
 }
 
-TEST(ServerIntegration, TlsServesHttpsAndWss) {
-  const std::string tmp = TempDir("tls");
+// A self-signed RSA certificate for localhost: DIR/cert.pem, DIR/key.pem.
+void MakeCertificate(const std::string& dir) {
   ASSERT_EQ(RunCommand({"/usr/bin/openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj",
                         "/CN=localhost", "-addext", "subjectAltName=DNS:localhost,IP:127.0.0.1", "-keyout",
-                        tmp + "/key.pem", "-out", tmp + "/cert.pem"},
-                       tmp + "/openssl.log"),
+                        dir + "/key.pem", "-out", dir + "/cert.pem"},
+                       dir + "/openssl.log"),
             0)
-      << ReadText(tmp + "/openssl.log");
+      << ReadText(dir + "/openssl.log");
+}
+
+TEST(ServerIntegration, TlsServesHttpsAndWss) {
+  const std::string tmp = TempDir("tls");
+  ASSERT_NO_FATAL_FAILURE(MakeCertificate(tmp));
   ServerProcess server(tmp + "/data", {"--tls-cert", tmp + "/cert.pem", "--tls-key", tmp + "/key.pem"});
   ASSERT_TRUE(server.ready()) << server.Log();
   asio::ssl::context tls(asio::ssl::context::tls_client);
@@ -354,6 +361,36 @@ TEST(ServerIntegration, TlsServesHttpsAndWss) {
   EXPECT_EQ(json::parse(ws.first_message)["event"], "hello");
   // Plain HTTP on the TLS port gets no HTTP answer.
   EXPECT_EQ(Get(server.port(), "/api/health", "").status, 0);
+}
+
+// Issue 27: TLS 1.2 took static-RSA key exchange and CBC suites. Only forward-secret AEAD suites
+// are offered now: a client that can speak nothing else fails the handshake.
+TEST(ServerIntegration, TlsOffersOnlyForwardSecretAeadSuites) {
+  const std::string tmp = TempDir("tls-ciphers");
+  ASSERT_NO_FATAL_FAILURE(MakeCertificate(tmp));
+  ServerProcess server(tmp + "/data", {"--tls-cert", tmp + "/cert.pem", "--tls-key", tmp + "/key.pem"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  // A TLS 1.2 client offering one suite (empty: TLS 1.3 with OpenSSL's defaults).
+  auto health = [&](const std::string& suite) {
+    asio::ssl::context tls(asio::ssl::context::tls_client);
+    tls.load_verify_file(tmp + "/cert.pem");
+    if (!suite.empty()) {
+      SSL_CTX_set_max_proto_version(tls.native_handle(), TLS1_2_VERSION);
+      EXPECT_EQ(SSL_CTX_set_cipher_list(tls.native_handle(), suite.c_str()), 1) << suite;
+    }
+    return Http(server.port(), HttpCall{"GET", "/api/health", {}, ""}, &tls);
+  };
+  for (const char* weak :
+       {"AES256-SHA", "AES128-GCM-SHA256", "AES256-GCM-SHA384", "ECDHE-RSA-AES128-SHA", "ECDHE-RSA-AES256-SHA384"}) {
+    const HttpReply r = health(weak);
+    EXPECT_EQ(r.status, 0) << weak << " was accepted";
+    EXPECT_NE(r.error.find("tls handshake"), std::string::npos) << weak << ": " << r.error;
+  }
+  for (const char* strong :
+       {"ECDHE-RSA-AES128-GCM-SHA256", "ECDHE-RSA-AES256-GCM-SHA384", "ECDHE-RSA-CHACHA20-POLY1305", ""}) {
+    const HttpReply r = health(strong);
+    EXPECT_EQ(r.status, 200) << strong << ": " << r.error;
+  }
 }
 
 TEST(ServerIntegration, SighupReloadsTokensAndKeepsThemOnABadFile) {
