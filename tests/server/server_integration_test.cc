@@ -6,12 +6,15 @@
 #include <gtest/gtest.h>
 #include <openssl/ssl.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/ssl/context.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -327,6 +330,87 @@ TEST(ServerIntegration, MetricLabelsStayBoundedWhateverTheClientSends) {
   EXPECT_LE(lines, 4u) << metrics;
   EXPECT_LT(metrics.size(), before + 3000);
   std::printf("/metrics: %zu bytes before, %zu after 201 requests with unknown methods\n", before, metrics.size());
+}
+
+// A process's CPU time so far (user + system), seconds, from /proc/PID/stat.
+double CpuSeconds(int pid) {
+  const std::string stat = ReadText("/proc/" + std::to_string(pid) + "/stat");
+  // Fields after the command name (which may hold spaces): state is field 3, utime 14, stime 15.
+  std::istringstream in(stat.substr(stat.rfind(')') + 2));
+  std::string field;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && in >> field; ++i) {
+    if (i == 14) utime = std::stod(field);
+    if (i == 15) stime = std::stod(field);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+int OpenDescriptors(int pid) {
+  int n = 0;
+  for ([[maybe_unused]] const auto& entry : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) ++n;
+  return n;
+}
+
+// One request on an open keep-alive connection; the response's status (0: none).
+int KeepAliveGet(beast::tcp_stream& stream, const std::string& target, const std::string& token = "") {
+  namespace http = beast::http;
+  http::request<http::empty_body> req{http::verb::get, target, 11};
+  req.set(http::field::host, "127.0.0.1");
+  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
+  beast::error_code ec;
+  stream.expires_after(seconds(10));
+  http::write(stream, req, ec);
+  beast::flat_buffer buffer;
+  http::response<http::string_body> res;
+  if (!ec) http::read(stream, buffer, res, ec);
+  return ec ? 0 : res.result_int();
+}
+
+// Issue 27: at the descriptor limit the accept loop re-armed at once on EMFILE and spun at 127% of
+// a core. It pauses now, and the connections already open are served meanwhile.
+TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAreServed) {
+  const std::string dir = TempDir("emfile") + "/data";
+  ServerProcess server(dir, {"--threads", "2"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const int pid = server.process().pid();
+  asio::io_context io;
+  beast::tcp_stream kept(io);
+  kept.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  ASSERT_EQ(KeepAliveGet(kept, "/api/health"), 200);
+  // Leave the server a few descriptors, then connect more clients than that: accept fails with
+  // EMFILE while the rest wait in the listen queue.
+  const int open = OpenDescriptors(pid);
+  rlimit limit{};
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, nullptr, &limit), 0);
+  limit.rlim_cur = static_cast<rlim_t>(open + 4);
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, &limit, nullptr), 0) << std::strerror(errno);
+  std::vector<std::unique_ptr<asio::ip::tcp::socket>> waiting;
+  for (int i = 0; i < 20; ++i) {
+    waiting.push_back(std::make_unique<asio::ip::tcp::socket>(io));
+    waiting.back()->connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  }
+  ASSERT_TRUE(Eventually([&] { return OpenDescriptors(pid) >= open + 4; }, seconds(5)));
+  // Two seconds at the limit: the server sleeps between attempts instead of spinning.
+  const double cpu0 = CpuSeconds(pid);
+  const auto t0 = std::chrono::steady_clock::now();
+  std::this_thread::sleep_for(seconds(2));
+  const double cpu = CpuSeconds(pid) - cpu0;
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("at the descriptor limit: %.2f s of CPU in %.2f s\n", cpu, wall);
+  EXPECT_LT(cpu, 0.3 * wall);
+  // The connection that was already open is served.
+  EXPECT_EQ(KeepAliveGet(kept, "/api/health"), 200);
+  EXPECT_EQ(KeepAliveGet(kept, "/metrics", server.Token("admin")), 200);
+  // Descriptors back: the waiting clients are accepted and the pauses were counted.
+  waiting.clear();
+  limit.rlim_cur = static_cast<rlim_t>(open + 1000);
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, &limit, nullptr), 0);
+  EXPECT_TRUE(Eventually([&] { return Get(port, "/api/health", "").status == 200; }));
+  const std::string metrics = Get(port, "/metrics", server.Token("admin")).body;
+  EXPECT_EQ(metrics.find("idms_accept_paused_total 0\n"), std::string::npos);
+  EXPECT_NE(metrics.find("idms_accept_paused_total "), std::string::npos);
 }
 
 // A self-signed RSA certificate for localhost: DIR/cert.pem, DIR/key.pem.
