@@ -39,12 +39,6 @@ constexpr auto kCloseGrace = std::chrono::seconds(5);
 template <class Stream>
 constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
 
-std::string PeerOf(const tcp::socket& s) {
-  beast::error_code ec;
-  const tcp::endpoint ep = s.remote_endpoint(ec);
-  return ec ? "?" : ep.address().to_string() + ":" + std::to_string(ep.port());
-}
-
 // Errors that mean "the peer went away or we closed it": not worth a warning.
 bool Quiet(const beast::error_code& ec) {
   return ec == asio::error::operation_aborted || ec == beast::error::timeout || ec == http::error::end_of_stream ||
@@ -58,8 +52,14 @@ bool Quiet(const beast::error_code& ec) {
 template <class Stream>
 class WsSession : public Connection, public WsPeer, public std::enable_shared_from_this<WsSession<Stream>> {
  public:
-  WsSession(ServerCore& core, Stream&& stream, std::string peer, std::shared_ptr<WsEndpoint> endpoint)
-      : core_(core), ws_(std::move(stream)), peer_(std::move(peer)), endpoint_(std::move(endpoint)) {
+  // `slot`: the connection's place, taken over from the HTTP session that upgraded.
+  WsSession(ServerCore& core, ConnectionSlot slot, Stream&& stream, std::string peer,
+            std::shared_ptr<WsEndpoint> endpoint)
+      : core_(core),
+        slot_(std::move(slot)),
+        ws_(std::move(stream)),
+        peer_(std::move(peer)),
+        endpoint_(std::move(endpoint)) {
     ++core_.metrics.open_websockets;
   }
   ~WsSession() override {
@@ -184,6 +184,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   }
 
   ServerCore& core_;
+  ConnectionSlot slot_;
   websocket::stream<Stream> ws_;
   beast::flat_buffer buffer_;
   std::deque<Outgoing> queue_;
@@ -203,13 +204,10 @@ template <class Stream>
 class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession<Stream>> {
  public:
   template <class... Args>
-  HttpSession(ServerCore& core, std::string peer, Args&&... stream_args)
-      : core_(core), stream_(std::forward<Args>(stream_args)...), peer_(std::move(peer)) {
-    ++core_.metrics.open_connections;
-  }
+  HttpSession(ServerCore& core, ConnectionSlot slot, std::string peer, Args&&... stream_args)
+      : core_(core), slot_(std::move(slot)), stream_(std::forward<Args>(stream_args)...), peer_(std::move(peer)) {}
   ~HttpSession() override {
     ReleaseUploadSlot();
-    --core_.metrics.open_connections;
     core_.Unregister(this);
   }
 
@@ -341,7 +339,8 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     std::string refusal;
     std::shared_ptr<WsEndpoint> endpoint = MakeEndpoint(core_, req_, &refusal);
     if (!endpoint) return Write(JsonError(req_, http::status::not_found, refusal), false);
-    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_),
+    // The connection slot goes with the stream: a WebSocket counts against the limits until it closes.
+    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(slot_), std::move(stream_),
                                                   std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));
     AccessLog(101, 0);
     ws->Run(parser_->release());
@@ -425,6 +424,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   }
 
   ServerCore& core_;
+  ConnectionSlot slot_;  // moved to the WebSocket session at an upgrade
   Stream stream_;
   beast::flat_buffer buffer_;
   std::string peer_;
@@ -441,15 +441,23 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   bool holds_upload_slot_ = false;
 };
 
-// Beyond the connection limit: a canned 503 (plain) or a close (TLS), without a session.
-void RejectBusy(ServerCore& core, tcp::socket socket) {
-  ++core.metrics.rejected_connections;
+// A whole 503 response with a JSON error, closing the connection.
+std::string BusyResponse(const std::string& message) {
+  const std::string body = "{\"error\":\"" + message + "\"}\n";
+  return "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
+         "Retry-After: 1\r\nContent-Length: " +
+         std::to_string(body.size()) + "\r\n\r\n" + body;
+}
+
+// Beyond a connection limit: a canned 503 (plain) or a close (TLS), without a session.
+void RejectBusy(ServerCore& core, tcp::socket socket, ConnectionSlots::Refusal refusal) {
+  const bool per_address = refusal == ConnectionSlots::Refusal::kAddress;
+  ++(per_address ? core.metrics.rejected_per_address : core.metrics.rejected_connections);
   if (core.tls) return;
-  static const std::string kBusy =
-      "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
-      "Retry-After: 1\r\nContent-Length: 40\r\n\r\n{\"error\":\"too many connections; retry\"}\n";
+  static const std::string kTotal = BusyResponse("too many connections; retry");
+  static const std::string kAddress = BusyResponse("too many connections from your address; retry");
   auto s = std::make_shared<tcp::socket>(std::move(socket));
-  asio::async_write(*s, asio::buffer(kBusy), [s](beast::error_code, size_t) {
+  asio::async_write(*s, asio::buffer(per_address ? kAddress : kTotal), [s](beast::error_code, size_t) {
     beast::error_code ignored;
     s->shutdown(tcp::socket::shutdown_both, ignored);
   });
@@ -458,14 +466,19 @@ void RejectBusy(ServerCore& core, tcp::socket socket) {
 }  // namespace
 
 void Launch(ServerCore& core, tcp::socket socket) {
-  if (core.metrics.open_connections.load() >= core.options.max_connections) return RejectBusy(core, std::move(socket));
-  std::string peer = PeerOf(socket);
+  beast::error_code ec;
+  const tcp::endpoint remote = socket.remote_endpoint(ec);
+  if (ec) return;  // gone already
+  ConnectionSlots::Refusal refusal;
+  ConnectionSlot slot = core.slots.Acquire(remote.address(), &refusal);
+  if (!slot) return RejectBusy(core, std::move(socket), refusal);
+  std::string peer = remote.address().to_string() + ":" + std::to_string(remote.port());
   if (core.tls) {
-    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(peer), std::move(socket),
-                                                                        *core.tls)
+    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(slot), std::move(peer),
+                                                                        std::move(socket), *core.tls)
         ->Run();
   } else {
-    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(peer), std::move(socket))->Run();
+    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(slot), std::move(peer), std::move(socket))->Run();
   }
 }
 

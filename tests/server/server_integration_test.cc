@@ -413,6 +413,64 @@ TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAre
   EXPECT_NE(metrics.find("idms_accept_paused_total "), std::string::npos);
 }
 
+// A Prometheus sample's value in a /metrics text ("name value" or "name{labels} value"); -1 when absent.
+double MetricValue(const std::string& text, const std::string& sample) {
+  const size_t at = text.find("\n" + sample + " ");
+  return at == std::string::npos ? -1 : std::stod(text.substr(at + sample.size() + 2));
+}
+
+// Issue 27: upgraded WebSockets were not counted against --max-connections (1,100 /ws/library
+// upgrades accepted), and one client's idle connections locked every other client out.
+TEST(ServerIntegration, EveryConnectionCountsAndOneAddressCannotTakeTheServer) {
+  const std::string dir = TempDir("per-address") + "/data";
+  ServerProcess server(dir, {"--max-connections", "50", "--max-connections-per-address", "20"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const int pid = server.process().pid();
+  const std::string admin = server.Token("admin");
+  auto metrics_from_elsewhere = [&] {
+    return Http(port, HttpCall{"GET", "/metrics", {{"Authorization", "Bearer " + admin}}, "", "127.0.0.2"}).body;
+  };
+  ASSERT_EQ(Get(port, "/api/health", "").status, 200);
+  ASSERT_TRUE(Eventually([&] { return MetricValue(metrics_from_elsewhere(), "idms_open_connections") == 1; }));
+  const int descriptors = OpenDescriptors(pid);
+  // 30 WebSockets from 127.0.0.1, kept open: 20 are accepted.
+  asio::io_context io;
+  std::vector<std::unique_ptr<websocket::stream<beast::tcp_stream>>> sockets;
+  int accepted = 0;
+  for (int i = 0; i < 30; ++i) {
+    auto ws = std::make_unique<websocket::stream<beast::tcp_stream>>(io);
+    beast::get_lowest_layer(*ws).expires_after(seconds(10));
+    beast::error_code ec;
+    beast::get_lowest_layer(*ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
+    ws->set_option(websocket::stream_base::decorator(
+        [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + admin); }));
+    if (!ec) ws->handshake("127.0.0.1", "/ws/library", ec);
+    if (!ec) ++accepted;
+    sockets.push_back(std::move(ws));
+  }
+  std::printf("30 /ws/library upgrades from one address: %d accepted\n", accepted);
+  EXPECT_EQ(accepted, 20);
+  // That address is refused and told why; another is served, and sees the WebSockets counted.
+  const HttpReply refused = Get(port, "/api/health", "");
+  EXPECT_EQ(refused.status, 503);
+  EXPECT_NE(refused.body.find("from your address"), std::string::npos) << refused.body;
+  EXPECT_EQ(Http(port, HttpCall{"GET", "/api/health", {}, "", "127.0.0.2"}).status, 200);
+  const std::string during = metrics_from_elsewhere();
+  EXPECT_EQ(MetricValue(during, "idms_open_websockets"), 20) << during;
+  EXPECT_EQ(MetricValue(during, "idms_open_connections"), 21);
+  EXPECT_GE(MetricValue(during, "idms_rejected_connections_total{limit=\"address\"}"), 11);
+  // Closed, every count and descriptor returns to its baseline.
+  sockets.clear();
+  EXPECT_TRUE(Eventually([&] {
+    const std::string after = metrics_from_elsewhere();
+    return MetricValue(after, "idms_open_websockets") == 0 && MetricValue(after, "idms_open_connections") == 1;
+  })) << metrics_from_elsewhere();
+  EXPECT_TRUE(Eventually([&] { return OpenDescriptors(pid) <= descriptors; }))
+      << OpenDescriptors(pid) << " descriptors open, " << descriptors << " before";
+  EXPECT_EQ(Get(port, "/api/health", "").status, 200);
+}
+
 // A self-signed RSA certificate for localhost: DIR/cert.pem, DIR/key.pem.
 void MakeCertificate(const std::string& dir) {
   ASSERT_EQ(RunCommand({"/usr/bin/openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj",

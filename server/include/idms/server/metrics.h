@@ -22,8 +22,9 @@ class Metrics {
 
   std::atomic<int64_t> open_connections{0};
   std::atomic<int64_t> open_websockets{0};
-  std::atomic<int64_t> rejected_connections{0};
-  std::atomic<int64_t> accept_paused{0};  // accepts that failed for want of descriptors or memory
+  std::atomic<int64_t> rejected_connections{0};  // at --max-connections
+  std::atomic<int64_t> rejected_per_address{0};  // at --max-connections-per-address
+  std::atomic<int64_t> accept_paused{0};         // accepts that failed for want of descriptors or memory
 
   // Prometheus text exposition format 0.0.4.
   std::string Render(int64_t models, int64_t library_bytes, double uptime_s) const;
