@@ -167,6 +167,13 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
     a.error = JsonError(req, status, message);
     return a;
   };
+  // RFC 9112 3.2: an HTTP/1.1 request names exactly one Host, any request at most one, well formed.
+  const size_t hosts = req.message.count(http::field::host);
+  if (hosts > 1) return fail(http::status::bad_request, "more than one Host header");
+  if (hosts == 0 && req.message.version() >= 11)
+    return fail(http::status::bad_request, "an HTTP/1.1 request must carry a Host header");
+  if (hosts == 1 && !ValidHost(Sv(req.message[http::field::host])))
+    return fail(http::status::bad_request, "malformed Host header");
   // Target and route.
   if (!ParseTarget(Sv(req.message.target()), &req.path, &req.query))
     return fail(http::status::bad_request, "malformed request target");

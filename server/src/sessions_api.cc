@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "idms/protocol/recording.h"
+#include "idms/server/http_parse.h"
 #include "sessions.h"
 
 namespace idms::server {
@@ -24,29 +25,6 @@ json RowJson(const SessionRow& r, int viewers) {
               {"samples", r.samples},
               {"viewers", viewers},
               {"summary", summary}};
-}
-
-// "bytes=A-B", "bytes=A-", "bytes=-N" against a file of `size` bytes; false when unsatisfiable.
-bool ParseRange(std::string_view header, uint64_t size, uint64_t* first, uint64_t* last) {
-  if (header.rfind("bytes=", 0) != 0 || size == 0) return false;
-  const std::string_view spec = header.substr(6);
-  const size_t dash = spec.find('-');
-  if (dash == std::string_view::npos || spec.find(',') != std::string_view::npos) return false;
-  try {
-    const std::string a(spec.substr(0, dash)), b(spec.substr(dash + 1));
-    if (a.empty()) {
-      const uint64_t n = std::stoull(b);
-      if (n == 0) return false;
-      *first = n >= size ? 0 : size - n;
-      *last = size - 1;
-    } else {
-      *first = std::stoull(a);
-      *last = b.empty() ? size - 1 : std::min<uint64_t>(std::stoull(b), size - 1);
-    }
-  } catch (const std::exception&) {
-    return false;
-  }
-  return *first <= *last && *first < size;
 }
 
 }  // namespace
@@ -110,13 +88,19 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                        const uint64_t size = static_cast<uint64_t>(in.tellg());
                        uint64_t first = 0, last = size == 0 ? 0 : size - 1;
                        ApiResponse res{http::status::ok, req.message.version()};
+                       // Range on GET only (RFC 9110 14.2: ignored on any other method).
                        const auto range = req.message.find(http::field::range);
-                       if (range != req.message.end()) {
-                         if (!ParseRange(Sv(range->value()), size, &first, &last)) {
-                           res = JsonError(req, http::status::range_not_satisfiable, "range not satisfiable");
-                           res.set(http::field::content_range, "bytes */" + std::to_string(size));
-                           return res;
-                         }
+                       ByteRange wanted;
+                       const RangeRequest kind = range == req.message.end() || req.message.method() != http::verb::get
+                                                     ? RangeRequest::kWhole
+                                                     : ParseRange(Sv(range->value()), size, &wanted);
+                       if (kind == RangeRequest::kUnsatisfiable) {
+                         res = JsonError(req, http::status::range_not_satisfiable, "range not satisfiable");
+                         res.set(http::field::content_range, "bytes */" + std::to_string(size));
+                         return res;
+                       }
+                       if (kind == RangeRequest::kPartial) {
+                         first = wanted.first, last = wanted.last;
                          res.result(http::status::partial_content);
                          res.set(http::field::content_range, "bytes " + std::to_string(first) + "-" +
                                                                  std::to_string(last) + "/" + std::to_string(size));

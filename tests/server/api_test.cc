@@ -192,6 +192,7 @@ TEST_F(ApiTest, BadUploadsAreRefusedAtTheirLineAndChangeNothing) {
   {
     ApiRequest header_only;
     header_only.message = http::request<http::string_body>(http::verb::put, "/api/models/hex", 11);
+    header_only.message.set(http::field::host, "idms.local:8740");
     header_only.message.set(http::field::authorization, "Bearer " + kAdmin);
     header_only.message.set(http::field::content_type, "application/json");
     header_only.message.set(http::field::content_length, "5000");

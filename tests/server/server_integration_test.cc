@@ -471,6 +471,27 @@ TEST(ServerIntegration, EveryConnectionCountsAndOneAddressCannotTakeTheServer) {
   EXPECT_EQ(Get(port, "/api/health", "").status, 200);
 }
 
+// RFC 9112 3.2: a 400 for an HTTP/1.1 request without Host, or with two, or a malformed one.
+TEST(ServerIntegration, ARequestWithoutExactlyOneValidHostIsA400) {
+  const std::string dir = TempDir("host") + "/data";
+  ServerProcess server(dir);
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  auto status_line = [&](const std::string& request) {
+    const std::string reply = RawExchange(port, request, seconds(10));
+    return reply.substr(0, reply.find("\r\n"));
+  };
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nConnection: close\r\n\r\n"), "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: a\r\nHost: b\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: evil/x@y\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 400 Bad Request");
+  // HTTP/1.0 may leave it out; a well-formed one is served.
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.0\r\n\r\n"), "HTTP/1.0 200 OK");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: [::1]:8740\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 200 OK");
+}
+
 // A self-signed RSA certificate for localhost: DIR/cert.pem, DIR/key.pem.
 void MakeCertificate(const std::string& dir) {
   ASSERT_EQ(RunCommand({"/usr/bin/openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj",
