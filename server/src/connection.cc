@@ -318,15 +318,15 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     req_.message = parser_->release();
     // Blocking handlers (parse, hash, file I/O, fsync) on a worker, never on an I/O thread; the
     // others here, on the strand.
-    if (!admission_.route->blocking) return Write(RunHandler(), false);
+    if (!admission_.route->blocking) return WriteReply(RunHandler());
     asio::post(core_.workers, [self = this->shared_from_this()] {
-      ApiResponse res = self->RunHandler();
+      HandlerResponse res = self->RunHandler();
       asio::post(self->stream_.get_executor(),
-                 [self, res = std::move(res)]() mutable { self->Write(std::move(res), false); });
+                 [self, res = std::move(res)]() mutable { self->WriteReply(std::move(res)); });
     });
   }
 
-  ApiResponse RunHandler() {
+  HandlerResponse RunHandler() {
     try {
       return admission_.route->handler(core_.ctx, req_);
     } catch (const std::exception& e) {
@@ -352,29 +352,46 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     Write(JsonError(req_, status, message), true);
   }
 
-  void Write(ApiResponse res, bool close_after) {
+  void WriteReply(HandlerResponse res) {
+    std::visit([this](auto& r) { Write(std::move(r), false); }, res);
+  }
+
+  // Any body: a string, or a file sent in pieces (FileRangeBody).
+  template <class Body>
+  void Write(http::response<Body> res, bool close_after) {
     res.set(http::field::server, "idms-server");
     res.keep_alive(!close_after && !core_.draining && req_.message.keep_alive());
     res.prepare_payload();
     // HEAD: the headers of the GET, Content-Length included, and no body.
-    if (req_.message.method() == http::verb::head) {
-      const size_t length = res.body().size();
-      res.body().clear();
-      res.content_length(length);
+    if constexpr (!std::is_same_v<Body, http::empty_body>) {
+      if (req_.message.method() == http::verb::head) {
+        const uint64_t length = res.payload_size().value_or(0);
+        http::response<http::empty_body> head(std::move(res.base()));
+        head.content_length(length);
+        return Send(std::move(head));
+      }
     }
-    response_ = std::make_shared<ApiResponse>(std::move(res));
+    Send(std::move(res));
+  }
+
+  // A complete response, written as it is; one write in flight.
+  template <class Body>
+  void Send(http::response<Body> res) {
+    auto response = std::make_shared<http::response<Body>>(std::move(res));
+    response_status_ = response->result_int();
+    response_keep_alive_ = response->keep_alive();
+    response_ = response;
     beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
-                                                   std::chrono::seconds(response_->body().size() >> 20));
-    http::async_write(stream_, *response_, beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
+                                                   std::chrono::seconds(response->payload_size().value_or(0) >> 20));
+    http::async_write(stream_, *response, beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
   }
 
   void OnWrite(beast::error_code ec, size_t bytes) {
-    AccessLog(response_->result_int(), bytes);
+    AccessLog(response_status_, bytes);
     ReleaseUploadSlot();
+    response_.reset();  // a file's descriptor and piece go now
     if (ec) return Fail(ec, "write");
-    const bool close = !response_->keep_alive();
-    response_.reset();
-    if (close) return DoClose();
+    if (!response_keep_alive_) return DoClose();
     DoRead();
   }
 
@@ -432,7 +449,9 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   std::optional<http::response<http::empty_body>> continue_;
   ApiRequest req_;
   Admission admission_;
-  std::shared_ptr<ApiResponse> response_;
+  std::shared_ptr<void> response_;  // the response being written, whatever its body
+  unsigned response_status_ = 0;
+  bool response_keep_alive_ = false;
   Clock::time_point started_ = Clock::now();
   Clock::time_point body_started_ = Clock::now();
   double read_ms_ = 0;  // the body's read time, for the log

@@ -12,9 +12,11 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "idms/server/auth.h"
+#include "idms/server/file_body.h"
 #include "idms/server/library.h"
 #include "idms/server/metrics.h"
 #include "idms/server/options.h"
@@ -24,6 +26,11 @@ namespace idms::server {
 namespace http = boost::beast::http;
 
 using ApiResponse = http::response<http::string_body>;
+// A response streamed from a file (FileRangeBody): static files and recordings.
+using FileResponse = http::response<FileRangeBody>;
+// What a handler returns: a response held in memory, or one the connection sends from a file in
+// pieces, so that memory per slow client is bounded by a piece, not by the file.
+using HandlerResponse = std::variant<ApiResponse, FileResponse>;
 
 // Beast 1.74's string_view is Boost's; ours is std's.
 inline std::string_view Sv(boost::beast::string_view s) { return {s.data(), s.size()}; }
@@ -53,7 +60,7 @@ struct ApiRequest {
   std::string peer;
 };
 
-using Handler = std::function<ApiResponse(ApiContext&, ApiRequest&)>;
+using Handler = std::function<HandlerResponse(ApiContext&, ApiRequest&)>;
 
 struct Route {
   http::verb method;
