@@ -148,12 +148,28 @@ std::vector<Route> MakeRoutes() {
   return routes;
 }
 
+std::string_view MethodLabel(const std::vector<Route>& routes, http::verb method) {
+  if (method == http::verb::unknown) return "other";
+  const http::verb served = method == http::verb::head ? http::verb::get : method;
+  for (const Route& r : routes) {
+    if (r.method == served) return Sv(http::to_string(method));
+  }
+  return "other";
+}
+
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req) {
   Admission a;
   auto fail = [&](http::status status, const std::string& message) {
     a.error = JsonError(req, status, message);
     return a;
   };
+  // RFC 9112 3.2: an HTTP/1.1 request names exactly one Host, any request at most one, well formed.
+  const size_t hosts = req.message.count(http::field::host);
+  if (hosts > 1) return fail(http::status::bad_request, "more than one Host header");
+  if (hosts == 0 && req.message.version() >= 11)
+    return fail(http::status::bad_request, "an HTTP/1.1 request must carry a Host header");
+  if (hosts == 1 && !ValidHost(Sv(req.message[http::field::host])))
+    return fail(http::status::bad_request, "malformed Host header");
   // Target and route.
   if (!ParseTarget(Sv(req.message.target()), &req.path, &req.query))
     return fail(http::status::bad_request, "malformed request target");

@@ -40,12 +40,6 @@ constexpr auto kCloseGrace = std::chrono::seconds(5);
 template <class Stream>
 constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
 
-std::string PeerOf(const tcp::socket& s) {
-  beast::error_code ec;
-  const tcp::endpoint ep = s.remote_endpoint(ec);
-  return ec ? "?" : ep.address().to_string() + ":" + std::to_string(ep.port());
-}
-
 // Errors that mean "the peer went away or we closed it": not worth a warning.
 bool Quiet(const beast::error_code& ec) {
   return ec == asio::error::operation_aborted || ec == beast::error::timeout || ec == http::error::end_of_stream ||
@@ -59,8 +53,14 @@ bool Quiet(const beast::error_code& ec) {
 template <class Stream>
 class WsSession : public Connection, public WsPeer, public std::enable_shared_from_this<WsSession<Stream>> {
  public:
-  WsSession(ServerCore& core, Stream&& stream, std::string peer, std::shared_ptr<WsEndpoint> endpoint)
-      : core_(core), ws_(std::move(stream)), peer_(std::move(peer)), endpoint_(std::move(endpoint)) {
+  // `slot`: the connection's place, taken over from the HTTP session that upgraded.
+  WsSession(ServerCore& core, ConnectionSlot slot, Stream&& stream, std::string peer,
+            std::shared_ptr<WsEndpoint> endpoint)
+      : core_(core),
+        slot_(std::move(slot)),
+        ws_(std::move(stream)),
+        peer_(std::move(peer)),
+        endpoint_(std::move(endpoint)) {
     ++core_.metrics.open_websockets;
   }
   ~WsSession() override {
@@ -202,6 +202,7 @@ class WsSession : public Connection, public WsPeer, public std::enable_shared_fr
   }
 
   ServerCore& core_;
+  ConnectionSlot slot_;
   websocket::stream<Stream> ws_;
   beast::flat_buffer buffer_;
   std::deque<Outgoing> queue_;
@@ -222,13 +223,10 @@ template <class Stream>
 class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession<Stream>> {
  public:
   template <class... Args>
-  HttpSession(ServerCore& core, std::string peer, Args&&... stream_args)
-      : core_(core), stream_(std::forward<Args>(stream_args)...), peer_(std::move(peer)) {
-    ++core_.metrics.open_connections;
-  }
+  HttpSession(ServerCore& core, ConnectionSlot slot, std::string peer, Args&&... stream_args)
+      : core_(core), slot_(std::move(slot)), stream_(std::forward<Args>(stream_args)...), peer_(std::move(peer)) {}
   ~HttpSession() override {
     ReleaseUploadSlot();
-    --core_.metrics.open_connections;
     core_.Unregister(this);
   }
 
@@ -339,15 +337,15 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     req_.message = parser_->release();
     // Blocking handlers (parse, hash, file I/O, fsync) on a worker, never on an I/O thread; the
     // others here, on the strand.
-    if (!admission_.route->blocking) return Write(RunHandler(), false);
+    if (!admission_.route->blocking) return WriteReply(RunHandler());
     asio::post(core_.workers, [self = this->shared_from_this()] {
-      ApiResponse res = self->RunHandler();
+      HandlerResponse res = self->RunHandler();
       asio::post(self->stream_.get_executor(),
-                 [self, res = std::move(res)]() mutable { self->Write(std::move(res), false); });
+                 [self, res = std::move(res)]() mutable { self->WriteReply(std::move(res)); });
     });
   }
 
-  ApiResponse RunHandler() {
+  HandlerResponse RunHandler() {
     try {
       return admission_.route->handler(core_.ctx, req_);
     } catch (const std::exception& e) {
@@ -360,7 +358,8 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     std::string refusal;
     std::shared_ptr<WsEndpoint> endpoint = admission_.route->open_websocket(req_, &refusal);
     if (!endpoint) return Write(JsonError(req_, http::status::not_found, refusal), false);
-    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(stream_),
+    // The connection slot goes with the stream: a WebSocket counts against the limits until it closes.
+    auto ws = std::make_shared<WsSession<Stream>>(core_, std::move(slot_), std::move(stream_),
                                                   std::string(RoleName(req_.role)) + " " + peer_, std::move(endpoint));
     AccessLog(101, 0);
     ws->Run(parser_->release());
@@ -372,29 +371,46 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     Write(JsonError(req_, status, message), true);
   }
 
-  void Write(ApiResponse res, bool close_after) {
+  void WriteReply(HandlerResponse res) {
+    std::visit([this](auto& r) { this->Write(std::move(r), false); }, res);
+  }
+
+  // Any body: a string, or a file sent in pieces (FileRangeBody).
+  template <class Body>
+  void Write(http::response<Body> res, bool close_after) {
     res.set(http::field::server, "idms-server");
     res.keep_alive(!close_after && !core_.draining && req_.message.keep_alive());
     res.prepare_payload();
     // HEAD: the headers of the GET, Content-Length included, and no body.
-    if (req_.message.method() == http::verb::head) {
-      const size_t length = res.body().size();
-      res.body().clear();
-      res.content_length(length);
+    if constexpr (!std::is_same_v<Body, http::empty_body>) {
+      if (req_.message.method() == http::verb::head) {
+        const uint64_t length = res.payload_size().value_or(0);
+        http::response<http::empty_body> head(std::move(res.base()));
+        head.content_length(length);
+        return Send(std::move(head));
+      }
     }
-    response_ = std::make_shared<ApiResponse>(std::move(res));
+    Send(std::move(res));
+  }
+
+  // A complete response, written as it is; one write in flight.
+  template <class Body>
+  void Send(http::response<Body> res) {
+    auto response = std::make_shared<http::response<Body>>(std::move(res));
+    response_status_ = response->result_int();
+    response_keep_alive_ = response->keep_alive();
+    response_ = response;
     beast::get_lowest_layer(stream_).expires_after(core_.options.body_timeout +
-                                                   std::chrono::seconds(response_->body().size() >> 20));
-    http::async_write(stream_, *response_, beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
+                                                   std::chrono::seconds(response->payload_size().value_or(0) >> 20));
+    http::async_write(stream_, *response, beast::bind_front_handler(&HttpSession::OnWrite, this->shared_from_this()));
   }
 
   void OnWrite(beast::error_code ec, size_t bytes) {
-    AccessLog(response_->result_int(), bytes);
+    AccessLog(response_status_, bytes);
     ReleaseUploadSlot();
+    response_.reset();  // a file's descriptor and piece go now
     if (ec) return Fail(ec, "write");
-    const bool close = !response_->keep_alive();
-    response_.reset();
-    if (close) return DoClose();
+    if (!response_keep_alive_) return DoClose();
     DoRead();
   }
 
@@ -402,7 +418,9 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     const double seconds = std::chrono::duration<double>(Clock::now() - started_).count();
     const std::string route = admission_.route != nullptr ? admission_.route->pattern : "(none)";
     const std::string method(req_.message.method_string());
-    core_.metrics.CountRequest(method, route, static_cast<int>(status), seconds, bytes_in_, bytes_out);
+    // Labels from the route table only, so that clients cannot grow /metrics.
+    core_.metrics.CountRequest(std::string(MethodLabel(core_.routes, req_.message.method())), route,
+                               static_cast<int>(status), seconds, bytes_in_, bytes_out);
     // The path only: no query string, no header, so no secret can reach the log.
     Log(LogLevel::kInfo, "request",
         {{"method", method},
@@ -442,6 +460,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   }
 
   ServerCore& core_;
+  ConnectionSlot slot_;  // moved to the WebSocket session at an upgrade
   Stream stream_;
   beast::flat_buffer buffer_;
   std::string peer_;
@@ -449,7 +468,9 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   std::optional<http::response<http::empty_body>> continue_;
   ApiRequest req_;
   Admission admission_;
-  std::shared_ptr<ApiResponse> response_;
+  std::shared_ptr<void> response_;  // the response being written, whatever its body
+  unsigned response_status_ = 0;
+  bool response_keep_alive_ = false;
   Clock::time_point started_ = Clock::now();
   Clock::time_point body_started_ = Clock::now();
   double read_ms_ = 0;  // the body's read time, for the log
@@ -458,15 +479,23 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   bool holds_upload_slot_ = false;
 };
 
-// Beyond the connection limit: a canned 503 (plain) or a close (TLS), without a session.
-void RejectBusy(ServerCore& core, tcp::socket socket) {
-  ++core.metrics.rejected_connections;
+// A whole 503 response with a JSON error, closing the connection.
+std::string BusyResponse(const std::string& message) {
+  const std::string body = "{\"error\":\"" + message + "\"}\n";
+  return "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
+         "Retry-After: 1\r\nContent-Length: " +
+         std::to_string(body.size()) + "\r\n\r\n" + body;
+}
+
+// Beyond a connection limit: a canned 503 (plain) or a close (TLS), without a session.
+void RejectBusy(ServerCore& core, tcp::socket socket, ConnectionSlots::Refusal refusal) {
+  const bool per_address = refusal == ConnectionSlots::Refusal::kAddress;
+  ++(per_address ? core.metrics.rejected_per_address : core.metrics.rejected_connections);
   if (core.tls) return;
-  static const std::string kBusy =
-      "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
-      "Retry-After: 1\r\nContent-Length: 40\r\n\r\n{\"error\":\"too many connections; retry\"}\n";
+  static const std::string kTotal = BusyResponse("too many connections; retry");
+  static const std::string kAddress = BusyResponse("too many connections from your address; retry");
   auto s = std::make_shared<tcp::socket>(std::move(socket));
-  asio::async_write(*s, asio::buffer(kBusy), [s](beast::error_code, size_t) {
+  asio::async_write(*s, asio::buffer(per_address ? kAddress : kTotal), [s](beast::error_code, size_t) {
     beast::error_code ignored;
     s->shutdown(tcp::socket::shutdown_both, ignored);
   });
@@ -475,14 +504,19 @@ void RejectBusy(ServerCore& core, tcp::socket socket) {
 }  // namespace
 
 void Launch(ServerCore& core, tcp::socket socket) {
-  if (core.metrics.open_connections.load() >= core.options.max_connections) return RejectBusy(core, std::move(socket));
-  std::string peer = PeerOf(socket);
+  beast::error_code ec;
+  const tcp::endpoint remote = socket.remote_endpoint(ec);
+  if (ec) return;  // gone already
+  ConnectionSlots::Refusal refusal;
+  ConnectionSlot slot = core.slots.Acquire(remote.address(), &refusal);
+  if (!slot) return RejectBusy(core, std::move(socket), refusal);
+  std::string peer = remote.address().to_string() + ":" + std::to_string(remote.port());
   if (core.tls) {
-    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(peer), std::move(socket),
-                                                                        *core.tls)
+    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(slot), std::move(peer),
+                                                                        std::move(socket), *core.tls)
         ->Run();
   } else {
-    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(peer), std::move(socket))->Run();
+    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(slot), std::move(peer), std::move(socket))->Run();
   }
 }
 

@@ -154,6 +154,99 @@ bool ParseMediaType(std::string_view header, MediaType* out) {
   return true;
 }
 
+namespace {
+
+// 1*DIGIT, saturating at UINT64_MAX (a larger number is as unsatisfiable, or as clamped).
+bool ParseDigits(std::string_view s, uint64_t* value) {
+  if (s.empty()) return false;
+  uint64_t v = 0;
+  for (const char c : s) {
+    if (c < '0' || c > '9') return false;
+    const uint64_t d = static_cast<uint64_t>(c - '0');
+    v = v > (UINT64_MAX - d) / 10 ? UINT64_MAX : v * 10 + d;
+  }
+  *value = v;
+  return true;
+}
+
+// One range-spec: false when invalid; else *satisfiable and, if so, *range.
+bool ParseRangeSpec(std::string_view spec, uint64_t size, bool* satisfiable, ByteRange* range) {
+  const size_t dash = spec.find('-');
+  if (dash == std::string_view::npos) return false;
+  const std::string_view a = spec.substr(0, dash), b = spec.substr(dash + 1);
+  uint64_t first = 0, last = UINT64_MAX, suffix = 0;
+  if (a.empty()) {
+    // suffix-range: the last N bytes (all of them when N >= size).
+    if (!ParseDigits(b, &suffix)) return false;
+    *satisfiable = suffix > 0 && size > 0;
+    if (*satisfiable) *range = {suffix >= size ? 0 : size - suffix, size - 1};
+    return true;
+  }
+  // int-range: first-last, or first- to the end.
+  if (!ParseDigits(a, &first) || (!b.empty() && !ParseDigits(b, &last)) || last < first) return false;
+  *satisfiable = first < size;
+  if (*satisfiable) *range = {first, std::min(last, size - 1)};
+  return true;
+}
+
+}  // namespace
+
+RangeRequest ParseRange(std::string_view header, uint64_t size, ByteRange* range) {
+  const size_t eq = header.find('=');
+  if (eq == std::string_view::npos || !IEquals(header.substr(0, eq), "bytes")) return RangeRequest::kWhole;
+  // range-set = 1#range-spec: commas with optional whitespace; empty elements are skipped.
+  const std::string_view set = header.substr(eq + 1);
+  int specs = 0, satisfiable = 0;
+  ByteRange found;
+  for (size_t pos = 0; pos <= set.size();) {
+    const size_t comma = std::min(set.find(',', pos), set.size());
+    const std::string_view spec = Trim(set.substr(pos, comma - pos));
+    pos = comma + 1;
+    if (spec.empty()) continue;
+    bool ok = false;
+    if (!ParseRangeSpec(spec, size, &ok, &found)) return RangeRequest::kWhole;
+    ++specs, satisfiable += ok ? 1 : 0;
+  }
+  if (specs == 0) return RangeRequest::kWhole;
+  if (satisfiable == 0) return RangeRequest::kUnsatisfiable;
+  if (specs > 1) return RangeRequest::kWhole;
+  *range = found;
+  return RangeRequest::kPartial;
+}
+
+bool ValidHost(std::string_view host) {
+  std::string_view port;
+  if (!host.empty() && host.front() == '[') {
+    // IP-literal: IPv6address or IPvFuture; its characters, then "]" and the optional port.
+    const size_t close = host.find(']');
+    if (close == std::string_view::npos || close == 1) return false;
+    for (const char c : host.substr(1, close - 1)) {
+      if (!std::isalnum(static_cast<unsigned char>(c)) &&
+          std::string_view(":._~!$&'()*+,;=%-").find(c) == std::string_view::npos)
+        return false;
+    }
+    const std::string_view rest = host.substr(close + 1);
+    if (!rest.empty() && rest.front() != ':') return false;
+    port = rest.empty() ? rest : rest.substr(1);
+  } else {
+    // reg-name or IPv4address: unreserved, pct-encoded, sub-delims.
+    const size_t colon = host.find(':');
+    const std::string_view name = host.substr(0, colon);
+    for (size_t i = 0; i < name.size(); ++i) {
+      const char c = name[i];
+      if (c == '%') {
+        if (i + 2 >= name.size() || HexValue(name[i + 1]) < 0 || HexValue(name[i + 2]) < 0) return false;
+        i += 2;
+      } else if (!std::isalnum(static_cast<unsigned char>(c)) &&
+                 std::string_view("._~!$&'()*+,;=-").find(c) == std::string_view::npos) {
+        return false;
+      }
+    }
+    port = colon == std::string_view::npos ? std::string_view() : host.substr(colon + 1);
+  }
+  return std::all_of(port.begin(), port.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
 bool ParseMultipart(std::string_view body, std::string_view boundary, std::vector<FormPart>* parts,
                     std::string* error) {
   if (boundary.empty() || boundary.size() > 70) {

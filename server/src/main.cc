@@ -70,8 +70,17 @@ int main(int argc, char** argv) {
   app.add_option("--max-ws-message-mb", max_ws_mb, "Largest WebSocket message, MiB")
       ->check(CLI::Range(1, 1 << 12))
       ->capture_default_str();
-  app.add_option("--max-connections", o.max_connections, "Open connections beyond which new ones get 503")
+  app.add_option("--max-connections", o.max_connections,
+                 "Open connections (HTTP and WebSocket) beyond which new ones get 503")
       ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  app.add_option("--max-connections-per-address", o.max_connections_per_address,
+                 "Open connections (HTTP and WebSocket) from one client address, IPv6 by its /64, beyond which "
+                 "that address gets 503 while others are still served: one client cannot take the whole "
+                 "server. A browser uses about 6 plus its WebSockets; the default leaves three quarters of "
+                 "the default --max-connections to everyone else. Behind a reverse proxy every client has the "
+                 "proxy's address: 0 (no per-address limit)")
+      ->check(CLI::Range(0, 1 << 20))
       ->capture_default_str();
   app.add_option("--header-timeout", header_timeout_s, "Seconds for a whole request header, and keep-alive idle")
       ->check(CLI::Range(1, 3600))

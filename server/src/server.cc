@@ -2,6 +2,7 @@
 // on SIGHUP), TLS, the listener, the I/O threads, and a graceful stop on SIGTERM / SIGINT.
 #include "idms/server/server.h"
 
+#include <openssl/ssl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -9,6 +10,7 @@
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
 #include <boost/beast/core/error.hpp>
+#include <cerrno>
 #include <filesystem>
 #include <thread>
 
@@ -28,6 +30,7 @@ struct Server::Impl {
       : core(o, ResolveThreads(o.threads), std::max(1, o.workers)),
         logins(core.options.login_lifetime),
         acceptor(asio::make_strand(core.ioc)),
+        accept_pause(acceptor.get_executor()),
         signals(core.ioc, SIGINT, SIGTERM, SIGHUP),
         grace(core.ioc) {}
 
@@ -48,6 +51,8 @@ struct Server::Impl {
   std::shared_ptr<const TokenTable> tokens = std::make_shared<TokenTable>();
   std::string tokens_path;
   tcp::acceptor acceptor;
+  asio::steady_timer accept_pause;  // on the acceptor's strand
+  bool accept_paused = false;       // logged once per run of failures
   asio::signal_set signals;
   asio::steady_timer grace;
   uint16_t port = 0;
@@ -55,6 +60,21 @@ struct Server::Impl {
 };
 
 namespace {
+
+// How long the accept loop waits after running out of descriptors or memory. Long enough not to
+// spin (a failed accept costs microseconds), short against a connection's lifetime.
+constexpr std::chrono::milliseconds kAcceptPause{100};
+
+// EMFILE, ENFILE, ENOBUFS, ENOMEM: accepting again now would fail again now.
+bool OutOfResources(const boost::system::error_code& ec) {
+  if (ec.category() != boost::system::system_category()) return false;
+  const int e = ec.value();
+  return e == EMFILE || e == ENFILE || e == ENOBUFS || e == ENOMEM;
+}
+
+constexpr const char* kTls12Suites =
+    "ECDHE-ECDSA-AES128-GCM-SHA256:ECDHE-RSA-AES128-GCM-SHA256:ECDHE-ECDSA-AES256-GCM-SHA384:"
+    "ECDHE-RSA-AES256-GCM-SHA384:ECDHE-ECDSA-CHACHA20-POLY1305:ECDHE-RSA-CHACHA20-POLY1305";
 
 // The shipped models/ directory: $IDMS_MODELS_DIR, beside the build (build/bin/../../models), an
 // installed share/idms/models, or the source tree this binary was built from.
@@ -118,6 +138,14 @@ bool Server::Impl::Start(std::string* error) {
     boost::system::error_code ec;
     core.tls->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
                           asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 | asio::ssl::context::no_tlsv1_1);
+    // TLS 1.2: forward-secret AEAD suites only (Mozilla's "intermediate" without finite-field
+    // DHE, slow and needing parameters): no static-RSA key exchange, no CBC. TLS 1.3 keeps
+    // OpenSSL's suites, all of which are. No client-initiated renegotiation (a CPU sink).
+    SSL_CTX_set_options(core.tls->native_handle(), SSL_OP_NO_RENEGOTIATION);
+    if (SSL_CTX_set_cipher_list(core.tls->native_handle(), kTls12Suites) != 1) {
+      *error = "this OpenSSL offers none of the TLS 1.2 suites " + std::string(kTls12Suites);
+      return false;
+    }
     if (core.tls->use_certificate_chain_file(o.tls_cert, ec); ec) {
       *error = "--tls-cert " + o.tls_cert + ": " + ec.message();
       return false;
@@ -170,9 +198,25 @@ bool Server::Impl::Start(std::string* error) {
 void Server::Impl::DoAccept() {
   acceptor.async_accept(asio::make_strand(core.ioc), [this](boost::system::error_code ec, tcp::socket socket) {
     if (ec == asio::error::operation_aborted || !acceptor.is_open()) return;
-    if (!ec) Launch(core, std::move(socket));
-    // EMFILE and the like: keep accepting; the peer saw a reset.
-    DoAccept();
+    if (!ec) {
+      accept_paused = false;
+      Launch(core, std::move(socket));
+      return DoAccept();
+    }
+    if (!OutOfResources(ec)) return DoAccept();  // this client gave up (ECONNABORTED): the next one
+    // Out of descriptors or memory: a new attempt would fail at once, and the loop would spin a
+    // core while nobody is served. Pause: the open connections are served meanwhile, and the
+    // clients wait in the listen queue until one of them closes.
+    ++core.metrics.accept_paused;
+    if (!accept_paused) {
+      Log(LogLevel::kWarn, "cannot accept; pausing until a connection closes",
+          {{"error", ec.message()}, {"retry_ms", kAcceptPause.count()}});
+    }
+    accept_paused = true;
+    accept_pause.expires_after(kAcceptPause);
+    accept_pause.async_wait([this](boost::system::error_code wait_ec) {
+      if (!wait_ec && acceptor.is_open()) DoAccept();
+    });
   });
 }
 
@@ -198,6 +242,7 @@ void Server::Impl::Stop() {
     if (core.draining.exchange(true)) return;
     boost::system::error_code ignored;
     acceptor.close(ignored);
+    accept_pause.cancel();
     signals.cancel(ignored);
     // Sessions first: their recordings are finished and they are marked interrupted (an agent
     // may resume them after a restart); then every connection drains.

@@ -15,6 +15,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "connection_slots.h"
 #include "idms/server/api.h"
 
 namespace idms::server {
@@ -41,6 +42,8 @@ struct ServerCore {
   ApiContext ctx;
   std::vector<Route> routes;
   Metrics metrics;
+  // Every open connection's slot, HTTP or WebSocket (sets metrics.open_connections).
+  ConnectionSlots slots{options.max_connections, options.max_connections_per_address, &metrics.open_connections};
   boost::asio::io_context ioc;
   boost::asio::thread_pool workers;
   std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
@@ -81,8 +84,8 @@ std::string RandomHex(size_t bytes);
 // The sessions' REST routes (sessions_api.cc).
 void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes);
 
-// Takes an accepted socket: enforces the connection limit, then runs an HTTP session (plain or
-// TLS) on its own strand.
+// Takes an accepted socket: takes its connection slot (else a 503 and close), then runs an HTTP
+// session (plain or TLS) on its own strand.
 void Launch(ServerCore& core, boost::asio::ip::tcp::socket socket);
 
 }  // namespace idms::server

@@ -1,9 +1,11 @@
 // The sessions' REST routes: list, one session with its events, the recording (with HTTP range
 // requests), delete. Added to the route table by the server (they need the live sessions).
-#include <fstream>
+#include <sys/stat.h>
+
 #include <nlohmann/json.hpp>
 
 #include "idms/protocol/recording.h"
+#include "idms/server/http_parse.h"
 #include "sessions.h"
 
 namespace idms::server {
@@ -26,27 +28,49 @@ json RowJson(const SessionRow& r, int viewers) {
               {"summary", summary}};
 }
 
-// "bytes=A-B", "bytes=A-", "bytes=-N" against a file of `size` bytes; false when unsatisfiable.
-bool ParseRange(std::string_view header, uint64_t size, uint64_t* first, uint64_t* last) {
-  if (header.rfind("bytes=", 0) != 0 || size == 0) return false;
-  const std::string_view spec = header.substr(6);
-  const size_t dash = spec.find('-');
-  if (dash == std::string_view::npos || spec.find(',') != std::string_view::npos) return false;
-  try {
-    const std::string a(spec.substr(0, dash)), b(spec.substr(dash + 1));
-    if (a.empty()) {
-      const uint64_t n = std::stoull(b);
-      if (n == 0) return false;
-      *first = n >= size ? 0 : size - n;
-      *last = size - 1;
-    } else {
-      *first = std::stoull(a);
-      *last = b.empty() ? size - 1 : std::min<uint64_t>(std::stoull(b), size - 1);
-    }
-  } catch (const std::exception&) {
-    return false;
+// GET /api/sessions/{id}/recording.mcap: streamed from the file (FileRangeBody), with one byte
+// range (RFC 9110 14) on GET. The ETag is the size and modification time (a live recording
+// grows), so that If-Range resumes a download only while the bytes are the same.
+HandlerResponse GetRecording(SessionHub& hub, ApiRequest& req) {
+  const std::optional<SessionRow> r = hub.Get(req.params[0]);
+  if (!r) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
+  boost::beast::file file;
+  boost::beast::error_code ec;
+  file.open(hub.RecordingPath(*r).c_str(), boost::beast::file_mode::scan, ec);
+  struct stat st {};
+  if (ec || ::fstat(file.native_handle(), &st) != 0 || !S_ISREG(st.st_mode))
+    return JsonError(req, http::status::not_found, "session " + r->id + " has no recording");
+  const uint64_t size = static_cast<uint64_t>(st.st_size);
+  const std::string etag =
+      "\"" + std::to_string(size) + "-" + std::to_string(st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec) + "\"";
+  // Range on GET only (RFC 9110 14.2), and only while If-Range (if any) names this ETag (13.1.5;
+  // a date never matches: the recording has no Last-Modified).
+  const auto range = req.message.find(http::field::range);
+  const auto if_range = req.message.find(http::field::if_range);
+  ByteRange wanted{0, size == 0 ? 0 : size - 1};
+  RangeRequest kind = RangeRequest::kWhole;
+  if (range != req.message.end() && req.message.method() == http::verb::get &&
+      (if_range == req.message.end() || Sv(if_range->value()) == etag))
+    kind = ParseRange(Sv(range->value()), size, &wanted);
+  if (kind == RangeRequest::kUnsatisfiable) {
+    ApiResponse res = JsonError(req, http::status::range_not_satisfiable, "range not satisfiable");
+    res.set(http::field::content_range, "bytes */" + std::to_string(size));
+    return res;
   }
-  return *first <= *last && *first < size;
+  FileResponse res{http::status::ok, req.message.version()};
+  if (kind == RangeRequest::kPartial) {
+    res.result(http::status::partial_content);
+    res.set(http::field::content_range,
+            "bytes " + std::to_string(wanted.first) + "-" + std::to_string(wanted.last) + "/" + std::to_string(size));
+  }
+  res.set(http::field::content_type, "application/x-mcap");
+  res.set(http::field::accept_ranges, "bytes");
+  res.set(http::field::etag, etag);
+  res.set(http::field::content_disposition, "attachment; filename=\"" + r->id + ".mcap\"");
+  res.body().file = std::move(file);
+  res.body().offset = kind == RangeRequest::kPartial ? wanted.first : 0;
+  res.body().length = kind == RangeRequest::kPartial ? wanted.last - wanted.first + 1 : size;
+  return res;
 }
 
 }  // namespace
@@ -101,35 +125,7 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                      },
                      true});
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,
-                     [hub](ApiContext&, ApiRequest& req) {
-                       const std::optional<SessionRow> r = hub->Get(req.params[0]);
-                       if (!r) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
-                       std::ifstream in(hub->RecordingPath(*r), std::ios::binary | std::ios::ate);
-                       if (!in)
-                         return JsonError(req, http::status::not_found, "session " + r->id + " has no recording");
-                       const uint64_t size = static_cast<uint64_t>(in.tellg());
-                       uint64_t first = 0, last = size == 0 ? 0 : size - 1;
-                       ApiResponse res{http::status::ok, req.message.version()};
-                       const auto range = req.message.find(http::field::range);
-                       if (range != req.message.end()) {
-                         if (!ParseRange(Sv(range->value()), size, &first, &last)) {
-                           res = JsonError(req, http::status::range_not_satisfiable, "range not satisfiable");
-                           res.set(http::field::content_range, "bytes */" + std::to_string(size));
-                           return res;
-                         }
-                         res.result(http::status::partial_content);
-                         res.set(http::field::content_range, "bytes " + std::to_string(first) + "-" +
-                                                                 std::to_string(last) + "/" + std::to_string(size));
-                       }
-                       res.body().resize(size == 0 ? 0 : last - first + 1);
-                       in.seekg(static_cast<std::streamoff>(first));
-                       in.read(res.body().data(), static_cast<std::streamsize>(res.body().size()));
-                       res.set(http::field::content_type, "application/x-mcap");
-                       res.set(http::field::accept_ranges, "bytes");
-                       res.set(http::field::content_disposition, "attachment; filename=\"" + r->id + ".mcap\"");
-                       return res;
-                     },
-                     true});
+                     [hub](ApiContext&, ApiRequest& req) { return GetRecording(*hub, req); }, true});
   routes->push_back({V::delete_, "/api/sessions/{id}", P::kWrite, false, false,
                      [hub](ApiContext&, ApiRequest& req) {
                        std::string error;

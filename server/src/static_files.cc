@@ -1,10 +1,10 @@
 // The web viewer's built files (--web-root, built from viewer-web/): every page URL gets
 // index.html (the viewer routes in the browser), /assets/* their files, each with its
-// Content-Type and an ETag so that a browser revalidates for the price of a stat.
+// Content-Type and an ETag so that a browser revalidates for the price of a stat; streamed from
+// the file, never held whole.
 #include <sys/stat.h>
 
 #include <cctype>
-#include <fstream>
 #include <sstream>
 
 #include "idms/server/api.h"
@@ -40,13 +40,17 @@ std::string ContentType(const std::string& name) {
   return "application/octet-stream";
 }
 
-// Serves one file: 304 when the browser's ETag (size and modification time) still holds.
-ApiResponse ServeFile(ApiContext& ctx, ApiRequest& req, const std::string& name, bool page) {
+// Serves one file, streamed (FileRangeBody): 304 when the browser's ETag (size and modification
+// time) still holds. Opened first, then fstat: the size sent is the size of the file opened.
+HandlerResponse ServeFile(ApiContext& ctx, ApiRequest& req, const std::string& name, bool page) {
   if (ctx.options->web_root.empty())
     return JsonError(req, http::status::service_unavailable, "this server serves no web viewer (no --web-root)");
   const std::string path = ctx.options->web_root + "/" + name;
+  boost::beast::file file;
+  boost::beast::error_code ec;
+  file.open(path.c_str(), boost::beast::file_mode::scan, ec);
   struct stat st {};
-  if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) {
+  if (ec || ::fstat(file.native_handle(), &st) != 0 || !S_ISREG(st.st_mode)) {
     if (page)
       return JsonError(req, http::status::service_unavailable,
                        "the web viewer is not built: " + path +
@@ -55,32 +59,33 @@ ApiResponse ServeFile(ApiContext& ctx, ApiRequest& req, const std::string& name,
   }
   std::ostringstream tag;
   tag << '"' << std::hex << st.st_size << '-' << (st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec) << '"';
-  ApiResponse res{http::status::ok, req.message.version()};
-  res.set(http::field::etag, tag.str());
-  // Revalidate every time: file names carry no hash, and a stat is cheap.
-  res.set(http::field::cache_control, "no-cache");
-  res.set("X-Content-Type-Options", "nosniff");
-  if (page) {
-    res.set("Content-Security-Policy",
-            "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; connect-src 'self'; "
-            "frame-ancestors 'none'");
-  }
+  auto set_headers = [&](auto& res) {
+    res.set(http::field::etag, tag.str());
+    // Revalidate every time: file names carry no hash, and a stat is cheap.
+    res.set(http::field::cache_control, "no-cache");
+    res.set("X-Content-Type-Options", "nosniff");
+    if (page) {
+      res.set("Content-Security-Policy",
+              "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; connect-src 'self'; "
+              "frame-ancestors 'none'");
+    }
+  };
   if (Sv(req.message[http::field::if_none_match]) == tag.str()) {
-    res.result(http::status::not_modified);
+    ApiResponse res{http::status::not_modified, req.message.version()};
+    set_headers(res);
     return res;
   }
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream body;
-  body << in.rdbuf();
-  if (!in) return JsonError(req, http::status::internal_server_error, "cannot read " + path);
+  FileResponse res{http::status::ok, req.message.version()};
+  set_headers(res);
   res.set(http::field::content_type, ContentType(name));
-  res.body() = std::move(body).str();
+  res.body().file = std::move(file);
+  res.body().length = static_cast<uint64_t>(st.st_size);
   return res;
 }
 
-ApiResponse ServePage(ApiContext& ctx, ApiRequest& req) { return ServeFile(ctx, req, "index.html", true); }
+HandlerResponse ServePage(ApiContext& ctx, ApiRequest& req) { return ServeFile(ctx, req, "index.html", true); }
 
-ApiResponse ServeAsset(ApiContext& ctx, ApiRequest& req) {
+HandlerResponse ServeAsset(ApiContext& ctx, ApiRequest& req) {
   if (!SafeAssetName(req.params[0])) return JsonError(req, http::status::not_found, "no such file: " + req.path);
   return ServeFile(ctx, req, "assets/" + req.params[0], false);
 }

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <tuple>
+#include <utility>
 
 #include "text_scanner.h"
 
@@ -156,17 +157,36 @@ void AddPolygon(const std::vector<int32_t>& ids, SurfaceMesh& mesh) {
   for (size_t i = 1; i + 1 < ids.size(); ++i) mesh.tri_verts.insert(mesh.tri_verts.end(), {ids[0], ids[i], ids[i + 1]});
 }
 
+// Fails at the first vertex (in reading order) that repeats an earlier one. A polygon may have
+// up to kMaxPolygonSides: pairs sorted by (id, position) put each id's occurrences side by side,
+// O(n log n), where comparing every pair took minutes at 10^6 sides. Small polygons (nearly
+// all of them) keep the pairwise loop, which allocates nothing.
 bool CheckDistinct(TextScanner& in, const std::vector<int32_t>& ids, const std::vector<int>& cols,
-                   std::string_view which) {
-  for (size_t i = 0; i < ids.size(); ++i) {
-    for (size_t j = 0; j < i; ++j) {
-      if (ids[i] == ids[j]) {
-        return in.Fail(
-            cols[i], std::string(which) + " repeats vertex " + std::to_string(ids[i]) + ": expected distinct vertices");
+                   std::string_view which, std::vector<std::pair<int32_t, int32_t>>& scratch) {
+  constexpr size_t kPairwiseMax = 32;
+  size_t first_repeat = ids.size();
+  if (ids.size() <= kPairwiseMax) {
+    for (size_t i = 0; i < ids.size() && first_repeat == ids.size(); ++i) {
+      for (size_t j = 0; j < i; ++j) {
+        if (ids[i] == ids[j]) {
+          first_repeat = i;
+          break;
+        }
       }
     }
+  } else {
+    scratch.resize(ids.size());
+    for (size_t i = 0; i < ids.size(); ++i) scratch[i] = {ids[i], static_cast<int32_t>(i)};
+    std::sort(scratch.begin(), scratch.end());
+    // Within a run of one id, every position after the run's first is a repeat.
+    for (size_t k = 1; k < scratch.size(); ++k) {
+      if (scratch[k].first == scratch[k - 1].first)
+        first_repeat = std::min(first_repeat, static_cast<size_t>(scratch[k].second));
+    }
   }
-  return true;
+  if (first_repeat == ids.size()) return true;
+  return in.Fail(cols[first_repeat], std::string(which) + " repeats vertex " + std::to_string(ids[first_repeat]) +
+                                         ": expected distinct vertices");
 }
 
 }  // namespace
@@ -241,6 +261,7 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   out.tri_verts.reserve(3 * SafeReserve(np, text.size(), 8));
   std::vector<int32_t> ids;
   std::vector<int> cols;
+  std::vector<std::pair<int32_t, int32_t>> scratch;
   for (int64_t p = 0; p < np; ++p) {
     in.SetItem("polygon", p, np);
     if (!in.NextLine()) return in.FailAtEof("expected " + in.Item() + " (n v1 ... vn)");
@@ -258,7 +279,7 @@ bool ParsePlg(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
       if (!in.Int("vertex id " + std::to_string(s + 1), 0, nv - 1, &v)) return false;
       ids.push_back(static_cast<int32_t>(v));
     }
-    if (!in.ExpectEndOfLine() || !CheckDistinct(in, ids, cols, in.Item())) return false;
+    if (!in.ExpectEndOfLine() || !CheckDistinct(in, ids, cols, in.Item(), scratch)) return false;
     AddPolygon(ids, out);
   }
   if (!in.ExpectEndOfFile(std::to_string(nv) + " vertices and " + std::to_string(np) + " polygons")) return false;
@@ -272,6 +293,7 @@ bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
   SurfaceMesh out;
   std::vector<int32_t> ids;
   std::vector<int> cols;
+  std::vector<std::pair<int32_t, int32_t>> scratch;
   while (in.NextLine('#')) {
     std::string_view keyword;
     const int keyword_col = in.column();
@@ -311,7 +333,7 @@ bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
       if (ids.size() < 3) {
         return in.Fail(keyword_col, "expected a face of at least 3 vertices, found " + std::to_string(ids.size()));
       }
-      if (!CheckDistinct(in, ids, cols, "face")) return false;
+      if (!CheckDistinct(in, ids, cols, "face", scratch)) return false;
       AddPolygon(ids, out);
     } else if (keyword == "o" || keyword == "g") {
       std::string_view name;

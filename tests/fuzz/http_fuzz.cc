@@ -10,6 +10,7 @@
 #include <mutex>
 #include <set>
 #include <string>
+#include <variant>
 
 #include "idms/server/api.h"
 
@@ -135,17 +136,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   ApiRequest req;
   req.message = parser.release();
   Admission a = Admit(world->ctx, world->routes, req);
-  ApiResponse res;
+  unsigned status = 0;
   if (a.error) {
-    res = std::move(*a.error);
+    status = a.error->result_int();
   } else if (a.route->handler) {
-    res = a.route->handler(world->ctx, req);
+    const HandlerResponse res = a.route->handler(world->ctx, req);
+    status = std::visit([](const auto& r) { return r.result_int(); }, res);
     // A successful upload is in the library, whole.
-    if (res.result() == http::status::created && !world->library.Find(req.params[0], 0)) __builtin_trap();
+    if (status == 201 && !world->library.Find(req.params[0], 0)) __builtin_trap();
   } else {
     return 0;  // a WebSocket upgrade: the connection code takes over
   }
-  const unsigned status = res.result_int();
   if (status < 200 || status > 599) __builtin_trap();
   return 0;
 }

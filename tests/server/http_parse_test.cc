@@ -71,5 +71,57 @@ TEST(Multipart, MalformedBodiesSayWhere) {
   EXPECT_FALSE(ParseMultipart("--b", "", &parts, &error));
 }
 
+// RFC 9110 14.1.2 strictly: digits only; an invalid header is ignored (the whole), a valid one
+// that misses the representation is a 416.
+TEST(ParseRange, FirstLastFirstAndSuffixRanges) {
+  ByteRange r;
+  auto partial = [&](std::string_view header, uint64_t first, uint64_t last) {
+    r = ByteRange{99, 99};
+    EXPECT_EQ(ParseRange(header, 1000, &r), RangeRequest::kPartial) << header;
+    EXPECT_EQ(r.first, first) << header;
+    EXPECT_EQ(r.last, last) << header;
+  };
+  partial("bytes=0-499", 0, 499);
+  partial("bytes=500-", 500, 999);
+  partial("bytes=-200", 800, 999);
+  partial("bytes=-2000", 0, 999);
+  partial("bytes=990-5000", 990, 999);
+  partial("bytes=999-999", 999, 999);
+  partial("BYTES=1-2", 1, 2);
+  partial("bytes= 1-2 ", 1, 2);
+  partial("bytes=,1-2,", 1, 2);  // empty list elements are skipped
+  partial("bytes=0-18446744073709551616", 0, 999);
+}
+
+TEST(ParseRange, InvalidHeadersAreIgnored) {
+  ByteRange r;
+  for (std::string_view header : {"bytes=--5",    "bytes=0x10-0x20", "bytes=5-1",  "bytes=a-b",  "bytes=",
+                                  "bytes=-",      "bytes=,",         "bytes=1 -2", "bytes=1- 2", "bytes=+1-2",
+                                  "bytes=1-+2",   "bytes=1-2-3",     "bytes=-5-",  "bytes=1",    "bytes=-1.5",
+                                  "bytes 1-2",    "bytes=1-2,x",     "items=0-5",  "",           "=0-5",
+                                  "bytes=0-1,5-6"})
+    EXPECT_EQ(ParseRange(header, 1000, &r), RangeRequest::kWhole) << header;
+}
+
+TEST(ParseRange, RangesBeyondTheRepresentationAreUnsatisfiable) {
+  ByteRange r;
+  for (std::string_view header :
+       {"bytes=1000-", "bytes=1000-2000", "bytes=-0", "bytes=18446744073709551616-", "bytes=2000-,3000-4000"})
+    EXPECT_EQ(ParseRange(header, 1000, &r), RangeRequest::kUnsatisfiable) << header;
+  EXPECT_EQ(ParseRange("bytes=0-", 0, &r), RangeRequest::kUnsatisfiable);
+  EXPECT_EQ(ParseRange("bytes=-5", 0, &r), RangeRequest::kUnsatisfiable);
+  // One of several in range: the whole, not a 416.
+  EXPECT_EQ(ParseRange("bytes=2000-,0-5", 1000, &r), RangeRequest::kWhole);
+}
+
+TEST(ValidHost, NamesAddressesAndPortsOnly) {
+  for (std::string_view host : {"", "localhost", "idms.local:8740", "127.0.0.1:80", "[::1]", "[::1]:8740",
+                                "[fe80::1%25eth0]", "a-b_c~d.example", "xn--bcher-kva.example", "host:"})
+    EXPECT_TRUE(ValidHost(host)) << host;
+  for (std::string_view host :
+       {"a b", "a/b", "user@host", "host:80x", "[::1", "[]", "[::1]x", "h%zz", "a\tb", "host:80:81", "a\"b"})
+    EXPECT_FALSE(ValidHost(host)) << host;
+}
+
 }  // namespace
 }  // namespace idms::server

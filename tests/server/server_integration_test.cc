@@ -4,12 +4,17 @@
 // SIGHUP, SIGTERM with a request in flight, SIGKILL during uploads, and the real idms-agent
 // fetching its model from it.
 #include <gtest/gtest.h>
+#include <openssl/ssl.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/ssl/context.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -291,14 +296,273 @@ TEST(ServerIntegration, SlowClientsAreCutOffAndTheConnectionLimitHolds) {
   EXPECT_TRUE(Eventually([&] { return Get(port, "/api/health", "").status == 200; }));
 }
 
-TEST(ServerIntegration, TlsServesHttpsAndWss) {
-  const std::string tmp = TempDir("tls");
+// Issue 27: 400 requests with made-up methods grew /metrics from 36 kB to 3.3 MB, for good.
+TEST(ServerIntegration, MetricLabelsStayBoundedWhateverTheClientSends) {
+  const std::string dir = TempDir("metric-labels") + "/data";
+  ServerProcess server(dir);
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const std::string admin = server.Token("admin");
+  ASSERT_EQ(Get(port, "/metrics", admin).status, 200);
+  const size_t before = Get(port, "/metrics", admin).body.size();
+  // Unauthenticated requests with a new method each, on a route and off any route; a verb Beast
+  // knows that no route takes.
+  for (int i = 0; i < 200; ++i) {
+    const std::string method = "XMETHOD" + std::to_string(i);
+    const std::string target = i % 2 == 0 ? "/api/models" : "/nowhere/" + std::to_string(i);
+    const std::string reply =
+        RawExchange(port, method + " " + target + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n", seconds(10));
+    ASSERT_EQ(reply.rfind("HTTP/1.1 4", 0), 0u) << reply;
+  }
+  EXPECT_EQ(Http(port, HttpCall{"PATCH", "/api/models/x", {}, ""}).status, 405);
+  const std::string metrics = Get(port, "/metrics", admin).body;
+  EXPECT_EQ(metrics.find("XMETHOD"), std::string::npos);
+  EXPECT_EQ(metrics.find("/nowhere"), std::string::npos);
+  EXPECT_EQ(metrics.find("PATCH"), std::string::npos);
+  EXPECT_NE(metrics.find("method=\"other\",route=\"(none)\",status=\"405\"} 101"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("method=\"other\",route=\"(none)\",status=\"404\""), std::string::npos);
+  // GET /metrics 200, other on (none) 404 and 405, maybe the first GET not yet counted: a few
+  // lines, and the few kB of the (none) route's histogram.
+  size_t lines = 0;
+  for (size_t at = metrics.find("\nidms_http_requests_total{"); at != std::string::npos;
+       at = metrics.find("\nidms_http_requests_total{", at + 1))
+    ++lines;
+  EXPECT_LE(lines, 4u) << metrics;
+  EXPECT_LT(metrics.size(), before + 3000);
+  std::printf("/metrics: %zu bytes before, %zu after 201 requests with unknown methods\n", before, metrics.size());
+}
+
+// A process's CPU time so far (user + system), seconds, from /proc/PID/stat.
+double CpuSeconds(int pid) {
+  const std::string stat = ReadText("/proc/" + std::to_string(pid) + "/stat");
+  // Fields after the command name (which may hold spaces): state is field 3, utime 14, stime 15.
+  std::istringstream in(stat.substr(stat.rfind(')') + 2));
+  std::string field;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && in >> field; ++i) {
+    if (i == 14) utime = std::stod(field);
+    if (i == 15) stime = std::stod(field);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+int OpenDescriptors(int pid) {
+  int n = 0;
+  for ([[maybe_unused]] const auto& entry : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) ++n;
+  return n;
+}
+
+// One request on an open keep-alive connection; the response's status (0: none).
+int KeepAliveGet(beast::tcp_stream& stream, const std::string& target, const std::string& token = "") {
+  namespace http = beast::http;
+  http::request<http::empty_body> req{http::verb::get, target, 11};
+  req.set(http::field::host, "127.0.0.1");
+  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
+  beast::error_code ec;
+  stream.expires_after(seconds(10));
+  http::write(stream, req, ec);
+  beast::flat_buffer buffer;
+  http::response<http::string_body> res;
+  if (!ec) http::read(stream, buffer, res, ec);
+  return ec ? 0 : res.result_int();
+}
+
+// Issue 27: at the descriptor limit the accept loop re-armed at once on EMFILE and spun at 127% of
+// a core. It pauses now, and the connections already open are served meanwhile.
+TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAreServed) {
+  const std::string dir = TempDir("emfile") + "/data";
+  ServerProcess server(dir, {"--threads", "2"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const int pid = server.process().pid();
+  asio::io_context io;
+  beast::tcp_stream kept(io);
+  kept.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  ASSERT_EQ(KeepAliveGet(kept, "/api/health"), 200);
+  // Leave the server a few descriptors, then connect more clients than that: accept fails with
+  // EMFILE while the rest wait in the listen queue.
+  const int open = OpenDescriptors(pid);
+  rlimit limit{};
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, nullptr, &limit), 0);
+  limit.rlim_cur = static_cast<rlim_t>(open + 4);
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, &limit, nullptr), 0) << std::strerror(errno);
+  std::vector<std::unique_ptr<asio::ip::tcp::socket>> waiting;
+  for (int i = 0; i < 20; ++i) {
+    waiting.push_back(std::make_unique<asio::ip::tcp::socket>(io));
+    waiting.back()->connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  }
+  ASSERT_TRUE(Eventually([&] { return OpenDescriptors(pid) >= open + 4; }, seconds(5)));
+  // Two seconds at the limit: the server sleeps between attempts instead of spinning.
+  const double cpu0 = CpuSeconds(pid);
+  const auto t0 = std::chrono::steady_clock::now();
+  std::this_thread::sleep_for(seconds(2));
+  const double cpu = CpuSeconds(pid) - cpu0;
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("at the descriptor limit: %.2f s of CPU in %.2f s\n", cpu, wall);
+  EXPECT_LT(cpu, 0.3 * wall);
+  // The connection that was already open is served.
+  EXPECT_EQ(KeepAliveGet(kept, "/api/health"), 200);
+  EXPECT_EQ(KeepAliveGet(kept, "/metrics", server.Token("admin")), 200);
+  // Descriptors back: the waiting clients are accepted and the pauses were counted.
+  waiting.clear();
+  limit.rlim_cur = static_cast<rlim_t>(open + 1000);
+  ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, &limit, nullptr), 0);
+  EXPECT_TRUE(Eventually([&] { return Get(port, "/api/health", "").status == 200; }));
+  const std::string metrics = Get(port, "/metrics", server.Token("admin")).body;
+  EXPECT_EQ(metrics.find("idms_accept_paused_total 0\n"), std::string::npos);
+  EXPECT_NE(metrics.find("idms_accept_paused_total "), std::string::npos);
+}
+
+// A Prometheus sample's value in a /metrics text ("name value" or "name{labels} value"); -1 when absent.
+double MetricValue(const std::string& text, const std::string& sample) {
+  const size_t at = text.find("\n" + sample + " ");
+  return at == std::string::npos ? -1 : std::stod(text.substr(at + sample.size() + 2));
+}
+
+// Issue 27: upgraded WebSockets were not counted against --max-connections (1,100 /ws/library
+// upgrades accepted), and one client's idle connections locked every other client out.
+TEST(ServerIntegration, EveryConnectionCountsAndOneAddressCannotTakeTheServer) {
+  const std::string dir = TempDir("per-address") + "/data";
+  ServerProcess server(dir, {"--max-connections", "50", "--max-connections-per-address", "20"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const int pid = server.process().pid();
+  const std::string admin = server.Token("admin");
+  auto metrics_from_elsewhere = [&] {
+    return Http(port, HttpCall{"GET", "/metrics", {{"Authorization", "Bearer " + admin}}, "", "127.0.0.2"}).body;
+  };
+  ASSERT_EQ(Get(port, "/api/health", "").status, 200);
+  ASSERT_TRUE(Eventually([&] { return MetricValue(metrics_from_elsewhere(), "idms_open_connections") == 1; }));
+  const int descriptors = OpenDescriptors(pid);
+  // 30 WebSockets from 127.0.0.1, kept open: 20 are accepted.
+  asio::io_context io;
+  std::vector<std::unique_ptr<websocket::stream<beast::tcp_stream>>> sockets;
+  int accepted = 0;
+  for (int i = 0; i < 30; ++i) {
+    auto ws = std::make_unique<websocket::stream<beast::tcp_stream>>(io);
+    beast::get_lowest_layer(*ws).expires_after(seconds(10));
+    beast::error_code ec;
+    beast::get_lowest_layer(*ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
+    ws->set_option(websocket::stream_base::decorator(
+        [&](websocket::request_type& req) { req.set("Authorization", "Bearer " + admin); }));
+    if (!ec) ws->handshake("127.0.0.1", "/ws/library", ec);
+    if (!ec) ++accepted;
+    sockets.push_back(std::move(ws));
+  }
+  std::printf("30 /ws/library upgrades from one address: %d accepted\n", accepted);
+  EXPECT_EQ(accepted, 20);
+  // That address is refused and told why; another is served, and sees the WebSockets counted.
+  const HttpReply refused = Get(port, "/api/health", "");
+  EXPECT_EQ(refused.status, 503);
+  EXPECT_NE(refused.body.find("from your address"), std::string::npos) << refused.body;
+  EXPECT_EQ(Http(port, HttpCall{"GET", "/api/health", {}, "", "127.0.0.2"}).status, 200);
+  // 20 WebSockets and the scrape itself (the health check's connection closes a moment later).
+  std::string during;
+  EXPECT_TRUE(Eventually([&] {
+    during = metrics_from_elsewhere();
+    return MetricValue(during, "idms_open_connections") == 21;
+  })) << during;
+  EXPECT_EQ(MetricValue(during, "idms_open_websockets"), 20) << during;
+  EXPECT_GE(MetricValue(during, "idms_rejected_connections_total{limit=\"address\"}"), 11);
+  // Closed, every count and descriptor returns to its baseline.
+  sockets.clear();
+  EXPECT_TRUE(Eventually([&] {
+    const std::string after = metrics_from_elsewhere();
+    return MetricValue(after, "idms_open_websockets") == 0 && MetricValue(after, "idms_open_connections") == 1;
+  })) << metrics_from_elsewhere();
+  EXPECT_TRUE(Eventually([&] { return OpenDescriptors(pid) <= descriptors; }))
+      << OpenDescriptors(pid) << " descriptors open, " << descriptors << " before";
+  EXPECT_EQ(Get(port, "/api/health", "").status, 200);
+}
+
+// RFC 9112 3.2: a 400 for an HTTP/1.1 request without Host, or with two, or a malformed one.
+TEST(ServerIntegration, ARequestWithoutExactlyOneValidHostIsA400) {
+  const std::string dir = TempDir("host") + "/data";
+  ServerProcess server(dir);
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  auto status_line = [&](const std::string& request) {
+    const std::string reply = RawExchange(port, request, seconds(10));
+    return reply.substr(0, reply.find("\r\n"));
+  };
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nConnection: close\r\n\r\n"), "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: a\r\nHost: b\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 400 Bad Request");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: evil/x@y\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 400 Bad Request");
+  // HTTP/1.0 may leave it out; a well-formed one is served.
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.0\r\n\r\n"), "HTTP/1.0 200 OK");
+  EXPECT_EQ(status_line("GET /api/health HTTP/1.1\r\nHost: [::1]:8740\r\nConnection: close\r\n\r\n"),
+            "HTTP/1.1 200 OK");
+}
+
+// The process's resident memory, bytes (VmRSS in /proc/PID/status).
+double ResidentBytes(int pid) {
+  std::istringstream in(ReadText("/proc/" + std::to_string(pid) + "/status"));
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) * 1024;
+  }
+  return 0;
+}
+
+// Issue 27: 50 requests for a 4 MB asset that never read held 180 MiB (a string body each).
+// Files are streamed in pieces now: 40 such clients cost the server far less than 40 x 4 MB.
+TEST(ServerIntegration, AFileIsStreamedSoClientsThatDoNotReadHoldLittleMemory) {
+  const std::string tmp = TempDir("streamed");
+  fs::create_directories(tmp + "/web/assets");
+  std::ofstream(tmp + "/web/index.html") << "<!doctype html>";
+  std::string big(4 << 20, '\0');
+  for (size_t i = 0; i < big.size(); ++i) big[i] = static_cast<char>('a' + (i * 7919) % 26);
+  std::ofstream(tmp + "/web/assets/big.js", std::ios::binary) << big;
+  ServerProcess server(tmp + "/data", {"--web-root", tmp + "/web"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const uint16_t port = server.port();
+  const int pid = server.process().pid();
+  // Whole, HEAD, and 304: as before.
+  const HttpReply whole = Get(port, "/assets/big.js", "");
+  ASSERT_EQ(whole.status, 200);
+  EXPECT_TRUE(whole.body == big);
+  const std::string head =
+      RawExchange(port, "HEAD /assets/big.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n", seconds(10));
+  EXPECT_NE(head.find("Content-Length: " + std::to_string(big.size()) + "\r\n"), std::string::npos) << head;
+  EXPECT_EQ(head.substr(head.find("\r\n\r\n") + 4), "");
+  EXPECT_EQ(Http(port, HttpCall{"GET", "/assets/big.js", {{"If-None-Match", whole.headers.at("etag")}}, ""}).status,
+            304);
+  // 40 clients ask for it and read nothing (a small receive buffer, so the server's writes stall).
+  const double before = ResidentBytes(pid);
+  asio::io_context io;
+  std::vector<std::unique_ptr<asio::ip::tcp::socket>> stalled;
+  for (int i = 0; i < 40; ++i) {
+    auto s = std::make_unique<asio::ip::tcp::socket>(io);
+    s->open(asio::ip::tcp::v4());
+    s->set_option(asio::socket_base::receive_buffer_size(4096));
+    s->connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+    asio::write(*s, asio::buffer(std::string("GET /assets/big.js HTTP/1.1\r\nHost: x\r\n\r\n")));
+    stalled.push_back(std::move(s));
+  }
+  // Every response has begun (counted once written), so the server holds what it holds.
+  std::this_thread::sleep_for(seconds(2));
+  const double grown = ResidentBytes(pid) - before;
+  std::printf("40 clients not reading a 4 MiB file: the server's RSS grew by %.1f MiB\n", grown / (1 << 20));
+  EXPECT_LT(grown, 40.0 * (1 << 20));
+  // And the server still answers others.
+  EXPECT_EQ(Get(port, "/api/health", "").status, 200);
+}
+
+// A self-signed RSA certificate for localhost: DIR/cert.pem, DIR/key.pem.
+void MakeCertificate(const std::string& dir) {
   ASSERT_EQ(RunCommand({"/usr/bin/openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj",
                         "/CN=localhost", "-addext", "subjectAltName=DNS:localhost,IP:127.0.0.1", "-keyout",
-                        tmp + "/key.pem", "-out", tmp + "/cert.pem"},
-                       tmp + "/openssl.log"),
+                        dir + "/key.pem", "-out", dir + "/cert.pem"},
+                       dir + "/openssl.log"),
             0)
-      << ReadText(tmp + "/openssl.log");
+      << ReadText(dir + "/openssl.log");
+}
+
+TEST(ServerIntegration, TlsServesHttpsAndWss) {
+  const std::string tmp = TempDir("tls");
+  ASSERT_NO_FATAL_FAILURE(MakeCertificate(tmp));
   ServerProcess server(tmp + "/data", {"--tls-cert", tmp + "/cert.pem", "--tls-key", tmp + "/key.pem"});
   ASSERT_TRUE(server.ready()) << server.Log();
   asio::ssl::context tls(asio::ssl::context::tls_client);
@@ -318,6 +582,36 @@ TEST(ServerIntegration, TlsServesHttpsAndWss) {
   EXPECT_EQ(json::parse(ws.first_message)["event"], "hello");
   // Plain HTTP on the TLS port gets no HTTP answer.
   EXPECT_EQ(Get(server.port(), "/api/health", "").status, 0);
+}
+
+// Issue 27: TLS 1.2 took static-RSA key exchange and CBC suites. Only forward-secret AEAD suites
+// are offered now: a client that can speak nothing else fails the handshake.
+TEST(ServerIntegration, TlsOffersOnlyForwardSecretAeadSuites) {
+  const std::string tmp = TempDir("tls-ciphers");
+  ASSERT_NO_FATAL_FAILURE(MakeCertificate(tmp));
+  ServerProcess server(tmp + "/data", {"--tls-cert", tmp + "/cert.pem", "--tls-key", tmp + "/key.pem"});
+  ASSERT_TRUE(server.ready()) << server.Log();
+  // A TLS 1.2 client offering one suite (empty: TLS 1.3 with OpenSSL's defaults).
+  auto health = [&](const std::string& suite) {
+    asio::ssl::context tls(asio::ssl::context::tls_client);
+    tls.load_verify_file(tmp + "/cert.pem");
+    if (!suite.empty()) {
+      SSL_CTX_set_max_proto_version(tls.native_handle(), TLS1_2_VERSION);
+      EXPECT_EQ(SSL_CTX_set_cipher_list(tls.native_handle(), suite.c_str()), 1) << suite;
+    }
+    return Http(server.port(), HttpCall{"GET", "/api/health", {}, ""}, &tls);
+  };
+  for (const char* weak :
+       {"AES256-SHA", "AES128-GCM-SHA256", "AES256-GCM-SHA384", "ECDHE-RSA-AES128-SHA", "ECDHE-RSA-AES256-SHA384"}) {
+    const HttpReply r = health(weak);
+    EXPECT_EQ(r.status, 0) << weak << " was accepted";
+    EXPECT_NE(r.error.find("tls handshake"), std::string::npos) << weak << ": " << r.error;
+  }
+  for (const char* strong :
+       {"ECDHE-RSA-AES128-GCM-SHA256", "ECDHE-RSA-AES256-GCM-SHA384", "ECDHE-RSA-CHACHA20-POLY1305", ""}) {
+    const HttpReply r = health(strong);
+    EXPECT_EQ(r.status, 200) << strong << ": " << r.error;
+  }
 }
 
 TEST(ServerIntegration, SighupReloadsTokensAndKeepsThemOnABadFile) {

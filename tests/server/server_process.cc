@@ -89,6 +89,11 @@ HttpReply Http(uint16_t port, const HttpCall& call, asio::ssl::context* tls) {
   beast::tcp_stream tcp_stream(io);
   tcp_stream.expires_after(std::chrono::seconds(120));
   beast::error_code ec;
+  if (!call.from.empty()) {
+    tcp_stream.socket().open(tcp::v4(), ec);
+    if (!ec) tcp_stream.socket().bind(tcp::endpoint(asio::ip::make_address(call.from), 0), ec);
+    if (ec) return HttpReply{0, {}, {}, "bind " + call.from + ": " + ec.message()};
+  }
   tcp_stream.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
   if (ec) return HttpReply{0, {}, {}, "connect: " + ec.message()};
   if (tls == nullptr) return Exchange(tcp_stream, port, call);

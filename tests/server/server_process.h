@@ -44,6 +44,7 @@ struct HttpCall {
   std::string target;
   std::vector<std::pair<std::string, std::string>> headers;
   std::string body;
+  std::string from;  // the client's own address (e.g. 127.0.0.2: all of 127/8 is loopback); empty: any
 };
 
 // One request on a new connection. With `tls`, HTTPS verified against that context.

@@ -35,7 +35,19 @@ class StaticFilesTest : public ::testing::Test {
     if (!if_none_match.empty()) req.message.set(http::field::if_none_match, if_none_match);
     Admission a = Admit(ctx_, routes_, req);
     if (a.error) return *a.error;
-    return a.route->handler(ctx_, req);
+    HandlerResponse reply = a.route->handler(ctx_, req);
+    if (auto* in_memory = std::get_if<ApiResponse>(&reply)) return std::move(*in_memory);
+    // A streamed file: read its range as the connection would, into a string body.
+    FileResponse& streamed = std::get<FileResponse>(reply);
+    ApiResponse res{streamed.result(), streamed.version()};
+    for (const auto& field : streamed) res.set(field.name_string(), field.value());
+    res.body().resize(streamed.body().length);
+    boost::beast::error_code ec;
+    streamed.body().file.seek(streamed.body().offset, ec);
+    const size_t got = streamed.body().file.read(res.body().data(), res.body().size(), ec);
+    EXPECT_FALSE(ec);
+    EXPECT_EQ(got, res.body().size());
+    return res;
   }
 
   std::string root_;

@@ -12,9 +12,11 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "idms/server/auth.h"
+#include "idms/server/file_body.h"
 #include "idms/server/library.h"
 #include "idms/server/metrics.h"
 #include "idms/server/options.h"
@@ -24,6 +26,11 @@ namespace idms::server {
 namespace http = boost::beast::http;
 
 using ApiResponse = http::response<http::string_body>;
+// A response streamed from a file (FileRangeBody): static files and recordings.
+using FileResponse = http::response<FileRangeBody>;
+// What a handler returns: a response held in memory, or one the connection sends from a file in
+// pieces, so that memory per slow client is bounded by a piece, not by the file.
+using HandlerResponse = std::variant<ApiResponse, FileResponse>;
 
 // Beast 1.74's string_view is Boost's; ours is std's.
 inline std::string_view Sv(boost::beast::string_view s) { return {s.data(), s.size()}; }
@@ -53,7 +60,7 @@ struct ApiRequest {
   std::string peer;
 };
 
-using Handler = std::function<ApiResponse(ApiContext&, ApiRequest&)>;
+using Handler = std::function<HandlerResponse(ApiContext&, ApiRequest&)>;
 
 class WsEndpoint;  // server/src/ws_endpoint.h
 // A WebSocket route's endpoint for an admitted upgrade; null with *refusal when there is nothing
@@ -93,6 +100,10 @@ struct Admission {
 // that carries one), Content-Length against the route's limit. Fills req's path, query, params,
 // role. Pure apart from reading the token table and login sessions.
 Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& req);
+
+// The request's method as a metrics label: a verb some route takes (HEAD with GET), else
+// "other". Methods are the client's to choose; a label per spelling would grow without bound.
+std::string_view MethodLabel(const std::vector<Route>& routes, http::verb method);
 
 // A JSON text for a response: bytes that are not UTF-8 (a client's path, a parser's quote of a
 // file) are replaced, never thrown on.

@@ -3,6 +3,7 @@
 // functions of their input, no allocation limits of their own (the caller bounds the input).
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <optional>
 #include <string>
@@ -38,6 +39,22 @@ struct FormPart {
   std::string name, filename, content_type;
   std::string_view data;
 };
+// A Range header (RFC 9110 14.1.2) against a representation of `size` bytes: what to send.
+// kPartial: one satisfiable range, *range inclusive and within the representation. kWhole: no
+// range to honour: a unit other than bytes, an invalid header (anything but digits in
+// first-last / first- / -suffix, last < first; RFC 9110 14.2: ignored), or several ranges (not
+// served as multipart/byteranges, which 14.2 allows). kUnsatisfiable: valid, but no range
+// overlaps the representation (416).
+struct ByteRange {
+  uint64_t first = 0, last = 0;
+};
+enum class RangeRequest { kWhole, kPartial, kUnsatisfiable };
+RangeRequest ParseRange(std::string_view header, uint64_t size, ByteRange* range);
+
+// A Host header's value is uri-host [":" port] (RFC 9112 3.2, RFC 3986 3.2.2): an IP literal in
+// brackets, or reg-name / IPv4 characters; the port digits only. Empty is allowed.
+bool ValidHost(std::string_view host);
+
 // Parses a multipart/form-data body (RFC 7578) with the given boundary. False with *error saying
 // what was expected where (byte offset) on a malformed body.
 bool ParseMultipart(std::string_view body, std::string_view boundary, std::vector<FormPart>* parts, std::string* error);

@@ -13,7 +13,8 @@ namespace idms::server {
 
 class Metrics {
  public:
-  // One finished HTTP request. `route` is the route's pattern (bounded cardinality), not the path.
+  // One finished HTTP request. `method` and `route` are bounded labels (MethodLabel, the route's
+  // pattern or "(none)"), never the client's spelling or path: every label set is kept forever.
   void CountRequest(const std::string& method, const std::string& route, int status, double seconds, uint64_t bytes_in,
                     uint64_t bytes_out);
   void AddBytesOut(uint64_t n) { bytes_out_ += n; }
@@ -21,7 +22,9 @@ class Metrics {
 
   std::atomic<int64_t> open_connections{0};
   std::atomic<int64_t> open_websockets{0};
-  std::atomic<int64_t> rejected_connections{0};
+  std::atomic<int64_t> rejected_connections{0};  // at --max-connections
+  std::atomic<int64_t> rejected_per_address{0};  // at --max-connections-per-address
+  std::atomic<int64_t> accept_paused{0};         // accepts that failed for want of descriptors or memory
 
   // Prometheus text exposition format 0.0.4.
   std::string Render(int64_t models, int64_t library_bytes, double uptime_s) const;

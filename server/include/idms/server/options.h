@@ -24,7 +24,10 @@ struct ServerOptions {
   int64_t max_small_body_bytes = int64_t{64} << 10;  // every route but uploads
   int64_t max_ws_message_bytes = int64_t{16} << 20;
   uint32_t max_header_bytes = 16 << 10;
-  int max_connections = 1024;               // beyond: 503 and close
+  int max_connections = 1024;  // HTTP and WebSocket; beyond: 503 and close
+  // From one client address (IPv6: one /64); beyond: 503 for that address, the others still served.
+  // 0: no limit (behind a reverse proxy every client has the proxy's address).
+  int max_connections_per_address = 256;
   int max_concurrent_uploads = 2;           // bodies over 1 MiB at once; beyond: 503 + Retry-After
   std::chrono::seconds header_timeout{15};  // a whole request header, and the keep-alive idle time
   std::chrono::seconds body_timeout{30};    // plus 1 s per MiB of the announced body
