@@ -465,6 +465,11 @@ TEST(Soak, DescriptorsGaugesThreadsAndMemoryReturnToTheirBaselinesAfterChurn) {
     ReplayOnce(port, recording, observer, round, &tally);
     LibraryChurn(port, admin, observer, upload, round, &tally);
     KeepAlive(port, observer, session, round, &tally);
+    // Progress, so that even a run stuck on a server that stopped answering shows the trend.
+    if (round % 20 == 0) {
+      std::printf("soak: round %d: %s\n", round, Describe(Measure(pid, port, observer)).c_str());
+      std::fflush(stdout);
+    }
     if (round % 5 == 4) {
       // The agent's connection reset under it: it reconnects and resumes the same session.
       const int64_t before = samples();
@@ -494,7 +499,7 @@ TEST(Soak, DescriptorsGaugesThreadsAndMemoryReturnToTheirBaselinesAfterChurn) {
           }))
         tally.Fail("agent restart", "no new live session\n" + agent->Log());
       if (stayed) {
-        Quit(stay1, Exit::kClean);
+        Quit(stay1, Exit::kFin);  // not a close frame: that waits for the server's answer, unbounded
         Quit(stay2, Exit::kReset);
       } else {
         tally.Fail("viewer", error);
