@@ -11,6 +11,7 @@
 #include <boost/beast/ssl.hpp>
 #include <boost/beast/websocket.hpp>
 #include <boost/beast/websocket/ssl.hpp>
+#include <csignal>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -68,6 +69,26 @@ ServerProcess::ServerProcess(const std::string& data_dir, const std::vector<std:
   if (!line) return;
   const size_t colon = line->rfind(':');
   if (colon != std::string::npos) port_ = static_cast<uint16_t>(std::stoi(line->substr(colon + 1)));
+}
+
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool kSanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+#else
+constexpr bool kSanitized = false;
+#endif
+
+ServerProcess::~ServerProcess() {
+  // A graceful stop finishes requests in flight for up to 10 s; beyond 30 s the SIGKILL follows.
+  if (kSanitized && process_ && process_->started()) {
+    process_->Signal(SIGTERM);
+    process_->Wait(std::chrono::seconds(30));
+  }
 }
 
 std::string ServerProcess::Token(const std::string& role) const {

@@ -18,6 +18,9 @@ class ServerProcess {
  public:
   // Starts idms-server --listen 127.0.0.1:0 --data DIR plus `extra`; waits for its first line.
   ServerProcess(const std::string& data_dir, const std::vector<std::string>& extra = {});
+  // Kills the server (SIGKILL) if it still runs. In a sanitized build (tests/sanitizers) it is
+  // stopped with SIGTERM first, so that it runs its shutdown and LeakSanitizer checks it at exit.
+  ~ServerProcess();
   bool ready() const { return port_ != 0; }
   uint16_t port() const { return port_; }
   std::string port_string() const { return std::to_string(port_); }
