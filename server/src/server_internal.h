@@ -44,17 +44,14 @@ struct ServerCore {
   Metrics metrics;
   // Every open connection's slot, HTTP or WebSocket (sets metrics.open_connections).
   ConnectionSlots slots{options.max_connections, options.max_connections_per_address, &metrics.open_connections};
-  boost::asio::io_context ioc;
-  boost::asio::thread_pool workers;
   std::optional<boost::asio::ssl::context> tls;  // set: every connection speaks TLS
   std::atomic<bool> draining{false};
   std::atomic<int> uploads_in_flight{0};
   std::atomic<uint64_t> next_endpoint_id{1};  // WebSocket endpoints' ids (a session tells its connections apart)
   SessionHub* hub = nullptr;                  // live sessions (sessions.cc)
-  boost::asio::thread_pool recorder{1};       // recordings' disk writes, off the network threads
 
   ServerCore(ServerOptions o, int io_threads, int worker_threads)
-      : options(std::move(o)), ioc(io_threads), workers(static_cast<size_t>(worker_threads)) {}
+      : options(std::move(o)), workers(static_cast<size_t>(worker_threads)), ioc(io_threads) {}
 
   // Registry of connections (for Drain) and of /ws/library watchers.
   void Register(Connection* c, std::weak_ptr<Connection> w);
@@ -69,6 +66,15 @@ struct ServerCore {
   std::mutex mu_;
   std::unordered_map<Connection*, std::weak_ptr<Connection>> connections_;
   std::unordered_map<TextSink*, std::weak_ptr<TextSink>> sinks_;
+
+ public:
+  // Declared last, so destroyed first: the handlers still queued in the io_context (a session
+  // posted to, a connection's write) are destroyed while everything they hold can still be let
+  // go: the registry above, and the pools whose strands a session's recorder or a replay holds.
+  // The pools are joined (empty) before; their strands outlive the io_context's handlers.
+  boost::asio::thread_pool recorder{1};  // recordings' disk writes, off the network threads
+  boost::asio::thread_pool workers;
+  boost::asio::io_context ioc;
 };
 
 // The WebSocket routes (ws_endpoints.cc): /ws/library, /ws/agent, /ws/session/{id} and
