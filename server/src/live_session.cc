@@ -9,6 +9,7 @@
 
 #include "idms/protocol/envelope.h"
 #include "idms/server/log.h"
+#include "idms/sim/check.h"
 #include "recordings.h"
 #include "sessions.h"
 
@@ -71,12 +72,7 @@ void LiveSession::Start() {
   asio::post(strand_, [self = shared_from_this()] { self->Tick(); });
 }
 
-void LiveSession::AssertOnStrand() const {
-  if (!strand_.running_in_this_thread()) {
-    Log(LogLevel::kError, "LiveSession used off its strand", {{"session", id_}});
-    std::abort();
-  }
-}
+void LiveSession::AssertOnStrand() const { IDMS_CHECK(strand_.running_in_this_thread()); }
 
 SessionRow LiveSession::Snapshot() const {
   std::lock_guard lock(row_mu_);
