@@ -3,6 +3,8 @@
 
 #include <cmath>
 
+#include "idms/protocol/envelope.h"
+
 namespace idms::server {
 namespace {
 
@@ -43,41 +45,56 @@ bool CheckAgentHello(const v1::Hello& hello, std::string* error) {
   return true;
 }
 
-bool CheckAgentFrame(const v1::Envelope& e, std::string* error) {
+double FrameTimeS(const v1::Envelope& e) {
   switch (e.body_case()) {
     case v1::Envelope::kDeviceSamples: {
-      const v1::DeviceSamples& ds = e.device_samples();
-      if (ds.samples_size() > kMaxSamplesPerBatch) {
-        return Fail(error, "DeviceSamples has " + std::to_string(ds.samples_size()) + " samples; at most " +
-                               std::to_string(kMaxSamplesPerBatch) + " a frame");
-      }
-      for (int i = 0; i < ds.samples_size(); ++i) {
-        const v1::DeviceSample& s = ds.samples(i);
-        const std::string where = "DeviceSamples.samples[" + std::to_string(i) + "]";
-        if (s.tick() >= kMaxTick) {
-          return Fail(error, where + ".tick " + std::to_string(s.tick()) + " is at or above 2^63");
-        }
-        if (!TimeOk(s.time_s())) return Fail(error, TimeError(where + ".time_s", s.time_s()));
-        if (!VecOk(s.tool_pos()) || !VecOk(s.force())) {
-          return Fail(error, where + ": tool_pos and force must be finite");
-        }
-      }
-      return true;
+      const auto& s = e.device_samples().samples();
+      return s.empty() ? 0 : s[s.size() - 1].time_s();
     }
     case v1::Envelope::kMeshKeyframe:
-      return TimeOk(e.mesh_keyframe().time_s()) ||
-             Fail(error, TimeError("MeshKeyframe.time_s", e.mesh_keyframe().time_s()));
+      return e.mesh_keyframe().time_s();
     case v1::Envelope::kMeshDelta:
-      return TimeOk(e.mesh_delta().time_s()) || Fail(error, TimeError("MeshDelta.time_s", e.mesh_delta().time_s()));
-    case v1::Envelope::kTopologyEvent: {
-      const v1::TopologyEvent& t = e.topology_event();
-      if (!TimeOk(t.time_s())) return Fail(error, TimeError("TopologyEvent.time_s", t.time_s()));
-      if (t.atoms_size() > kMaxSamplesPerBatch) return Fail(error, "TopologyEvent lists too many atoms");
-      return true;
+      return e.mesh_delta().time_s();
+    case v1::Envelope::kTopologyEvent:
+      return e.topology_event().time_s();
+    case v1::Envelope::kSessionEvent:
+      return e.session_event().time_s();
+    case v1::Envelope::kAnnotation:
+      return e.annotation().time_s();
+    default:
+      return 0;
+  }
+}
+
+bool CheckAgentFrame(const v1::Envelope& e, std::string* error) {
+  if (e.has_device_samples()) {
+    // Every sample's time, not only the last one FrameTimeS gives.
+    const v1::DeviceSamples& ds = e.device_samples();
+    if (ds.samples_size() > kMaxSamplesPerBatch) {
+      return Fail(error, "DeviceSamples has " + std::to_string(ds.samples_size()) + " samples; at most " +
+                             std::to_string(kMaxSamplesPerBatch) + " a frame");
     }
+    for (int i = 0; i < ds.samples_size(); ++i) {
+      const v1::DeviceSample& s = ds.samples(i);
+      const std::string where = "DeviceSamples.samples[" + std::to_string(i) + "]";
+      if (s.tick() >= kMaxTick) return Fail(error, where + ".tick " + std::to_string(s.tick()) + " is at or above 2^63");
+      if (!TimeOk(s.time_s())) return Fail(error, TimeError(where + ".time_s", s.time_s()));
+      if (!VecOk(s.tool_pos()) || !VecOk(s.force())) return Fail(error, where + ": tool_pos and force must be finite");
+    }
+    return true;
+  }
+  // The other frames' one time, whichever field carries it.
+  if (const double t_s = FrameTimeS(e); !TimeOk(t_s)) {
+    return Fail(error, TimeError(std::string(EnvelopeBodyName(e)) + ".time_s", t_s));
+  }
+  switch (e.body_case()) {
+    case v1::Envelope::kTopologyEvent:
+      if (e.topology_event().atoms_size() > kMaxSamplesPerBatch) {
+        return Fail(error, "TopologyEvent lists too many atoms");
+      }
+      return true;
     case v1::Envelope::kSessionEvent: {
       const v1::SessionEvent& s = e.session_event();
-      if (!TimeOk(s.time_s())) return Fail(error, TimeError("SessionEvent.time_s", s.time_s()));
       if (s.tick() >= kMaxTick) return Fail(error, "SessionEvent.tick is at or above 2^63");
       if (!SizeOk(s.message(), kMaxEventTextBytes, "SessionEvent.message", error)) return false;
       return SizeOk(s.peer(), kMaxIdentityBytes, "SessionEvent.peer", error);

@@ -23,6 +23,8 @@ inline constexpr int kMaxSamplesPerBatch = 10000;    // DeviceSamples.samples
 
 // An agent's Hello: protocol version and role aside (the hub checks those), its strings and scene.
 bool CheckAgentHello(const v1::Hello& hello, std::string* error);
+// The session time a frame speaks of, s (DeviceSamples: its last sample's); 0 when it has none.
+double FrameTimeS(const v1::Envelope& e);
 // A frame an agent sends after its Hello: samples, mesh frames, events.
 bool CheckAgentFrame(const v1::Envelope& e, std::string* error);
 // A replay viewer's control: a known action, a finite seek time and speed (the replay clamps the

@@ -9,6 +9,7 @@
 
 #include "idms/protocol/envelope.h"
 #include "idms/server/log.h"
+#include "frame_checks.h"
 #include "idms/sim/check.h"
 #include "recordings.h"
 #include "sessions.h"
@@ -25,28 +26,6 @@ constexpr size_t kViewerQueueBytes = size_t{8} << 20;  // bytes queued for a vie
 constexpr uint16_t kNormal = 1000;
 constexpr uint16_t kGoingAway = 1001;
 constexpr uint16_t kPolicyError = 1008;
-
-// The simulation time a frame speaks of, s; 0 when it carries none.
-double FrameTimeS(const v1::Envelope& e) {
-  switch (e.body_case()) {
-    case v1::Envelope::kDeviceSamples: {
-      const auto& s = e.device_samples().samples();
-      return s.empty() ? 0 : s[s.size() - 1].time_s();
-    }
-    case v1::Envelope::kMeshKeyframe:
-      return e.mesh_keyframe().time_s();
-    case v1::Envelope::kMeshDelta:
-      return e.mesh_delta().time_s();
-    case v1::Envelope::kTopologyEvent:
-      return e.topology_event().time_s();
-    case v1::Envelope::kSessionEvent:
-      return e.session_event().time_s();
-    case v1::Envelope::kAnnotation:
-      return e.annotation().time_s();
-    default:
-      return 0;
-  }
-}
 
 }  // namespace
 
@@ -317,7 +296,7 @@ void LiveSession::End(const std::string& state, const std::string& why) {
   {
     std::lock_guard lock(row_mu_);
     row_.state = state;
-    row_.recording = id_ + ".mcap";
+    row_.recording = hub_.recordings().NameFor(id_, state);
   }
   for (Viewer& v : viewers_) {
     if (auto peer = v.peer.lock()) peer->Close(kNormal, why);

@@ -66,7 +66,7 @@ void SessionHub::RecoverInterrupted() {
       }
     }
     row.state = "interrupted";
-    row.recording = row.id + ".mcap";
+    row.recording = recordings_->NameFor(row.id, row.state);
     index_->Put(row, &error);
     Log(LogLevel::kInfo, "session interrupted by the last stop; recording repaired",
         {{"session", row.id}, {"samples", row.samples}, {"next_tick", row.next_tick}});
@@ -118,7 +118,7 @@ AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::strin
     }
     if (!s) {
       row.state = "live";
-      row.recording = row.id + ".live.mcap";
+      row.recording = recordings_->NameFor(row.id, row.state);
       v1::Scene scene;
       google::protobuf::TextFormat::ParseFromString(row.scene_text, &scene);
       s = StartSession(row, scene, /*continue_finished=*/true);
@@ -140,8 +140,8 @@ AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::strin
   row.model = !hello.scene().model().empty() ? hello.scene().model() : hello.scene().model_file();
   row.identity = hello.identity();
   row.device = hello.device();
-  row.started = UtcNow();
-  row.recording = row.id + ".live.mcap";
+  row.started = UtcNowMs();
+  row.recording = recordings_->NameFor(row.id, row.state);
   google::protobuf::TextFormat::PrintToString(hello.scene(), &row.scene_text);
   AgentAdmission a;
   a.resume_token = RandomHex(32);

@@ -431,8 +431,10 @@ TEST(Soak, DescriptorsGaugesThreadsAndMemoryReturnToTheirBaselinesAfterChurn) {
   std::string session = WaitForLiveSession(port, observer, 200);
   ASSERT_FALSE(session.empty()) << server.Log() << agent->Log();
   auto samples = [&] {
-    const json s = Sessions(port, observer);
-    return !s.empty() && s[0]["id"] == session ? s[0]["samples"].get<int64_t>() : int64_t{-1};
+    for (const json& s : Sessions(port, observer)) {
+      if (s["id"] == session) return s["samples"].get<int64_t>();
+    }
+    return int64_t{-1};
   };
 
   // Warm-up: every kind of client once (thread pools, SQLite's statements, caches all started),
@@ -499,6 +501,7 @@ TEST(Soak, DescriptorsGaugesThreadsAndMemoryReturnToTheirBaselinesAfterChurn) {
       ++kills;
       agent = start_agent();
       const std::string old = session;
+      // The newest session is listed first (started within the second of the old one or not).
       if (!Eventually([&] {
             const json s = Sessions(port, observer);
             if (s.empty() || s[0]["id"] == old || s[0]["state"] != "live") return false;

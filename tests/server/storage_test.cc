@@ -1,11 +1,12 @@
-// The blob directory and the SQLite model store: content addressing, crash leftovers collected at
-// start-up, version numbers never reused, deletes.
+// The blob directory, the SQLite model store and session index: content addressing, crash
+// leftovers collected at start-up, version numbers never reused, deletes, the sessions' order.
 #include "idms/server/storage.h"
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include "child_process.h"
 
@@ -117,6 +118,28 @@ TEST(SqliteModelStore, SurvivesReopenAndListsLatestByName) {
   EXPECT_EQ(list[0].version, 2);
   EXPECT_EQ(list[1].name, "zeta");
   EXPECT_FALSE(list[0].created.empty());
+}
+
+// Sessions started within one second (an agent restarted at once) are listed newest first: their
+// start has milliseconds, not a tie broken by the random part of their ids.
+TEST(SqliteSessionIndex, SessionsStartedWithinOneSecondAreListedNewestFirst) {
+  const std::string dir = test::TempDir("sqlite-sessions");
+  std::string error;
+  auto index = OpenSqliteSessionIndex(dir + "/idms.db", &error);
+  ASSERT_TRUE(index) << error;
+  // Ids in the opposite order to the starts, so that a tie on the start lists the older first.
+  for (const char* id : {"2026-11-27-ffffff", "2026-11-27-000000"}) {
+    SessionRow row;
+    row.id = id;
+    row.state = "live";
+    row.started = UtcNowMs();
+    ASSERT_TRUE(index->Put(row, &error)) << error;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  const std::vector<SessionRow> list = index->List();
+  ASSERT_EQ(list.size(), 2u);
+  EXPECT_EQ(list[0].id, "2026-11-27-000000") << "started " << list[0].started << " and " << list[1].started;
+  EXPECT_LT(list[1].started, list[0].started);
 }
 
 }  // namespace

@@ -102,6 +102,11 @@ class RecordingStore {
   std::string PathFor(const std::string& id, const std::string& state) const {
     return state == "live" ? LivePath(id) : FinishedPath(id);
   }
+  // PathFor's file name alone, as the session index shows it (SessionRow::recording).
+  std::string NameFor(const std::string& id, const std::string& state) const {
+    const std::string path = PathFor(id, state);
+    return path.substr(path.find_last_of('/') + 1);
+  }
   // The live file, closed, becomes the finished one. False with *error.
   virtual bool Publish(const std::string& id, std::string* error) = 0;
   virtual void Remove(const std::string& id) = 0;  // both files, whichever exist
@@ -128,6 +133,9 @@ std::unique_ptr<SessionIndex> OpenSqliteSessionIndex(const std::string& db_path,
 
 // The current UTC time as ISO 8601 ("2026-11-23T19:04:05Z"), as the stores write it.
 std::string UtcNow();
+// The same with milliseconds ("2026-11-23T19:04:05.123Z"): a session's start, so that sessions
+// started within one second are still listed newest first.
+std::string UtcNowMs();
 
 using ::idms::Sha256Hex;  // idms/protocol/digest.h: SHA-256 as 64 lowercase hex digits
 
