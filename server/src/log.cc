@@ -5,8 +5,8 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
-#include <chrono>
-#include <ctime>
+
+#include "idms/server/storage.h"  // UtcNowMs
 
 namespace idms::server {
 namespace {
@@ -21,18 +21,6 @@ spdlog::logger& Logger() {
     return l;
   }();
   return *logger;
-}
-
-std::string Timestamp() {
-  const auto now = std::chrono::system_clock::now();
-  const std::time_t t = std::chrono::system_clock::to_time_t(now);
-  const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[40];
-  const size_t n = std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%S", &tm);
-  std::snprintf(buf + n, sizeof buf - n, ".%03dZ", static_cast<int>(ms));
-  return buf;
 }
 
 // Text fields: control characters (a decoded %0A in a path, say) escaped, so one event is one line.
@@ -58,11 +46,11 @@ void Log(LogLevel level, const std::string& message, const nlohmann::ordered_jso
   const char* name = level == LogLevel::kInfo ? "info" : level == LogLevel::kWarn ? "warn" : "error";
   std::string line;
   if (g_json) {
-    nlohmann::ordered_json j{{"time", Timestamp()}, {"level", name}, {"msg", message}};
+    nlohmann::ordered_json j{{"time", UtcNowMs()}, {"level", name}, {"msg", message}};
     for (const auto& [k, v] : fields.items()) j[k] = v;
     line = j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   } else {
-    line = Timestamp() + " " + name + " " + message;
+    line = UtcNowMs() + " " + name + " " + message;
     for (const auto& [k, v] : fields.items()) {
       line += " " + k + "=" + Escaped(v.is_string() ? v.get<std::string>() : v.dump());
     }

@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "server_process.h"
+#include "test_clients.h"
 
 namespace idms::test {
 namespace {
@@ -346,27 +347,6 @@ double CpuSeconds(int pid) {
   return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
 }
 
-int OpenDescriptors(int pid) {
-  int n = 0;
-  for ([[maybe_unused]] const auto& entry : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) ++n;
-  return n;
-}
-
-// One request on an open keep-alive connection; the response's status (0: none).
-int KeepAliveGet(beast::tcp_stream& stream, const std::string& target, const std::string& token = "") {
-  namespace http = beast::http;
-  http::request<http::empty_body> req{http::verb::get, target, 11};
-  req.set(http::field::host, "127.0.0.1");
-  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
-  beast::error_code ec;
-  stream.expires_after(seconds(10));
-  http::write(stream, req, ec);
-  beast::flat_buffer buffer;
-  http::response<http::string_body> res;
-  if (!ec) http::read(stream, buffer, res, ec);
-  return ec ? 0 : res.result_int();
-}
-
 // Issue 27: at the descriptor limit the accept loop re-armed at once on EMFILE and spun at 127% of
 // a core. It pauses now, and the connections already open are served meanwhile.
 TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAreServed) {
@@ -378,10 +358,10 @@ TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAre
   asio::io_context io;
   beast::tcp_stream kept(io);
   kept.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-  ASSERT_EQ(KeepAliveGet(kept, "/api/health"), 200);
+  ASSERT_EQ(KeepAliveRequest(kept, beast::http::verb::get, "/api/health"), 200);
   // Leave the server a few descriptors, then connect more clients than that: accept fails with
   // EMFILE while the rest wait in the listen queue.
-  const int open = OpenDescriptors(pid);
+  const int open = OpenFds(pid);
   rlimit limit{};
   ASSERT_EQ(prlimit(pid, RLIMIT_NOFILE, nullptr, &limit), 0);
   limit.rlim_cur = static_cast<rlim_t>(open + 4);
@@ -391,7 +371,7 @@ TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAre
     waiting.push_back(std::make_unique<asio::ip::tcp::socket>(io));
     waiting.back()->connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
   }
-  ASSERT_TRUE(Eventually([&] { return OpenDescriptors(pid) >= open + 4; }, seconds(5)));
+  ASSERT_TRUE(Eventually([&] { return OpenFds(pid) >= open + 4; }, seconds(5)));
   // Two seconds at the limit: the server sleeps between attempts instead of spinning.
   const double cpu0 = CpuSeconds(pid);
   const auto t0 = std::chrono::steady_clock::now();
@@ -401,8 +381,8 @@ TEST(ServerIntegration, OutOfDescriptorsTheAcceptLoopPausesAndOpenConnectionsAre
   std::printf("at the descriptor limit: %.2f s of CPU in %.2f s\n", cpu, wall);
   EXPECT_LT(cpu, 0.3 * wall);
   // The connection that was already open is served.
-  EXPECT_EQ(KeepAliveGet(kept, "/api/health"), 200);
-  EXPECT_EQ(KeepAliveGet(kept, "/metrics", server.Token("admin")), 200);
+  EXPECT_EQ(KeepAliveRequest(kept, beast::http::verb::get, "/api/health"), 200);
+  EXPECT_EQ(KeepAliveRequest(kept, beast::http::verb::get, "/metrics", server.Token("admin")), 200);
   // Descriptors back: the waiting clients are accepted and the pauses were counted.
   waiting.clear();
   limit.rlim_cur = static_cast<rlim_t>(open + 1000);
@@ -433,7 +413,7 @@ TEST(ServerIntegration, EveryConnectionCountsAndOneAddressCannotTakeTheServer) {
   };
   ASSERT_EQ(Get(port, "/api/health", "").status, 200);
   ASSERT_TRUE(Eventually([&] { return MetricValue(metrics_from_elsewhere(), "idms_open_connections") == 1; }));
-  const int descriptors = OpenDescriptors(pid);
+  const int descriptors = OpenFds(pid);
   // 30 WebSockets from 127.0.0.1, kept open: 20 are accepted.
   asio::io_context io;
   std::vector<std::unique_ptr<websocket::stream<beast::tcp_stream>>> sockets;
@@ -470,8 +450,8 @@ TEST(ServerIntegration, EveryConnectionCountsAndOneAddressCannotTakeTheServer) {
     const std::string after = metrics_from_elsewhere();
     return MetricValue(after, "idms_open_websockets") == 0 && MetricValue(after, "idms_open_connections") == 1;
   })) << metrics_from_elsewhere();
-  EXPECT_TRUE(Eventually([&] { return OpenDescriptors(pid) <= descriptors; }))
-      << OpenDescriptors(pid) << " descriptors open, " << descriptors << " before";
+  EXPECT_TRUE(Eventually([&] { return OpenFds(pid) <= descriptors; }))
+      << OpenFds(pid) << " descriptors open, " << descriptors << " before";
   EXPECT_EQ(Get(port, "/api/health", "").status, 200);
 }
 

@@ -26,6 +26,7 @@
 #include "idms/protocol/envelope.h"
 #include "server_process.h"
 #include "session_checks.h"
+#include "test_clients.h"
 
 namespace idms::test {
 namespace {
@@ -51,14 +52,6 @@ struct Figures {
   double websockets = -1, connections = -1, viewers = -1;  // /metrics gauges
 };
 
-int64_t StatusField(int pid, const std::string& field) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  for (std::string line; std::getline(in, line);) {
-    if (line.rfind(field + ":", 0) == 0) return std::atoll(line.c_str() + field.size() + 1);
-  }
-  return -1;
-}
-
 // What the descriptors are: "socket", "anon_inode:[eventfd]", or a file's path.
 std::map<std::string, int> DescriptorKinds(int pid) {
   std::map<std::string, int> kinds;
@@ -79,8 +72,8 @@ Figures Measure(int pid, uint16_t port, const std::string& token) {
   f.fds = 0;
   for (const auto& [kind, n] : kinds) f.fds += n;
   f.sockets = kinds.count("socket") ? kinds.at("socket") : 0;
-  f.threads = static_cast<int>(StatusField(pid, "Threads"));
-  f.rss_kib = StatusField(pid, "VmRSS");
+  f.threads = Threads(pid);
+  f.rss_kib = RssKiB(pid);
   f.websockets = MetricValue(port, token, "idms_open_websockets");
   f.connections = MetricValue(port, token, "idms_open_connections");
   f.viewers = MetricValue(port, token, "idms_viewers");
@@ -289,29 +282,6 @@ void ReplayOnce(uint16_t port, const std::string& recording, const std::string& 
   ++tally->done["replay"];
 }
 
-// One plain HTTP request on `stream`, keep-alive; the status (0 on failure).
-int Request(beast::tcp_stream& stream, http::verb verb, const std::string& target, const std::string& token,
-            const std::string& body = "", std::string* reply = nullptr) {
-  http::request<http::string_body> req{verb, target, 11};
-  req.set(http::field::host, "127.0.0.1");
-  req.keep_alive(true);
-  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
-  if (!body.empty()) {
-    req.set(http::field::content_type, "application/json");
-    req.body() = body;
-  }
-  req.prepare_payload();
-  beast::error_code ec;
-  stream.expires_after(seconds(60));
-  http::write(stream, req, ec);
-  beast::flat_buffer buffer;
-  http::response<http::string_body> res;
-  if (!ec) http::read(stream, buffer, res, ec);
-  if (ec) return 0;
-  if (reply != nullptr) *reply = res.body();
-  return res.result_int();
-}
-
 // A library watcher sees a model uploaded and deleted (each on a keep-alive connection of its own).
 void LibraryChurn(uint16_t port, const std::string& admin, const std::string& observer, const std::string& upload,
                   int round, Tally* tally) {
@@ -326,14 +296,14 @@ void LibraryChurn(uint16_t port, const std::string& admin, const std::string& ob
   http_stream.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
   const std::string name = "soak_" + std::to_string(round);
   std::string reply;
-  const int put = Request(http_stream, http::verb::put, "/api/models/" + name, admin, upload, &reply);
+  const int put = KeepAliveRequest(http_stream, http::verb::put, "/api/models/" + name, admin, upload, &reply);
   if (put != 201) return tally->Fail("upload", "PUT " + name + ": " + std::to_string(put) + " " + reply);
   ++tally->done["upload"];
   const int version = json::parse(reply).value("version", 0);
   for (const char* expected : {"model_added", "model_deleted"}) {
     if (std::string(expected) == "model_deleted") {
       const std::string target = "/api/models/" + name + "?version=" + std::to_string(version);
-      const int del = Request(http_stream, http::verb::delete_, target, admin);
+      const int del = KeepAliveRequest(http_stream, http::verb::delete_, target, admin);
       if (del != 200) return tally->Fail("delete", "DELETE " + target + ": " + std::to_string(del));
       ++tally->done["delete"];
     }
@@ -355,10 +325,10 @@ void KeepAlive(uint16_t port, const std::string& token, const std::string& sessi
   beast::error_code ec;
   stream.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
   for (const char* target : {"/api/health", "/api/models", "/api/sessions", "/metrics", "/api/models/hex_4x5_home"}) {
-    const int status = Request(stream, http::verb::get, target, token);
+    const int status = KeepAliveRequest(stream, http::verb::get, target, token);
     if (status != 200) return tally->Fail("keep-alive", std::string(target) + ": " + std::to_string(status));
   }
-  if (Request(stream, http::verb::get, "/api/sessions/" + session, token) != 200)
+  if (KeepAliveRequest(stream, http::verb::get, "/api/sessions/" + session, token) != 200)
     return tally->Fail("keep-alive", "GET /api/sessions/" + session);
   Drop(stream.socket(), ExitFor(round));
   ++tally->done["keep-alive client"];

@@ -9,6 +9,9 @@
 
 #include <boost/beast/core/buffers_to_string.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
+#include <boost/beast/http/read.hpp>
+#include <boost/beast/http/string_body.hpp>
+#include <boost/beast/http/write.hpp>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -190,6 +193,30 @@ void SilenceProxy::Accept() {
 }
 
 // ---------------------------------------------------------------------------------------------
+int KeepAliveRequest(beast::tcp_stream& stream, beast::http::verb verb, const std::string& target,
+                     const std::string& token, const std::string& body, std::string* reply,
+                     std::chrono::seconds timeout) {
+  namespace http = beast::http;
+  http::request<http::string_body> req{verb, target, 11};
+  req.set(http::field::host, "127.0.0.1");
+  req.keep_alive(true);
+  if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
+  if (!body.empty()) {
+    req.set(http::field::content_type, "application/json");
+    req.body() = body;
+  }
+  req.prepare_payload();
+  beast::error_code ec;
+  stream.expires_after(timeout);
+  http::write(stream, req, ec);
+  beast::flat_buffer buffer;
+  http::response<http::string_body> res;
+  if (!ec) http::read(stream, buffer, res, ec);
+  if (ec) return 0;
+  if (reply != nullptr) *reply = res.body();
+  return res.result_int();
+}
+
 int OpenFds(int pid) {
   int n = 0;
   std::error_code ec;

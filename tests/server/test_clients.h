@@ -8,6 +8,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
+#include <boost/beast/http/verb.hpp>
 #include <boost/beast/websocket/stream.hpp>
 #include <chrono>
 #include <cstdint>
@@ -81,6 +82,12 @@ class SilenceProxy {
   std::vector<std::shared_ptr<Link>> links_;
   std::thread accept_thread_;
 };
+
+// One HTTP/1.1 request on an open keep-alive connection (a JSON body when `body` is not empty,
+// "Authorization: Bearer" when `token` is not); the response's status, 0 when none came.
+int KeepAliveRequest(boost::beast::tcp_stream& stream, boost::beast::http::verb verb, const std::string& target,
+                     const std::string& token = "", const std::string& body = "", std::string* reply = nullptr,
+                     std::chrono::seconds timeout = std::chrono::seconds(60));
 
 // The server process's open descriptors, resident memory (KiB) and threads, from /proc.
 int OpenFds(int pid);
