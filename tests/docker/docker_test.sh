@@ -4,10 +4,14 @@
 # port: /api/health and the container's own HEALTHCHECK, a non-root server, a recorded session
 # read back whole by the independent MCAP reader, the renderer's screenshot and the server's.
 # Exit 77 (CTest: skipped) only where dockerd cannot run, saying why.
-# Usage: tests/docker/docker_test.sh SOURCE_DIR WORK_DIR
+# Usage: tests/docker/docker_test.sh SOURCE_DIR WORK_DIR [BUILD_DIR]
+# With BUILD_DIR (as CTest runs it) the images take the programs built there (the Dockerfile's
+# PROGRAMS=host); IDMS_DOCKER_PROGRAMS=source, or no BUILD_DIR, compiles them in the image instead.
 set -euo pipefail
 src=$(cd "$1" && pwd)
 work=$2
+build_dir=${3:-}
+programs=${IDMS_DOCKER_PROGRAMS:-$([ -n "$build_dir" ] && echo host || echo source)}
 rm -rf "$work" && mkdir -p "$work/shots"
 chmod 0777 "$work/shots"  # written by the renderer's non-root user
 
@@ -25,17 +29,34 @@ secret=()
 ca=/etc/ssl/certs/ca-certificates.crt
 [ -s "$ca" ] && secret=(--secret "id=ca,src=$ca")
 start=$(date +%s)
+context=$src
+if [ "$programs" = host ]; then
+  # A context of what the runtime stages copy: the models, the entry points, and the programs
+  # from BUILD_DIR, stripped as the source stage strips them.
+  context=$work/context
+  mkdir -p "$context/docker" "$context/programs/bin"
+  cp -r "$src/models" "$context/models"
+  cp "$src/docker/agent-entrypoint.sh" "$src/docker/render-entrypoint.sh" "$context/docker/"
+  for p in idms-server idms-agent idms-render; do
+    [ -x "$build_dir/bin/$p" ] || { echo "FAIL: no $build_dir/bin/$p (build it first)"; exit 1; }
+    strip -o "$context/programs/bin/$p" "$build_dir/bin/$p"
+  done
+  [ -f "$build_dir/web/index.html" ] || { echo "FAIL: no web viewer in $build_dir/web"; exit 1; }
+  cp -r "$build_dir/web" "$context/programs/web"
+fi
 for target in server agent render; do
   "$docker" build -q --network host "${secret[@]}" -f "$src/docker/Dockerfile" --target "$target" \
-    -t "idms-$target:local" "$src" \
+    --build-arg "PROGRAMS=$programs" -t "idms-$target:local" "$context" \
     > "$work/build-$target.log" 2>&1 || { tail -40 "$work/build-$target.log"; exit 1; }
 done
-echo "images built in $(( $(date +%s) - start )) s"
+echo "images built in $(( $(date +%s) - start )) s (programs: $programs)"
 
-# A free loopback port (nothing answers a connect there).
+# A free loopback port (nothing answers a connect there), below the kernel's ephemeral range: a
+# port there may be the local end of some other program's connection, and the server's bind fails.
+ephemeral_low=$(cut -f1 /proc/sys/net/ipv4/ip_local_port_range 2>/dev/null || echo 32768)
 port=""
 for _ in $(seq 50); do
-  p=$(( 20000 + RANDOM % 40000 ))
+  p=$(( 10000 + RANDOM % (ephemeral_low - 10000) ))
   if ! (exec 3<> "/dev/tcp/127.0.0.1/$p") 2>/dev/null; then port=$p; break; fi
 done
 [ -n "$port" ] || { echo "no free port"; exit 1; }
