@@ -307,6 +307,9 @@ void Loop::Reset() {
   if (sim_->model.topology_version != rest_topology_) rest_topology_ = sim_->model.topology_version + 1;
   rest->model.topology_version = rest_topology_;
   rest->workspace.topology_version = rest_topology_;
+  // The hand feels no jump: the device force carries on from where it was and eases towards the
+  // new contact force instead of leaping to it (the tissue springs back around a pressing tool).
+  BeginForceTransition(sim_->state, rest->state, rest->workspace.options);
   // Swap pointers; the replaced set goes back to the I/O thread to be freed there. It cannot find
   // the ring full: PushCommand keeps at most its capacity of sets away from the loop.
   reset_spent_.push(sim_.release());

@@ -57,6 +57,7 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   o.max_device_force = d.max_force() / d.force_scale();
   o.max_device_force_rate =
       d.max_force_rate() > 0 ? d.max_force_rate() / d.force_scale() : std::numeric_limits<double>::max();
+  o.transition_force_rate = d.transition_force_rate() / d.force_scale();
   *step = o;
 
   // The tool.

@@ -149,6 +149,9 @@ void CheckDevice(const v1::DeviceMapping& d, Checker* c) {
   if (d.has_max_force()) c->Range(path("max_force"), d.max_force(), 0, kInf, true);
   if (d.has_max_force_rate()) c->Range(path("max_force_rate"), d.max_force_rate(), 0, kInf, false);
   if (d.has_max_rate_hz()) c->Range(path("max_rate_hz"), d.max_rate_hz(), 0, 10000, true);
+  if (d.has_transition_force_rate()) {
+    c->Range(path("transition_force_rate"), d.transition_force_rate(), 0, kInf, true);
+  }
 }
 
 Checker CheckScene(const v1::Scene& scene) {
@@ -346,6 +349,7 @@ void ApplySceneDefaults(v1::Scene* scene) {
   if (!d->has_max_force()) d->set_max_force(10);
   if (!d->has_max_force_rate()) d->set_max_force_rate(0);
   if (!d->has_max_rate_hz()) d->set_max_rate_hz(1000);
+  if (!d->has_transition_force_rate()) d->set_transition_force_rate(10);
 }
 
 bool LoadSceneText(std::string_view text, std::string_view file, v1::Scene* scene, std::string* error) {

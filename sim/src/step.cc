@@ -233,12 +233,17 @@ void DeviceForces(State& s, const Workspace& ws, StepReport* report) {
       f[0] = f[1] = f[2] = mag = 0;
     }
     const double prev = std::sqrt(ts.force[0] * ts.force[0] + ts.force[1] * ts.force[1] + ts.force[2] * ts.force[2]);
+    const double rate = ts.easing ? std::min(o.transition_force_rate, o.max_device_force_rate) : o.max_device_force_rate;
     double limit = o.max_device_force;
-    if (prev + o.max_device_force_rate * o.dt_s < limit) limit = prev + o.max_device_force_rate * o.dt_s;
+    if (prev + rate * o.dt_s < limit) limit = prev + rate * o.dt_s;
     if (mag > limit) {
-      ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
+      // Easing in is the expected path after a jump, not a numerical event.
+      if (!ts.easing) ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
       for (int c = 0; c < 3; ++c) f[c] *= limit / mag;
+    } else if (ts.easing_ticks == 0) {
+      ts.easing = false;  // the window is over and the contact force met: the ordinary limits again
     }
+    if (ts.easing_ticks > 0) --ts.easing_ticks;
     std::copy(f, f + 3, ts.force);
     std::copy(f, f + 3, tr.force);
   }
@@ -504,6 +509,16 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   ws.reach_slack = -1;  // the caller may move atoms before the next tick
   report.new_warnings = TotalWarnings(s.warnings) - warnings_before;
   return report;
+}
+
+void BeginForceTransition(const State& from, State& to, const StepOptions& options) {
+  const auto window = static_cast<int32_t>(std::ceil(options.transition_window_s / options.dt_s));
+  for (int t = 0; t < kMaxTools; ++t) {
+    ToolState& ts = to.tools[t];
+    std::copy(from.tools[t].force, from.tools[t].force + 3, ts.force);
+    ts.easing = true;
+    ts.easing_ticks = std::max(window, 0);
+  }
 }
 
 }  // namespace idms

@@ -19,7 +19,8 @@ void CheckOptions(const StepOptions& o) {
   IDMS_CHECK(o.full || (o.local_radius > 0 && std::isfinite(o.local_radius)));
   IDMS_CHECK(o.settle_time_s >= 0 && o.settle_speed >= 0 && o.settle_distance >= 0 && o.hash_cell >= 0);
   IDMS_CHECK(o.air_damping >= 0 && o.min_distance_fraction > 0 && o.min_distance_fraction < 1);
-  IDMS_CHECK(o.max_device_force >= 0 && o.max_device_force_rate >= 0);
+  IDMS_CHECK(o.max_device_force >= 0 && o.max_device_force_rate >= 0 && o.transition_force_rate > 0 &&
+             o.transition_window_s >= 0);
   IDMS_CHECK(o.stability.safety > 0 && o.stability.max_substeps >= 1 && o.stability.max_substeps <= 1 << 16);
   IDMS_CHECK(o.stability.energy_rel_tol >= 0 && o.stability.energy_abs_tol >= 0 && o.stability.energy_memory_s > 0);
   IDMS_CHECK(o.stability.cg_max_iterations >= 1 && o.stability.cg_tolerance > 0);

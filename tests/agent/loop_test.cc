@@ -47,7 +47,10 @@ class RecordingDevice final : public Device {
   }
   void Write(int64_t tick, const double force[3]) override {
     for (int i = 0; i < 3; ++i) all_finite_ = all_finite_ && std::isfinite(force[i]);
-    max_force_ = std::max(max_force_, std::sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2]));
+    const double mag = std::sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2]);
+    max_force_ = std::max(max_force_, mag);
+    if (writes_ > 0) max_rise_ = std::max(max_rise_, mag - last_force_);
+    last_force_ = mag;
     ++writes_;
     inner_->Write(tick, force);
   }
@@ -57,6 +60,8 @@ class RecordingDevice final : public Device {
   std::unique_ptr<Device> inner_;
   bool poison_ = false, all_finite_ = true, released_ = false;
   double max_force_ = 0;
+  double last_force_ = 0;  // |force| of the last write
+  double max_rise_ = 0;    // the largest rise of |force| from one write to the next
   int64_t writes_ = 0;
 };
 
@@ -172,6 +177,32 @@ TEST(Loop, ResetReturnsToRestAndKeepsTicksConsecutive) {
   ASSERT_EQ(samples.size(), 2901u);
   for (size_t i = 0; i < samples.size(); ++i) ASSERT_EQ(samples[i].tick, i);
   EXPECT_EQ(f.loop->model().topology_version, f.model.topology_version) << "no cut: same topology";
+}
+
+// Issue 28: a reset while the tool pressed into the tissue sent the device force to its limit
+// (8 N) within a tick: the tissue snapped back to rest around the tool. The device force now
+// carries on from where it was and rises no faster than the scene's transition rate.
+TEST(Loop, AResetDuringContactDoesNotJoltTheHand) {
+  Fixture f("scripted:palpate");
+  f.Run(2800);  // the deepest press
+  const double pressed = f.device->last_force_;
+  const double normal_rise = f.device->max_rise_;  // the largest rise per tick contact made
+  ASSERT_GT(pressed, 1.0);
+  ASSERT_TRUE(f.loop->PushCommand(LoopCommand{LoopCommand::kReset, 0}));
+  f.device->max_rise_ = 0, f.device->max_force_ = 0;
+  std::vector<TickSample> samples;
+  f.Run(400, &samples);
+  const double rate = f.step.transition_force_rate;
+  std::printf("reset at %.3f N: largest rise per tick %.4f N after it (normal contact: %.4f N), peak %.3f N, "
+              "%.3f N 0.4 s later\n",
+              pressed, f.device->max_rise_, normal_rise, f.device->max_force_, f.device->last_force_);
+  EXPECT_LE(f.device->max_rise_, rate * f.step.dt_s * (1 + 1e-9)) << "the transition rate";
+  EXPECT_LE(f.device->max_rise_, normal_rise) << "faster than the palpation's own contact made it";
+  EXPECT_LT(f.device->max_force_, 0.9 * f.registration.max_force) << "the device limit was reached";
+  // Within the transition the hand is back to what the same press makes without a reset.
+  Fixture twin("scripted:palpate");
+  twin.Run(3200);
+  EXPECT_NEAR(f.device->last_force_, twin.device->last_force_, 0.1 * twin.device->last_force_);
 }
 
 TEST(Loop, ResetHandoffIsBoundedAndRefusedWhenFull) {

@@ -48,6 +48,11 @@ struct ToolState {
   double grasp_leq = 0;         // model units: distance atom-centre when the tweezers closed
   double grasp_k = 0;           // force / length: the MIO's k at closure
   double force[3] = {0, 0, 0};  // device force sent last tick (for the rate clamp), force units
+  // Set when the model jumped under the tool (BeginForceTransition: a reset to rest): the device
+  // force rises no faster than StepOptions::transition_force_rate for the transition window and
+  // then until it has caught up with the contact force.
+  bool easing = false;
+  int32_t easing_ticks = 0;  // ticks of the transition window still to come
 };
 
 // Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).

@@ -95,6 +95,15 @@ struct StepOptions {
   // Device limits: what leaves the step is clamped (the atoms still feel the unclamped force).
   double max_device_force = 10;        // force units (PHANToM-class: ~8.5 N peak)
   double max_device_force_rate = 1e4;  // force units / s
+  // After the model jumps under the tool (BeginForceTransition: a reset while pressing leaves the
+  // tool deep inside the rest surface), the tissue springs back around the tool for tens of ticks:
+  // its contact force leaps to the device's limit, vanishes, and overshoots. For the transition
+  // window, and then until it meets the contact force, the device force rises no faster than
+  // transition_force_rate (drops pass at once, as always). 10 force units / s is a tenth of the
+  // thesis palpation's own steepest rise (0.1 per tick at first contact): no step is felt, and a
+  // 1.7 press is regained within 0.2 s. The window outlasts the hex fragment's rebound (~50 ms).
+  double transition_force_rate = 10;  // force units / s, > 0
+  double transition_window_s = 0.25;  // s, >= 0
 
   StabilityOptions stability;
 
@@ -174,6 +183,11 @@ struct StepReport {
 // start lives in the Workspace (same bits for the same Workspace history; otherwise the same
 // to the CG tolerance).
 StepReport Step(const Model& model, State& state, Workspace& workspace, const ToolInput& input);
+
+// The model jumps under the tools: `to` replaces `from` (a reset to rest). Each tool's device force
+// carries on from `from`'s and eases towards the new contact force (StepOptions::transition_*), so
+// the hand feels no step. Allocates nothing.
+void BeginForceTransition(const State& from, State& to, const StepOptions& options);
 
 // Energy of the whole model (kinetic + elastic, gravity if enabled in the workspace), for tests
 // and tools; O(atoms + elements). Does not allocate.
