@@ -174,6 +174,7 @@ struct Uplink::Impl final : ConnectionHandler {
     compute_hist.Add(s.compute_us);
     if (s.overrun) ++overruns;
     last_tick = s.tick;
+    last_time_s = s.time_s;
     if (opt.offline) return;
     // Numerical warnings become a session event, at most one a second with the count since.
     warnings_unreported += s.warnings;
@@ -544,6 +545,7 @@ struct Uplink::Impl final : ConnectionHandler {
     v1::SessionEvent* event = envelope.mutable_session_event();
     event->set_kind(v1::SessionEvent::KIND_ENDED);
     event->set_tick(last_tick);
+    event->set_time_s(last_time_s);
     event->set_message("the agent stopped");
     SerializeEnvelope(envelope, &frame);
     phase = Phase::kClosing;
@@ -586,6 +588,7 @@ struct Uplink::Impl final : ConnectionHandler {
   Backlog backlog;
   FrameOrder order;
   uint64_t last_tick = 0;
+  double last_time_s = 0;  // of the last sample, for ENDED
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;

@@ -41,6 +41,9 @@ LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::
       mirror_(limits),
       next_tick_(row.next_tick),
       row_(std::move(row)) {
+  // A resumed session (after a restart or its resume window) carries on with the figures of all
+  // it recorded before.
+  summary_ = SessionSummary::FromJson(row_.summary_json);
   epoch_ns_ = ParseUtcNs(row_.started);
   if (epoch_ns_ == 0) epoch_ns_ = UnixNs();
 }
@@ -261,17 +264,25 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
         return Refuse("mesh frame refused: " + error);
     }
   }
-  if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ENDED) {
+  if (e.has_session_event() && !(e.session_event().time_s() > 0) && summary_.last_time_s > 0) {
+    // An event without its session time (an older agent's ENDED): the time of the last sample.
+    auto timed = std::make_shared<v1::Envelope>(e);
+    timed->mutable_session_event()->set_time_s(summary_.last_time_s);
+    bytes = Serialized(*timed);
+    envelope = std::move(timed);
+  }
+  const v1::Envelope& event = *envelope;
+  if (event.has_session_event() && event.session_event().kind() == v1::SessionEvent::KIND_ENDED) {
     // The agent ended the session: recorded, then finished; the agent hears it in a final Ack.
     Broadcast(bytes, false, false);
     Record(std::move(envelope));
     return End("ended", "the session ended");
   }
-  if (e.has_session_event() || e.has_topology_event()) {
+  if (event.has_session_event() || event.has_topology_event()) {
     Broadcast(bytes, false, false);
     return Record(std::move(envelope));
   }
-  Refuse(std::string("unexpected ") + EnvelopeBodyName(e) + " from the agent");
+  Refuse(std::string("unexpected ") + EnvelopeBodyName(event) + " from the agent");
 }
 
 void LiveSession::AgentDetached(uint64_t conn) {

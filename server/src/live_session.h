@@ -17,30 +17,13 @@
 #include "idms/protocol/mesh_mirror.h"
 #include "idms/server/storage.h"
 #include "server_internal.h"
+#include "session_summary.h"
 #include "ws_endpoint.h"
 
 namespace idms::server {
 
 class Recorder;
 class SessionHub;
-
-// The session's figures, updated as samples arrive (on the session's strand).
-struct SessionSummary {
-  double peak_force = 0;            // |force| maximum, force units
-  double force_sum_in_contact = 0;  // for the mean contact force
-  int64_t contact_samples = 0;
-  double contact_time_s = 0;
-  double path_length = 0;  // of the tool centre, model units
-  int64_t warnings = 0;
-  uint64_t overruns = 0;
-  uint32_t tick_p99_us = 0;      // compute time p99 (the agent's LoopStats)
-  uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
-  bool have_last = false;
-  double last_pos[3] = {0, 0, 0};
-  double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample
-  void Add(const v1::DeviceSamples& batch);
-  std::string Json() const;
-};
 
 class LiveSession : public std::enable_shared_from_this<LiveSession> {
  public:

@@ -18,13 +18,13 @@ bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* 
   RecordedMessage m;
   while (reader.Next(&m, error)) {
     if (m.envelope.has_device_samples()) {
-      for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) {
-        ++stats->samples;
+      const v1::DeviceSamples& ds = m.envelope.device_samples();
+      if (ds.samples_size() > 0) {
+        stats->samples += ds.samples_size();
         stats->any_tick = true;
-        stats->last_tick = s.tick();
-        if (stats->first_time_s < 0) stats->first_time_s = s.time_s();
-        stats->last_time_s = s.time_s();
+        stats->last_tick = ds.samples(ds.samples_size() - 1).tick();
       }
+      stats->summary.Add(ds);
     }
     if (writer != nullptr && !writer->Write(m.envelope, m.log_time_ns, m.publish_time_ns, error)) return false;
   }
@@ -63,7 +63,8 @@ void Recorder::Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t log_
 void Recorder::Flush(std::function<void(bool)> done) {
   asio::post(strand_, [self = shared_from_this(), done = std::move(done)] {
     std::string error;
-    if (self->open_ && !self->writer_.Flush(UnixNs(), &error)) self->Failed(error);
+    // The open chunk too: the session acknowledges to its agent what this flush stored.
+    if (self->open_ && !self->writer_.CloseChunk(&error)) self->Failed(error);
     self->CountBytes();
     if (done) done(self->open_ && !self->failed_);
   });

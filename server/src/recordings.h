@@ -11,15 +11,17 @@
 
 #include "idms/protocol/recording.h"
 #include "idms/server/storage.h"
+#include "session_summary.h"
 
 namespace idms::server {
 
-// What CopyRecording read: the device samples, the last tick and the first and last sample times.
+// What CopyRecording read: the device samples, the last tick, and their summary (its first and
+// last sample times among its figures).
 struct CopyStats {
   int64_t samples = 0;
   bool any_tick = false;
   uint64_t last_tick = 0;
-  double first_time_s = -1, last_time_s = 0;
+  SessionSummary summary;
 };
 // Reads every message of a recording (finished, or unfinished after a crash: the reader recovers
 // by a scan) into `writer` (null: only counts). False with *error on unreadable data.

@@ -1,8 +1,8 @@
-// A session's summary figures, updated from each batch of device samples.
+// A session's summary figures, updated from each batch of device samples (session_summary.h).
+#include "session_summary.h"
+
 #include <cmath>
 #include <nlohmann/json.hpp>
-
-#include "live_session.h"
 
 namespace idms::server {
 namespace {
@@ -31,15 +31,45 @@ void SessionSummary::Add(const v1::DeviceSamples& ds) {
 }
 
 std::string SessionSummary::Json() const {
-  return nlohmann::json{{"peak_force", peak_force},
-                        {"mean_contact_force", contact_samples > 0 ? force_sum_in_contact / contact_samples : 0.0},
-                        {"contact_time_s", contact_time_s},
-                        {"path_length", path_length},
-                        {"warnings", warnings},
-                        {"overruns", overruns},
-                        {"tick_p99_us", tick_p99_us},
-                        {"samples_dropped", samples_dropped}}
-      .dump();
+  nlohmann::json j{{"peak_force", peak_force},
+                   {"mean_contact_force", contact_samples > 0 ? force_sum_in_contact / contact_samples : 0.0},
+                   {"contact_time_s", contact_time_s},
+                   {"path_length", path_length},
+                   {"warnings", warnings},
+                   {"overruns", overruns},
+                   {"tick_p99_us", tick_p99_us},
+                   {"samples_dropped", samples_dropped},
+                   {"contact_samples", contact_samples},
+                   {"first_time_s", first_time_s},
+                   {"last_time_s", last_time_s}};
+  if (have_last) j["last_tool_pos"] = {last_pos[0], last_pos[1], last_pos[2]};
+  return j.dump();
+}
+
+SessionSummary SessionSummary::FromJson(const std::string& text) {
+  SessionSummary s;
+  const nlohmann::json j = nlohmann::json::parse(text.empty() ? "{}" : text, nullptr, false);
+  if (!j.is_object()) return s;
+  const auto number = [&j](const char* key, auto fallback) {
+    const auto it = j.find(key);
+    return it != j.end() && it->is_number() ? it->get<decltype(fallback)>() : fallback;
+  };
+  s.peak_force = number("peak_force", 0.0);
+  s.contact_samples = number("contact_samples", int64_t{0});
+  s.force_sum_in_contact = number("mean_contact_force", 0.0) * static_cast<double>(s.contact_samples);
+  s.contact_time_s = number("contact_time_s", 0.0);
+  s.path_length = number("path_length", 0.0);
+  s.warnings = number("warnings", int64_t{0});
+  s.overruns = number("overruns", uint64_t{0});
+  s.tick_p99_us = number("tick_p99_us", uint32_t{0});
+  s.samples_dropped = number("samples_dropped", uint64_t{0});
+  s.first_time_s = number("first_time_s", -1.0);
+  s.last_time_s = number("last_time_s", 0.0);
+  if (const auto it = j.find("last_tool_pos"); it != j.end() && it->is_array() && it->size() == 3) {
+    for (int c = 0; c < 3; ++c) s.last_pos[c] = (*it)[c].is_number() ? (*it)[c].get<double>() : 0.0;
+    s.have_last = true;
+  }
+  return s;
 }
 
 }  // namespace idms::server

@@ -60,7 +60,11 @@ void SessionHub::RecoverInterrupted() {
         fs::remove(live, ec);
         row.samples = stats.samples;
         row.next_tick = stats.any_tick ? stats.last_tick + 1 : 0;
-        row.duration_s = stats.first_time_s < 0 ? 0 : stats.last_time_s - stats.first_time_s;
+        // The figures of the whole recording: the row may have been stored a second before the
+        // crash, or (a resumed session) hold only what followed an earlier restart.
+        const SessionSummary& sum = stats.summary;
+        row.duration_s = sum.first_time_s < 0 ? 0 : sum.last_time_s - sum.first_time_s;
+        row.summary_json = sum.Json();
       } else {
         Log(LogLevel::kError, "recording not repaired", {{"session", row.id}, {"error", error}});
       }

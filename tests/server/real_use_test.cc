@@ -27,15 +27,6 @@ std::vector<uint64_t> Range(uint64_t first, uint64_t end) {
   return v;
 }
 
-// Ends the fake agent's session and waits for the final Ack (the recording is finished).
-std::optional<v1::Envelope> EndSession(FakeAgent& agent, uint64_t last_tick) {
-  v1::Envelope ended;
-  ended.mutable_session_event()->set_kind(v1::SessionEvent::KIND_ENDED);
-  ended.mutable_session_event()->set_tick(last_tick);
-  if (!agent.Send(ended)) return std::nullopt;
-  return agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().final(); });
-}
-
 std::optional<v1::Envelope> ErrorAfter(FakeAgent& agent) {
   return agent.ReadUntil([](const v1::Envelope& e) {
     return e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ERROR;
@@ -88,6 +79,11 @@ TEST(RealUse, AResumeWhileTheOldConnectionIsOpenLosesNoTick) {
   ASSERT_TRUE(IsWelcome(welcome));
   const std::string id = welcome->welcome().session_id(), resume = welcome->welcome().resume_token();
   ASSERT_TRUE(first.SendSamples(0, 100));
+  // The server has them (its two connections' frames are not ordered between each other).
+  ASSERT_TRUE(Eventually([&] {
+    const HttpReply r = Get(server.port(), "/api/sessions/" + id, observer);
+    return r.status == 200 && json::parse(r.body)["samples"] == 100;
+  }));
   // The resume arrives while the first connection is still open: its Welcome says where to go on.
   FakeAgent second(server.port(), token);
   const auto resumed = second.Hello(id, resume);
@@ -97,7 +93,7 @@ TEST(RealUse, AResumeWhileTheOldConnectionIsOpenLosesNoTick) {
   // The old connection goes away (as a lingering one finally does): the new one stays the agent.
   first.Close();
   ASSERT_TRUE(second.SendSamples(200, 100));
-  const auto ack = EndSession(second, 299);
+  const auto ack = second.End(299);
   ASSERT_TRUE(ack) << server.Log();
   EXPECT_EQ(ack->ack().next_tick(), 300u);
   ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
@@ -113,7 +109,7 @@ TEST(RealUse, AnEndedSessionCannotBeResumedAndATickCannotWrap) {
   const auto welcome = agent.Hello();
   ASSERT_TRUE(IsWelcome(welcome));
   ASSERT_TRUE(agent.SendSamples(0, 10));
-  ASSERT_TRUE(EndSession(agent, 9));
+  ASSERT_TRUE(agent.End(9));
   // At once, and again later: the answer is that the session has ended.
   for (int i = 0; i < 3; ++i) {
     FakeAgent again(server.port(), token);

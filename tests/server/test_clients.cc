@@ -78,6 +78,15 @@ bool FakeAgent::SendSamples(uint64_t first_tick, int n, double dt_s) {
   return Send(e);
 }
 
+std::optional<v1::Envelope> FakeAgent::End(uint64_t last_tick, double time_s) {
+  v1::Envelope ended;
+  ended.mutable_session_event()->set_kind(v1::SessionEvent::KIND_ENDED);
+  ended.mutable_session_event()->set_tick(last_tick);
+  if (time_s > 0) ended.mutable_session_event()->set_time_s(time_s);
+  if (!Send(ended)) return std::nullopt;
+  return ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().final(); });
+}
+
 std::optional<v1::Envelope> FakeAgent::Read(std::chrono::milliseconds timeout) {
   if (closed_) return std::nullopt;
   beast::get_lowest_layer(ws_).expires_after(timeout);

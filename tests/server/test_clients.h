@@ -36,6 +36,9 @@ class FakeAgent {
   bool Send(const v1::Envelope& e);
   bool SendText(const std::string& text);
   bool SendSamples(uint64_t first_tick, int n, double dt_s = 0.001);  // ticks first..first+n-1
+  // Ends the session (ENDED after `last_tick`, at `time_s` when > 0) and waits for the server's
+  // final Ack (the recording finished); nullopt when none came.
+  std::optional<v1::Envelope> End(uint64_t last_tick, double time_s = 0);
   // The next frame from the server (nullopt: timeout or closed).
   std::optional<v1::Envelope> Read(std::chrono::milliseconds timeout = std::chrono::seconds(10));
   // Reads until a frame matching `pred` (or timeout / close).

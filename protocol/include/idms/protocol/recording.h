@@ -56,6 +56,9 @@ class RecordingWriter {
   bool Write(const v1::Envelope& envelope, uint64_t log_time_ns, uint64_t publish_time_ns, std::string* error);
   // McapWriter::Flush: call periodically so that a quiet session's chunk still closes.
   bool Flush(uint64_t now_ns, std::string* error) { return mcap_.Flush(now_ns, error); }
+  // Writes the open chunk to the file now: every frame written so far survives a crash (what a
+  // server acknowledges must be in the file, not in a chunk still being filled).
+  bool CloseChunk(std::string* error) { return mcap_.CloseChunk(error); }
   bool Close(std::string* error) { return mcap_.Close(error); }
   const McapWriter& mcap() const { return mcap_; }
 

@@ -1,0 +1,34 @@
+// A session's summary figures (the session list's columns), accumulated from its device samples:
+// live, as they arrive; at start-up, from a recording a crash left; and carried through a resume
+// after a restart (FromJson), so that they always describe the whole recording.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "idms/protocol/idms.pb.h"
+
+namespace idms::server {
+
+struct SessionSummary {
+  double peak_force = 0;            // |force| maximum, force units
+  double force_sum_in_contact = 0;  // for the mean contact force
+  int64_t contact_samples = 0;
+  double contact_time_s = 0;
+  double path_length = 0;  // of the tool centre, model units
+  int64_t warnings = 0;
+  uint64_t overruns = 0;
+  uint32_t tick_p99_us = 0;      // compute time p99 (the agent's LoopStats)
+  uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
+  bool have_last = false;
+  double last_pos[3] = {0, 0, 0};
+  double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample
+
+  void Add(const v1::DeviceSamples& batch);
+  // Every field, so that FromJson(Json()) carries on exactly where the summary was.
+  std::string Json() const;
+  // A summary stored by Json(); an empty or unreadable text gives an empty summary.
+  static SessionSummary FromJson(const std::string& text);
+};
+
+}  // namespace idms::server
