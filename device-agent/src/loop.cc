@@ -201,6 +201,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   input_.num_tools = has_pose_ ? 1 : 0;
 
   // The DSM step; cuts found by a scalpel are applied between steps.
+  const int64_t clamped_before = state.warnings.device_force_clamped;
   const StepReport report = Step(model, state, workspace, input_);
   if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
 
@@ -211,6 +212,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     f_model[0] = out.force[0], f_model[1] = out.force[1], f_model[2] = out.force[2];
   double f_device[3];
   registration_.ForceToDevice(f_model, f_device);
+  const double asked = std::sqrt(f_device[0] * f_device[0] + f_device[1] * f_device[1] + f_device[2] * f_device[2]);
   const int fault = SanitizeDeviceForce(f_device, registration_.max_force);
   device_.Write(tick, f_device);
   const int64_t written_ns = MonotonicNs();
@@ -234,6 +236,8 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.warnings = static_cast<uint32_t>(std::max<int64_t>(report.new_warnings, 0) + fault + pose_fault);
   s.num_contacts = static_cast<uint32_t>(std::max(out.contacts, 0));
   s.contact = out.contacts > 0;
+  // Clamped at the limit by the step (the scene's max_force) or by the guard (the device's).
+  s.force_limited = state.warnings.device_force_clamped != clamped_before || asked > registration_.max_force;
   s.grasp = out.grasp_atom >= 0;
   s.overrun = MonotonicNs() > deadline_ns;
   compute_hist_.Add(s.compute_us);

@@ -191,6 +191,27 @@ struct Uplink::Impl final : ConnectionHandler {
       warned_time_s = s.time_s;
       has_warned = true;
     }
+    // The device force at its limit: an event when it gets there, at most one per 0.5 s (a hand
+    // held at the limit clamps every tick), counting the clamped ticks since the last event.
+    if (s.force_limited) {
+      ++limited_unreported;
+      if ((!has_limited_event || s.time_s - limited_event_time_s >= 0.5) && control.size() < 64) {
+        v1::Envelope envelope;
+        v1::SessionEvent* event = envelope.mutable_session_event();
+        event->set_kind(v1::SessionEvent::KIND_FORCE_LIMIT);
+        event->set_tick(s.tick);
+        event->set_time_s(s.time_s);
+        event->set_count(limited_unreported);
+        char text[96];
+        std::snprintf(text, sizeof text, "the device force reached its limit (%g) and was clamped",
+                      opt.scene.device().max_force());
+        event->set_message(text);
+        control.push_back(std::move(envelope));
+        limited_unreported = 0;
+        limited_event_time_s = s.time_s;
+        has_limited_event = true;
+      }
+    }
     // Bounded: the oldest goes; one the server never got is a drop, counted and reported.
     backlog.Accept(s);
   }
@@ -498,6 +519,7 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_compute_us(s.compute_us);
     out->set_period_us(s.period_us);
     out->set_contact(s.contact);
+    out->set_force_limited(s.force_limited);
     out->set_grasp(s.grasp);
     out->set_substeps(s.substeps);
     out->set_warnings(s.warnings);
@@ -589,6 +611,9 @@ struct Uplink::Impl final : ConnectionHandler {
   FrameOrder order;
   uint64_t last_tick = 0;
   double last_time_s = 0;  // of the last sample, for ENDED
+  uint64_t limited_unreported = 0;  // clamped ticks since the last KIND_FORCE_LIMIT event
+  double limited_event_time_s = 0;
+  bool has_limited_event = false;
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;

@@ -24,6 +24,11 @@ void SessionSummary::Add(const v1::DeviceSamples& ds) {
     if (first_time_s < 0) first_time_s = s.time_s();
     last_time_s = s.time_s();
     warnings += s.warnings();
+    if (s.force_limited()) {
+      force_limit_hits += last_limited ? 0 : 1;
+      force_limited_s += dt;
+    }
+    last_limited = s.force_limited();
   }
   overruns = ds.stats().overruns();
   tick_p99_us = ds.stats().compute_p99_us();
@@ -39,6 +44,9 @@ std::string SessionSummary::Json() const {
                    {"overruns", overruns},
                    {"tick_p99_us", tick_p99_us},
                    {"samples_dropped", samples_dropped},
+                   {"force_limit_hits", force_limit_hits},
+                   {"force_limited_s", force_limited_s},
+                   {"last_limited", last_limited},
                    {"contact_samples", contact_samples},
                    {"first_time_s", first_time_s},
                    {"last_time_s", last_time_s}};
@@ -63,6 +71,9 @@ SessionSummary SessionSummary::FromJson(const std::string& text) {
   s.overruns = number("overruns", uint64_t{0});
   s.tick_p99_us = number("tick_p99_us", uint32_t{0});
   s.samples_dropped = number("samples_dropped", uint64_t{0});
+  s.force_limit_hits = number("force_limit_hits", int64_t{0});
+  s.force_limited_s = number("force_limited_s", 0.0);
+  if (const auto it = j.find("last_limited"); it != j.end() && it->is_boolean()) s.last_limited = it->get<bool>();
   s.first_time_s = number("first_time_s", -1.0);
   s.last_time_s = number("last_time_s", 0.0);
   if (const auto it = j.find("last_tool_pos"); it != j.end() && it->is_array() && it->size() == 3) {

@@ -115,6 +115,7 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                            events.push_back({{"kind", v1::SessionEvent::Kind_Name(e.kind())},
                                              {"tick", e.tick()},
                                              {"time_s", e.time_s()},
+                                             {"count", e.count()},
                                              {"message", e.message()},
                                              {"peer", e.peer()}});
                          }

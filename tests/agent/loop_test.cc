@@ -358,6 +358,25 @@ TEST(Loop, DeviceNeverSeesNonFiniteOrOversizeForce) {
   }
 }
 
+// Issue 28: an instructor sees when the hand was held at the force limit: each clamped tick is
+// marked in its sample (the agent makes KIND_FORCE_LIMIT events of them).
+TEST(Loop, AClampedDeviceForceIsMarkedInItsSample) {
+  Fixture f("scripted:palpate", /*max_force=*/0.5);
+  std::vector<TickSample> samples;
+  f.Run(3000, &samples);
+  int limited = 0;
+  for (const TickSample& s : samples) {
+    const double mag = std::sqrt(s.force[0] * s.force[0] + s.force[1] * s.force[1] + s.force[2] * s.force[2]);
+    if (s.force_limited) {
+      ++limited;
+      EXPECT_NEAR(mag, 0.5, 1e-9) << "tick " << s.tick;
+    } else {
+      EXPECT_LT(mag, 0.5) << "tick " << s.tick << " at the limit, unmarked";
+    }
+  }
+  EXPECT_GT(limited, 100) << "the palpation presses past 0.5 for much of its press";
+}
+
 TEST(Loop, SanitizeDeviceForceZeroesNaNAndClamps) {
   double nan_force[3] = {1, std::nan(""), 0};
   EXPECT_EQ(agent::SanitizeDeviceForce(nan_force, 8), 1);

@@ -120,6 +120,46 @@ TEST(AgentAndServer, CommandsFromAnAdminReachTheLoopAndSigtermEndsWithEveryTickR
   EXPECT_EQ(events.back().kind(), v1::SessionEvent::KIND_ENDED);
 }
 
+// Issue 28: the hand held at the force limit is an event with its time, and the session's figures
+// count it (the palpation presses past a 0.5 limit for about a second).
+TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
+  const std::string dir = TempDir("agent-force-limit");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home",
+                      "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--max-force", "0.5",
+                      "--duration", "4", "--no-realtime"},
+                     dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(server.port(), observer);
+    if (s.empty() || s[0]["state"] != "ended") return false;
+    id = s[0]["id"];
+    return true;
+  })) << server.Log();
+  const json row = Sessions(server.port(), observer)[0];
+  EXPECT_GE(row["summary"]["force_limit_hits"].get<int>(), 1) << row.dump();
+  EXPECT_GT(row["summary"]["force_limited_s"].get<double>(), 0.3) << row.dump();
+  EXPECT_NEAR(row["summary"]["peak_force"].get<double>(), 0.5, 1e-9);
+  const HttpReply detail = Get(server.port(), "/api/sessions/" + id, observer);
+  ASSERT_EQ(detail.status, 200);
+  const json body = json::parse(detail.body);
+  int limit_events = 0;
+  double first_time_s = -1;
+  for (const json& e : body["events"]) {
+    if (e["kind"] != "KIND_FORCE_LIMIT") continue;
+    if (++limit_events == 1) first_time_s = e["time_s"].get<double>();
+    EXPECT_GT(e["count"].get<int>(), 0) << e.dump();
+  }
+  EXPECT_GE(limit_events, 1) << detail.body;
+  // When the press first passed 0.5 (the palpation reaches it well after its start).
+  EXPECT_GT(first_time_s, 0.5);
+  EXPECT_LT(first_time_s, 3.5);
+}
+
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {
   const std::string dir = TempDir("agent-library");
   const std::string cache = dir + "/cache";

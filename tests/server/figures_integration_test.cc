@@ -17,7 +17,7 @@ using json = nlohmann::json;
 using std::chrono::seconds;
 
 // Ticks first..first+n-1 at 1 kHz (time (tick + 1) ms), in contact, with a force of `force`
-// except at `peak_tick` (force `peak`, one numerical warning).
+// except at `peak_tick` (force `peak`, at the device's limit, one numerical warning).
 bool SendPress(FakeAgent& agent, uint64_t first, int n, double force, uint64_t peak_tick = UINT64_MAX,
                double peak = 0) {
   v1::Envelope e;
@@ -29,7 +29,7 @@ bool SendPress(FakeAgent& agent, uint64_t first, int n, double force, uint64_t p
     s->set_contact(true);
     s->mutable_tool_pos()->set_z(1.4);
     s->mutable_force()->set_z(tick == peak_tick ? peak : force);
-    if (tick == peak_tick) s->set_warnings(1);
+    if (tick == peak_tick) s->set_warnings(1), s->set_force_limited(true);
   }
   return agent.Send(e);
 }
@@ -89,6 +89,8 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
   EXPECT_NEAR(row["duration_s"].get<double>(), 1.999, 1e-6) << "the whole recording, not what followed the restart";
   EXPECT_DOUBLE_EQ(row["summary"]["peak_force"].get<double>(), 8.0) << "the peak before the restart";
   EXPECT_EQ(row["summary"]["warnings"].get<int>(), 1);
+  EXPECT_EQ(row["summary"]["force_limit_hits"].get<int>(), 1);
+  EXPECT_NEAR(row["summary"]["force_limited_s"].get<double>(), 0.001, 1e-9);
   EXPECT_NEAR(row["summary"]["contact_time_s"].get<double>(), 1.999, 1e-6);
   EXPECT_NEAR(row["summary"]["mean_contact_force"].get<double>(), (1999 * 1.0 + 8.0) / 2000, 1e-9);
 

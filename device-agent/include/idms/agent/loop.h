@@ -36,6 +36,7 @@ struct TickSample {
   uint32_t num_contacts = 0;
   bool contact = false, grasp = false;
   bool overrun = false;  // the work ended after the next deadline
+  bool force_limited = false;  // the device force was clamped at its limit this tick
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.
