@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "idms/protocol/cli.h"
 #include "idms/agent/device.h"
 #include "idms/agent/loop.h"
 #include "idms/agent/model_source.h"
@@ -33,7 +34,7 @@ constexpr int kExitConfig = 1;   // bad arguments, scene, model or device
 constexpr int kExitRefused = 2;  // the server refused the token or the session
 
 struct Args {
-  std::string server, token, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
+  std::string server, token, token_file, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
   std::string rotation, offset;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
@@ -54,28 +55,13 @@ int Fail(const std::string& message) {
   return kExitConfig;
 }
 
-// "ws://HOST:PORT[/PATH]" -> host, port, target.
+// "ws://HOST:PORT[/PATH]" or "http://HOST:PORT" -> host, port, target (default /ws/agent).
 bool ParseServer(const std::string& url, UplinkOptions* o, std::string* error) {
-  const std::string scheme = "ws://";
-  if (url.rfind("wss://", 0) == 0) {
-    *error = "--server " + url + ": wss:// (TLS) is not supported by the agent yet; use ws://";
-    return false;
-  }
-  if (url.rfind(scheme, 0) != 0) {
-    *error = "--server '" + url + "': expected ws://HOST:PORT or none";
-    return false;
-  }
-  const std::string rest = url.substr(scheme.size());
-  const size_t slash = rest.find('/');
-  const std::string authority = rest.substr(0, slash);
-  const size_t colon = authority.rfind(':');
-  if (colon == std::string::npos || colon == 0 || colon + 1 == authority.size()) {
-    *error = "--server '" + url + "': expected ws://HOST:PORT (the port is required)";
-    return false;
-  }
-  o->host = authority.substr(0, colon);
-  o->port = authority.substr(colon + 1);
-  if (slash != std::string::npos && slash + 1 < rest.size()) o->target = rest.substr(slash);
+  ServerUrl u;
+  if (!ParseServerUrl(url, "--server", &u, error)) return false;
+  o->host = u.host;
+  o->port = u.port;
+  if (!u.path.empty()) o->target = u.path;
   return true;
 }
 
@@ -199,8 +185,13 @@ bool DumpFinal(const std::string& path, const Loop& loop) {
 
 // The command line into `a`.
 void AddOptions(CLI::App& app, Args& a) {
-  app.add_option("--server", a.server, "ws://HOST:PORT of the idms-server, or 'none' to run offline")->required();
-  app.add_option("--token", a.token, "Agent token (sent as Authorization: Bearer)");
+  app.add_option("--server", a.server, "ws://HOST:PORT (or http://) of the idms-server, or 'none' to run offline")
+      ->required();
+  auto* token_opt = app.add_option("--token", a.token, "Agent token (sent as Authorization: Bearer); `ps` shows it: "
+                                                        "prefer IDMS_TOKEN or --token-file")
+                        ->envname("IDMS_TOKEN");
+  app.add_option("--token-file", a.token_file, "A file holding the agent token alone")->excludes(token_opt);
+  app.set_version_flag("--version", Version());
   auto* model_opt = app.add_option("--model", a.model, "Library model NAME[@VERSION], downloaded from the server");
   auto* file_opt = app.add_option("--model-file", a.model_file, "Local model: PREFIX of PREFIX.fem + PREFIX.plg");
   model_opt->excludes(file_opt);
@@ -374,7 +365,10 @@ int Main(int argc, char** argv) {
   UplinkOptions up;
   std::string error;
   if (!offline && !ParseServer(a.server, &up, &error)) return Fail(error);
-  if (!offline && a.token.empty()) return Fail("--token is required with a server (or use --server none)");
+  if (!a.token_file.empty() && !ReadTokenFile(a.token_file, &a.token, &error)) return Fail(error);
+  if (!offline && a.token.empty()) {
+    return Fail("a token is required with a server: --token-file FILE, IDMS_TOKEN or --token (or use --server none)");
+  }
 
   // Scene, model, device.
   v1::Scene scene;

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <string>
 
+#include "idms/protocol/cli.h"
 #include "idms/protocol/mcap.h"
 
 namespace {
@@ -110,6 +111,7 @@ int Info(const std::string& path, uint64_t max_bytes, bool scan) {
 int main(int argc, char** argv) {
   CLI::App app{"idms-mcap: inspect MCAP files (idms session recordings or any other)"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", idms::Version());
   std::string path;
   uint64_t max_bytes = uint64_t{1} << 40;
   bool scan = false;

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "idms/protocol/cli.h"
 #include "idms/server/auth.h"
 #include "idms/server/log.h"
 #include "idms/server/server.h"
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
       "Started on an empty data directory it imports the shipped models/ and, without --tokens, writes one token "
       "per role (admin, agent, observer) to DATA/tokens (mode 0600) and prints that file's path.\n"
       "Signals: SIGTERM/SIGINT stop gracefully (requests in flight finish); SIGHUP reloads the tokens file."};
+  app.set_version_flag("--version", idms::Version());
   app.add_option("--listen", listen, "HOST:PORT to listen on (port 0: any free port)")->capture_default_str();
   app.add_option("--data", o.data_dir, "Data directory: idms.db (SQLite), blobs/, tokens")->capture_default_str();
   app.add_option("--tokens", o.tokens_file,

@@ -9,6 +9,7 @@
 #endif
 
 #include "command.h"
+#include "idms/protocol/cli.h"
 
 namespace idms::tool {
 namespace {
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
 #endif
   CLI::App app{"idms-sim: generate, validate, run and analyse Discrete Simulation Models (Swarup 1995)"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", idms::Version());
   auto& registry = idms::tool::Registry();
   std::stable_sort(registry.begin(), registry.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   for (const auto& entry : registry) entry.second(app);

@@ -8,6 +8,7 @@
 #include <signal.h>
 
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <regex>
 
@@ -127,8 +128,11 @@ TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
   ServerProcess server(dir + "/data");
   ASSERT_TRUE(server.ready()) << server.Log();
   const std::string observer = server.Token("observer");
+  // The server as a browser's address and the token from a file (where `ps` cannot show it).
+  std::ofstream(dir + "/agent.token") << server.Token("agent") << "\n";
   ChildProcess agent(IDMS_AGENT_BIN,
-                     {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home",
+                     {"--server", "http://127.0.0.1:" + server.port_string(), "--token-file", dir + "/agent.token",
+                      "--model", "hex_4x5_home",
                       "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--max-force", "0.5",
                       "--duration", "4", "--no-realtime"},
                      dir + "/agent.log");
