@@ -19,10 +19,12 @@ packages=(
   libmeshoptimizer-dev libbullet-dev
   nodejs npm
 )
+# The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker.
 $build_only || packages+=(
   clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk
+  prometheus
   docker.io docker-compose debootstrap
   chromium
 )

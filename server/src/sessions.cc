@@ -281,7 +281,9 @@ std::string SessionHub::MetricsText() {
     samples += "idms_session_samples" + label + std::to_string(r.samples) + "\n";
     watching += "idms_session_viewers" + label + std::to_string(s->viewers()) + "\n";
     if (summary.is_object() && summary.contains("tick_p99_us")) {
-      p99 += "idms_session_tick_p99_us" + label + summary["tick_p99_us"].dump() + "\n";
+      // Base units (seconds), as Prometheus names want them (promtool check metrics).
+      const double p99_s = summary["tick_p99_us"].is_number() ? summary["tick_p99_us"].get<double>() / 1e6 : 0.0;
+      p99 += "idms_session_tick_p99_seconds" + label + json(p99_s).dump() + "\n";
       overruns += "idms_session_overruns" + label + summary["overruns"].dump() + "\n";
     }
   }
@@ -305,8 +307,8 @@ std::string SessionHub::MetricsText() {
          "# TYPE idms_session_samples gauge\n" +
          samples + "# HELP idms_session_viewers Viewers, per live session.\n# TYPE idms_session_viewers gauge\n" +
          watching +
-         "# HELP idms_session_tick_p99_us The agent's tick compute time p99, per live session.\n"
-         "# TYPE idms_session_tick_p99_us gauge\n" +
+         "# HELP idms_session_tick_p99_seconds The agent's tick compute time p99, per live session.\n"
+         "# TYPE idms_session_tick_p99_seconds gauge\n" +
          p99 +
          "# HELP idms_session_overruns The agent's loop overruns, per live session.\n"
          "# TYPE idms_session_overruns gauge\n" +

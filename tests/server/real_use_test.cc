@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <zstd.h>
 
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "server_process.h"
@@ -289,6 +290,33 @@ TEST(RealUse, HostileAgentFramesAreRefusedAtTheDoorAndKeepNothing) {
     }
     return false;
   }));
+}
+
+// Issue 28: /metrics is what Prometheus expects, checked by its own promtool (names in base units:
+// idms_session_tick_p99_us failed it), with a live session's own series present.
+TEST(RealUse, MetricsPassPromtoolsCheck) {
+  const std::string dir = TempDir("real-use-promtool");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string admin = server.Token("admin");
+  FakeAgent agent(server.port(), server.Token("agent"));
+  ASSERT_TRUE(IsWelcome(agent.Hello()));
+  v1::Envelope batch;
+  v1::DeviceSample* s = batch.mutable_device_samples()->add_samples();
+  s->set_time_s(0.001);
+  batch.mutable_device_samples()->mutable_stats()->set_compute_p99_us(120);
+  ASSERT_TRUE(agent.Send(batch));
+  std::string metrics;
+  ASSERT_TRUE(Eventually([&] {
+    const HttpReply r = Get(server.port(), "/metrics", admin);
+    metrics = r.body;
+    return r.status == 200 && metrics.find("idms_session_tick_p99_seconds{") != std::string::npos;
+  })) << metrics;
+  EXPECT_NE(metrics.find("} 0.00012\n"), std::string::npos) << "120 us as seconds:\n" << metrics;
+  std::ofstream(dir + "/metrics.txt") << metrics;
+  ChildProcess promtool("/bin/sh", {"-c", "promtool check metrics < " + dir + "/metrics.txt"}, dir + "/promtool.log");
+  EXPECT_EQ(promtool.Wait(seconds(60)), 0) << promtool.Log();
+  EXPECT_EQ(promtool.Log(), "") << "promtool's findings";
 }
 
 }  // namespace
