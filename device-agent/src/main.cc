@@ -34,7 +34,7 @@ constexpr int kExitConfig = 1;   // bad arguments, scene, model or device
 constexpr int kExitRefused = 2;  // the server refused the token or the session
 
 struct Args {
-  std::string server, token, token_file, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
+  std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
   std::string rotation, offset;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
@@ -192,6 +192,7 @@ void AddOptions(CLI::App& app, Args& a) {
                         ->envname("IDMS_TOKEN");
   app.add_option("--token-file", a.token_file, "A file holding the agent token alone")->excludes(token_opt);
   app.set_version_flag("--version", Version());
+  app.add_option("--trainee", a.trainee, "Who is at the device (the session list filters by it; up to 256 bytes)");
   auto* model_opt = app.add_option("--model", a.model, "Library model NAME[@VERSION], downloaded from the server");
   auto* file_opt = app.add_option("--model-file", a.model_file, "Local model: PREFIX of PREFIX.fem + PREFIX.plg");
   model_opt->excludes(file_opt);
@@ -399,6 +400,7 @@ int Main(int argc, char** argv) {
   char host[256] = "?";
   gethostname(host, sizeof(host) - 1);
   up.identity = Cat({"idms-agent ", host}) + " pid " + std::to_string(getpid());
+  up.trainee = a.trainee;
   up.device = device->name();
   up.scene = scene;
   up.backlog_samples = a.backlog;

@@ -233,6 +233,7 @@ struct Uplink::Impl final : ConnectionHandler {
     hello->set_protocol_version(kProtocolVersion);
     hello->set_role(v1::ROLE_AGENT);
     hello->set_identity(opt.identity);
+    hello->set_trainee(opt.trainee);
     hello->set_device(opt.device);
     hello->set_session_id(session_id);
     hello->set_resume_token(resume_token);

@@ -33,6 +33,7 @@ bool SizeOk(const std::string& s, size_t max, const char* field, std::string* er
 bool CheckAgentHello(const v1::Hello& hello, std::string* error) {
   if (!SizeOk(hello.identity(), kMaxIdentityBytes, "Hello.identity", error)) return false;
   if (!SizeOk(hello.device(), kMaxIdentityBytes, "Hello.device", error)) return false;
+  if (!SizeOk(hello.trainee(), kMaxIdentityBytes, "Hello.trainee", error)) return false;
   if (!SizeOk(hello.session_id(), 64, "Hello.session_id", error)) return false;
   if (!SizeOk(hello.resume_token(), 128, "Hello.resume_token", error)) return false;
   if (!SizeOk(hello.scene().model(), kMaxIdentityBytes, "Hello.scene.model", error)) return false;

@@ -61,6 +61,14 @@ SessionRow LiveSession::Snapshot() const {
   return row_;
 }
 
+void LiveSession::SetTrainee(const std::string& trainee) {
+  {
+    std::lock_guard lock(row_mu_);
+    row_.trainee = trainee;
+  }
+  Persist();
+}
+
 void LiveSession::Persist(std::function<void()> then) { hub_.StoreRow(Snapshot(), std::move(then)); }
 
 void LiveSession::Tick() {

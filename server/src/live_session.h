@@ -58,6 +58,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
 
   // Any thread.
   SessionRow Snapshot() const;
+  void SetTrainee(const std::string& trainee);  // any thread; stored at once
   int viewers() const { return num_viewers_.load(); }
   // False once the session is ending (ENDED, the resume window, shutdown): no resume, no viewer.
   bool live() const { return live_.load(); }

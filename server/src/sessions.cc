@@ -143,6 +143,7 @@ AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::strin
   row.state = "live";
   row.model = !hello.scene().model().empty() ? hello.scene().model() : hello.scene().model_file();
   row.identity = hello.identity();
+  row.trainee = hello.trainee();
   row.device = hello.device();
   row.started = UtcNowMs();
   row.recording = recordings_->NameFor(row.id, row.state);
@@ -232,6 +233,17 @@ std::vector<SessionRow> SessionHub::List() {
 std::optional<SessionRow> SessionHub::Get(const std::string& id) {
   if (auto s = FindLive(id)) return s->Snapshot();
   return index_->Get(id);
+}
+
+bool SessionHub::SetTrainee(const std::string& id, const std::string& trainee, std::string* error) {
+  if (const auto s = FindLive(id)) {
+    s->SetTrainee(trainee);
+    return true;
+  }
+  std::optional<SessionRow> row = index_->Get(id);
+  if (!row) return *error = "no session " + id, false;
+  row->trainee = trainee;
+  return index_->Put(*row, error);
 }
 
 bool SessionHub::Delete(const std::string& id, std::string* error) {

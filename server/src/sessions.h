@@ -54,6 +54,8 @@ class SessionHub {
   std::optional<SessionRow> Get(const std::string& id);
   std::string RecordingPath(const SessionRow& row) const { return recordings_->PathFor(row.id, row.state); }
   bool Delete(const std::string& id, std::string* error);  // not while live
+  // An admin's correction of who was at the device. False with *error for an unknown session.
+  bool SetTrainee(const std::string& id, const std::string& trainee, std::string* error);
   void StopAll();
   // Stores a row on the index's strand (a worker, never a network thread); `then` runs there after.
   void StoreRow(SessionRow row, std::function<void()> then = nullptr);

@@ -2,6 +2,8 @@
 // requests), delete. Added to the route table by the server (they need the live sessions).
 #include <sys/stat.h>
 
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 #include "idms/protocol/recording.h"
@@ -21,6 +23,7 @@ json RowJson(const SessionRow& r, int viewers) {
               {"model", r.model},
               {"device", r.device},
               {"identity", r.identity},
+              {"trainee", r.trainee},
               {"started", r.started},
               {"duration_s", r.duration_s},
               {"samples", r.samples},
@@ -79,9 +82,21 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
   using P = Permission;
   using V = http::verb;
   SessionHub* hub = core.hub;
+  // ?trainee=NAME&model=NAME (exact), ?from=DATE&to=DATE (UTC, "2026-11-27" or a longer ISO 8601
+  // prefix; both ends included): the sessions that match all, newest first.
   routes->push_back({V::get, "/api/sessions", P::kRead, false, false, [hub](ApiContext&, ApiRequest& req) {
+                       const auto param = [&req](const char* key) {
+                         const auto it = req.query.find(key);
+                         return it == req.query.end() ? std::string() : it->second;
+                       };
+                       const std::string trainee = param("trainee"), model = param("model"), from = param("from"),
+                                         to = param("to");
                        json list = json::array();
                        for (const SessionRow& r : hub->List()) {
+                         if (req.query.count("trainee") && r.trainee != trainee) continue;
+                         if (!model.empty() && r.model != model) continue;
+                         if (!from.empty() && r.started.substr(0, from.size()) < from) continue;
+                         if (!to.empty() && r.started.substr(0, to.size()) > to) continue;
                          const auto live = hub->FindLive(r.id);
                          list.push_back(RowJson(r, live ? live->viewers() : 0));
                        }
@@ -127,6 +142,30 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                      true});
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,
                      [hub](ApiContext&, ApiRequest& req) { return GetRecording(*hub, req); }, true});
+  // {"trainee": "NAME"}: who was at the device, corrected by an admin.
+  routes->push_back({V::patch, "/api/sessions/{id}", P::kWrite, false, false,
+                     [hub](ApiContext&, ApiRequest& req) {
+                       const json body = json::parse(req.message.body(), nullptr, false);
+                       if (!body.is_object() || !body.contains("trainee") || !body["trainee"].is_string()) {
+                         return JsonError(req, http::status::bad_request,
+                                          "expected a JSON object {\"trainee\": \"NAME\"}");
+                       }
+                       const std::string trainee = body["trainee"];
+                       const bool printable = std::all_of(trainee.begin(), trainee.end(), [](char c) {
+                         return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f;
+                       });
+                       if (trainee.size() > 256 || !printable) {
+                         return JsonError(req, http::status::bad_request,
+                                          "trainee: at most 256 bytes, no control characters");
+                       }
+                       std::string error;
+                       if (!hub->SetTrainee(req.params[0], trainee, &error)) {
+                         return JsonError(req, http::status::not_found, error);
+                       }
+                       const std::optional<SessionRow> r = hub->Get(req.params[0]);
+                       return JsonResponse(req, http::status::ok, JsonText(RowJson(*r, 0)));
+                     },
+                     true});
   routes->push_back({V::delete_, "/api/sessions/{id}", P::kWrite, false, false,
                      [hub](ApiContext&, ApiRequest& req) {
                        std::string error;

@@ -2,7 +2,9 @@
 // one row per session, replaced whole on every update (a few per second per live session).
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <mutex>
+#include <vector>
 
 #include "idms/server/storage.h"
 
@@ -23,13 +25,23 @@ CREATE TABLE IF NOT EXISTS sessions (
   resume_sha256 TEXT NOT NULL,
   recording TEXT NOT NULL,
   summary_json TEXT NOT NULL,
-  scene_text TEXT NOT NULL
+  scene_text TEXT NOT NULL,
+  trainee TEXT NOT NULL DEFAULT ''
 );
 )sql";
 
+// Columns added since the first schema, each with what brings an older table up to date.
+struct AddedColumn {
+  const char* name;
+  const char* sql;
+};
+constexpr AddedColumn kAddedColumns[] = {
+    {"trainee", "ALTER TABLE sessions ADD COLUMN trainee TEXT NOT NULL DEFAULT ''"},
+};
+
 constexpr const char* kColumns =
     "id, state, model, device, identity, started, duration_s, samples, next_tick, resume_sha256, recording, "
-    "summary_json, scene_text";
+    "summary_json, scene_text, trainee";
 
 class SqliteSessionIndex final : public SessionIndex {
  public:
@@ -52,9 +64,10 @@ class SqliteSessionIndex final : public SessionIndex {
       sqlite3_free(msg);
       return false;
     }
+    if (!AddMissingColumns(error)) return false;
     const std::string cols = kColumns;
     return Prepare("INSERT OR REPLACE INTO sessions(" + cols +
-                       ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
+                       ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)",
                    &put_, error) &&
            Prepare("SELECT " + cols + " FROM sessions WHERE id = ?1", &get_, error) &&
            Prepare("SELECT " + cols + " FROM sessions ORDER BY started DESC, id DESC", &list_, error) &&
@@ -68,7 +81,9 @@ class SqliteSessionIndex final : public SessionIndex {
     sqlite3_bind_double(put_, i++, r.duration_s);
     sqlite3_bind_int64(put_, i++, r.samples);
     sqlite3_bind_int64(put_, i++, static_cast<int64_t>(r.next_tick));
-    for (const std::string* t : {&r.resume_sha256, &r.recording, &r.summary_json, &r.scene_text}) Text(put_, i++, *t);
+    for (const std::string* t : {&r.resume_sha256, &r.recording, &r.summary_json, &r.scene_text, &r.trainee}) {
+      Text(put_, i++, *t);
+    }
     const bool ok = sqlite3_step(put_) == SQLITE_DONE;
     if (!ok) *error = std::string("SQLite: ") + sqlite3_errmsg(db_);
     sqlite3_reset(put_);
@@ -101,6 +116,25 @@ class SqliteSessionIndex final : public SessionIndex {
   }
 
  private:
+  // A database from before a column existed gets it (with its default), once, at open.
+  bool AddMissingColumns(std::string* error) {
+    sqlite3_stmt* info = nullptr;
+    if (!Prepare("PRAGMA table_info(sessions)", &info, error)) return false;
+    std::vector<std::string> have;
+    while (sqlite3_step(info) == SQLITE_ROW) have.push_back(Col(info, 1));
+    sqlite3_finalize(info);
+    for (const AddedColumn& c : kAddedColumns) {
+      if (std::find(have.begin(), have.end(), c.name) != have.end()) continue;
+      char* msg = nullptr;
+      if (sqlite3_exec(db_, c.sql, nullptr, nullptr, &msg) != SQLITE_OK) {
+        *error = std::string("SQLite: adding sessions.") + c.name + ": " + (msg ? msg : "error");
+        sqlite3_free(msg);
+        return false;
+      }
+    }
+    return true;
+  }
+
   bool Prepare(const std::string& sql, sqlite3_stmt** s, std::string* error) {
     if (sqlite3_prepare_v3(db_, sql.c_str(), -1, SQLITE_PREPARE_PERSISTENT, s, nullptr) == SQLITE_OK) return true;
     *error = "SQLite cannot prepare '" + sql + "': " + sqlite3_errmsg(db_);
@@ -123,6 +157,7 @@ class SqliteSessionIndex final : public SessionIndex {
     r.samples = sqlite3_column_int64(s, 7);
     r.next_tick = static_cast<uint64_t>(sqlite3_column_int64(s, 8));
     r.resume_sha256 = Col(s, 9), r.recording = Col(s, 10), r.summary_json = Col(s, 11), r.scene_text = Col(s, 12);
+    r.trainee = Col(s, 13);
     return r;
   }
 

@@ -1,9 +1,11 @@
 // The figures an instructor grades from (issue 28, "trust the figures"), against the real
 // idms-server: a session's summary describes its whole recording across a kill -9, a restart and
-// a resume, and every event carries its session time.
+// a resume, every event carries its session time, and a session names its trainee.
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <ctime>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "server_process.h"
@@ -32,6 +34,16 @@ bool SendPress(FakeAgent& agent, uint64_t first, int n, double force, uint64_t p
     if (tick == peak_tick) s->set_warnings(1), s->set_force_limited(true);
   }
   return agent.Send(e);
+}
+
+// Today's UTC date, "2026-11-27".
+std::string UtcDate() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[16];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d", &tm);
+  return buf;
 }
 
 json Row(uint16_t port, const std::string& token, const std::string& id) {
@@ -103,6 +115,64 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
   ASSERT_TRUE(at.count("KIND_AGENT_RESUMED") && at.count("KIND_ENDED")) << detail.body;
   EXPECT_NEAR(at["KIND_AGENT_RESUMED"], 1.0, 1e-9);
   EXPECT_NEAR(at["KIND_ENDED"], 2.0, 1e-9);
+}
+
+// A session names its trainee (the agent's --trainee), an admin corrects it, and the list filters
+// by trainee, model and date.
+TEST(Figures, ATraineeNamesTheSessionAndTheListFiltersByTraineeModelAndDate) {
+  const std::string dir = TempDir("figures-trainee");
+  auto server = std::make_unique<ServerProcess>(dir + "/data");
+  ASSERT_TRUE(server->ready()) << server->Log();
+  const std::string port = server->port_string(), observer = server->Token("observer"), admin = server->Token("admin");
+  std::ofstream(dir + "/agent.token") << server->Token("agent");
+  const auto run = [&](const std::string& trainee, const std::string& model) {
+    ChildProcess agent(IDMS_AGENT_BIN,
+                       {"--server", "ws://127.0.0.1:" + port, "--token-file", dir + "/agent.token", "--model", model,
+                        "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "0.3",
+                        "--no-realtime", "--trainee", trainee},
+                       dir + "/agent-" + trainee + ".log");
+    return agent.Wait(seconds(120));
+  };
+  ASSERT_EQ(run("Ada Lovelace", "hex_4x5_home"), 0);
+  ASSERT_EQ(run("Bo", "sphere_cap"), 0);
+  const auto ids = [&](const std::string& query) {
+    const HttpReply r = Get(server->port(), "/api/sessions" + query, observer);
+    std::vector<std::string> out;
+    if (r.status != 200) return std::vector<std::string>{"HTTP " + std::to_string(r.status)};
+    const json body = json::parse(r.body);
+    for (const json& s : body["sessions"]) out.push_back(s["trainee"].get<std::string>());
+    return out;
+  };
+  ASSERT_TRUE(Eventually([&] { return ids("").size() == 2; }));
+  EXPECT_EQ(ids(""), (std::vector<std::string>{"Bo", "Ada Lovelace"}));
+  EXPECT_EQ(ids("?trainee=Ada%20Lovelace"), std::vector<std::string>{"Ada Lovelace"});
+  EXPECT_EQ(ids("?model=sphere_cap"), std::vector<std::string>{"Bo"});
+  const std::string today = UtcDate();
+  EXPECT_EQ(ids("?from=" + today + "&to=" + today).size(), 2u);
+  EXPECT_TRUE(ids("?from=2999-01-01").empty());
+  EXPECT_TRUE(ids("?to=2000-01-01").empty());
+
+  // An admin corrects the name; an observer may not; a bad body or an unknown session is refused.
+  const json ada = json::parse(Get(server->port(), "/api/sessions?trainee=Ada%20Lovelace", observer).body);
+  const std::string id = ada["sessions"][0]["id"];
+  const auto patch = [&](const std::string& token, const std::string& target, const std::string& body) {
+    return Http(server->port(), HttpCall{"PATCH", target,
+                                         {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}},
+                                         body});
+  };
+  const HttpReply ok = patch(admin, "/api/sessions/" + id, R"({"trainee": "Ada King"})");
+  EXPECT_EQ(ok.status, 200) << ok.body;
+  EXPECT_EQ(json::parse(ok.body)["trainee"], "Ada King");
+  EXPECT_EQ(patch(observer, "/api/sessions/" + id, R"({"trainee": "x"})").status, 403);
+  EXPECT_EQ(patch(admin, "/api/sessions/" + id, R"({"name": "x"})").status, 400);
+  EXPECT_EQ(patch(admin, "/api/sessions/" + id, "{\"trainee\": \"a\\nb\"}").status, 400);
+  EXPECT_EQ(patch(admin, "/api/sessions/" + id, R"({"trainee": ")" + std::string(300, 'x') + "\"}").status, 400);
+  EXPECT_EQ(patch(admin, "/api/sessions/nope", R"({"trainee": "x"})").status, 404);
+  // It survives a restart.
+  server.reset();
+  server = std::make_unique<ServerProcess>(dir + "/data", std::vector<std::string>{"--listen", "127.0.0.1:" + port});
+  ASSERT_TRUE(server->ready()) << server->Log();
+  EXPECT_EQ(ids("?trainee=Ada%20King"), std::vector<std::string>{"Ada King"});
 }
 
 }  // namespace

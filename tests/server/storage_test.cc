@@ -3,6 +3,7 @@
 #include "idms/server/storage.h"
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 
 #include <filesystem>
 #include <fstream>
@@ -140,6 +141,35 @@ TEST(SqliteSessionIndex, SessionsStartedWithinOneSecondAreListedNewestFirst) {
   ASSERT_EQ(list.size(), 2u);
   EXPECT_EQ(list[0].id, "2026-11-27-000000") << "started " << list[0].started << " and " << list[1].started;
   EXPECT_LT(list[1].started, list[0].started);
+}
+
+// A database written before sessions had a trainee opens with the column added, its rows kept.
+TEST(SqliteSessionIndex, ADatabaseFromBeforeTheTraineeColumnIsBroughtUpToDate) {
+  const std::string dir = test::TempDir("sqlite-old-sessions");
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir + "/idms.db").c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(db,
+                           "CREATE TABLE sessions (id TEXT PRIMARY KEY, state TEXT NOT NULL, model TEXT NOT NULL, "
+                           "device TEXT NOT NULL, identity TEXT NOT NULL, started TEXT NOT NULL, duration_s REAL NOT "
+                           "NULL, samples INTEGER NOT NULL, next_tick INTEGER NOT NULL, resume_sha256 TEXT NOT NULL, "
+                           "recording TEXT NOT NULL, summary_json TEXT NOT NULL, scene_text TEXT NOT NULL);"
+                           "INSERT INTO sessions VALUES ('old', 'ended', 'hex', 'scripted', 'agent', "
+                           "'2026-11-01T10:00:00Z', 3.5, 3500, 3500, '', 'old.mcap', '{}', '');",
+                           nullptr, nullptr, nullptr),
+              SQLITE_OK);
+    sqlite3_close(db);
+  }
+  std::string error;
+  auto index = OpenSqliteSessionIndex(dir + "/idms.db", &error);
+  ASSERT_TRUE(index) << error;
+  std::optional<SessionRow> old = index->Get("old");
+  ASSERT_TRUE(old);
+  EXPECT_EQ(old->samples, 3500);
+  EXPECT_EQ(old->trainee, "");
+  old->trainee = "Ada";
+  ASSERT_TRUE(index->Put(*old, &error)) << error;
+  EXPECT_EQ(index->Get("old")->trainee, "Ada");
 }
 
 }  // namespace

@@ -19,6 +19,7 @@ struct UplinkOptions {
   std::string target = "/ws/agent";
   std::string token;                 // sent as "Authorization: Bearer TOKEN" on the upgrade request
   std::string identity;              // Hello.identity
+  std::string trainee;               // Hello.trainee: who is at the device
   std::string device;                // Hello.device
   v1::Scene scene;                   // Hello.scene, and quant_step / keyframe_interval_s / sample_batch
   int64_t backlog_samples = 120000;  // samples kept for resending (2 min at 1 kHz); oldest dropped first

@@ -78,6 +78,7 @@ struct SessionRow {
   std::string recording;      // file name under DATA/recordings/
   std::string summary_json;   // the session's summary figures (peak force, time in contact, ...)
   std::string scene_text;     // the agent's scene, protobuf text format
+  std::string trainee;        // who was at the device (Hello.trainee; an admin may correct it)
 };
 
 // The session index. Thread-safe.
