@@ -19,6 +19,7 @@ struct RecordedSession {
   double peak_force = 0;
   double peak_tool_pos[3] = {0, 0, 0};
   double tool_radius = 0;
+  double before_contact_t_s = -1;  // session time of the last device batch with no contact before the first contact
   std::string error;  // why the session could not be made
 };
 

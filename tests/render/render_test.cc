@@ -238,6 +238,67 @@ TEST_F(RecordingRenderTest, TheDentUnderTheToolAfterPalpation) {
   EXPECT_EQ(Draw(player_.state(), o).rgba, at_rest.rgba);
 }
 
+// The share of pixels that changed clearly (some channel by more than kClearChange levels: a
+// change a person sees, not a level of shading) between two images of one size, in a disc of
+// radius_px around (cx, cy), and over the whole image.
+constexpr int kClearChange = 24;
+struct Change {
+  double region = 0, image = 0;
+};
+Change ClearChange(const Image& a, const Image& b, double cx, double cy, double radius_px) {
+  int64_t in = 0, in_changed = 0, changed = 0;
+  for (int y = 0; y < a.height; ++y) {
+    for (int x = 0; x < a.width; ++x) {
+      const uint8_t *p = a.Pixel(x, y), *q = b.Pixel(x, y);
+      const bool clear = std::max({std::abs(p[0] - q[0]), std::abs(p[1] - q[1]), std::abs(p[2] - q[2])}) > kClearChange;
+      changed += clear;
+      if (std::hypot(x + 0.5 - cx, y + 0.5 - cy) > radius_px) continue;
+      ++in;
+      in_changed += clear;
+    }
+  }
+  return {in > 0 ? static_cast<double>(in_changed) / static_cast<double>(in) : 0,
+          static_cast<double>(changed) / (static_cast<double>(a.width) * a.height)};
+}
+
+// What issue 28 measured: the palpation before contact and at its deepest press, as a viewer sees
+// them by default (the server's screenshot: tool and force shown), through one camera (the
+// deepest press's automatic one). The contact region is the disc of the tool's radius around the
+// surface point under the tool, projected. Before the dent was coloured and the light grazed, it
+// changed in 0 % of that region (the tool covered it in both images) and 0.6 % of the image.
+TEST_F(RecordingRenderTest, TheContactRegionChangesClearlyAtTheDeepestPress) {
+  const test::RecordedSession& s = test::Session();
+  ASSERT_GE(s.before_contact_t_s, 0) << "the palpation started in contact";
+  std::string error;
+  RenderOptions o;
+  o.width = 1280, o.height = 720;
+  o.show_tool = o.show_force = true;
+  ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
+  o.camera = CameraFor(player_.state().View(), o);
+  const Image pressed = Draw(player_.state(), o);
+  const std::array<double, 3> tool{player_.state().sample.tool_pos().x(), player_.state().sample.tool_pos().y(),
+                                   player_.state().sample.tool_pos().z()};
+  const double r = player_.state().tool_radius;
+  ASSERT_TRUE(player_.MoveTo(s.before_contact_t_s, &error)) << error;
+  const Image before = Draw(player_.state(), o);
+  // The surface point under the tool (the flat fragment's plane is z = 0) and the tool's radius there, in pixels.
+  double cx = 0, cy = 0, ex = 0, ey = 0;
+  ASSERT_TRUE(renderer_.Project({tool[0], tool[1], 0}, &cx, &cy));
+  ASSERT_TRUE(renderer_.Project({tool[0] + r, tool[1], 0}, &ex, &ey));
+  const double radius_px = std::hypot(ex - cx, ey - cy);
+  const Change c = ClearChange(before, pressed, cx, cy, radius_px);
+  std::printf("contact region (%.0f px around %.0f, %.0f): %.1f %% of its pixels changed clearly; the image: %.2f %%\n",
+              radius_px, cx, cy, 100 * c.region, 100 * c.image);
+  RecordProperty("contact_region_changed_percent", std::to_string(100 * c.region));
+  RecordProperty("image_changed_percent", std::to_string(100 * c.image));
+  std::string png;
+  for (const auto& [name, image] : {std::pair{"before_contact", &before}, std::pair{"deepest", &pressed}}) {
+    ASSERT_TRUE(EncodePng(*image, &png, &error));
+    ASSERT_TRUE(WriteFile(s.dir + "/glance_" + name + ".png", png, &error)) << error;
+  }
+  EXPECT_GT(c.region, 0.0);
+}
+
 TEST_F(RecordingRenderTest, TheToolMarkerIsWhereTheDeviceWasAndTheForceArrowShows) {
   const test::RecordedSession& s = test::Session();
   std::string error;
