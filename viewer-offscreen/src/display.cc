@@ -98,8 +98,10 @@ double NiceCeil(double x) {
   double p = 1;
   while (p > x) p /= 10;
   while (p * 10 <= x) p *= 10;
+  // A part in a million over a step is taken as the step: a mesh of unit sides is 1 within the
+  // float positions' rounding, either way.
   for (const double m : TheDisplay().nice_steps) {
-    if (x <= m * p) return m * p;
+    if (x <= m * p * (1 + 1e-6)) return m * p;
   }
   return 10 * p;
 }

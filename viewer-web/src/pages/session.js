@@ -7,6 +7,7 @@ import { EnvelopeSocket } from '../net/socket.js';
 import { FrameLoop } from '../view/frame_loop.js';
 import { api } from '../net/api.js';
 import { h, page } from './dom.js';
+import { display } from '../view/display.js';
 import { Timeline } from './timeline.js';
 import { LiveView } from './live_view.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel } from './session_panels.js';
@@ -43,6 +44,11 @@ function layout(id, mode, panels) {
     gapNote: h('p', { class: 'gap-note', id: 'gap-note', role: 'status' }),
   };
   const wire = h('input', { type: 'checkbox', id: 'wireframe' });
+  // What the colours say and how much the deformation is exaggerated (display.json's scales).
+  const colour = h('select', { id: 'colour-by', 'aria-label': 'Colour the surface by' },
+    [h('option', { value: 'displacement', text: 'displacement' }), h('option', { value: 'plain', text: 'plain' })]);
+  const scale = h('select', { id: 'deformation-scale', 'aria-label': 'Deformation scale' },
+    display.displacement.scales.map((x) => h('option', { value: String(x), text: `×${x}` })));
   const plots = h('aside', { class: 'side plots-side' }, [
     h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }),
       hosts.force, hosts.position, hosts.depth]),
@@ -61,13 +67,14 @@ function layout(id, mode, panels) {
     h('div', { class: 'session-grid' }, [
       h('section', { class: 'view-section', 'aria-label': '3D view' }, [
         hosts.view,
-        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
+        h('div', { class: 'toolbar' }, [h('label', {}, ['Colour ', colour]), h('label', {}, ['Deformation ', scale]),
+          h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
       ]),
       plots,
       below,
     ]),
   ].filter((x) => x !== null));
-  return { hosts, wire };
+  return { hosts, wire, colour, scale };
 }
 
 /**
@@ -151,17 +158,24 @@ export function sessionPage(id, role, mode) {
   const health = new HealthPanel(st, loop, timeline ? () => timeline.time : undefined);
   const events = new EventList(st);
   const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
-  const { hosts, wire } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
+  const { hosts, wire, colour, scale } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
     annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el,
     commands: mode === 'live' && role === 'admin' ? commandPanel(send) : null });
   const view = new LiveView(st, hosts, kWindowS, loop);
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
+  colour.addEventListener('change', () => view.view.setColourBy(/** @type {'displacement' | 'plain'} */ (colour.value)));
+  scale.addEventListener('change', () => view.view.setScale(Number(scale.value)));
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
   Object.defineProperty(st, 'forceShown', { get: () => view.forcePlot.shown, enumerable: true });
   Object.defineProperty(st, 'forceFirstS', { get: () => view.forcePlot.shownFirstS, enumerable: true });
   Object.defineProperty(st, 'forceLastS', { get: () => view.forcePlot.shownLastS, enumerable: true });
   // Where the surface and the tool fall in the view, for the tests (computed when asked).
   /** @type {any} */ (window).__idmsFraming = () => view.view.framing();
+  // What the surface shows, and where a model point falls on the canvas, for the tests.
+  /** @type {any} */ (window).__idmsSurface = () => ({ contacts: view.view.numContacts, lo: view.view.surface.lo, hi: view.view.surface.hi,
+    colourBy: view.view.surface.colourBy, scale: view.view.surface.scale, restTimeS: view.view.surface.restTimeS,
+    camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius });
+  /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
   /** @type {Parts} */

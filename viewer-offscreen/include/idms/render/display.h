@@ -45,7 +45,8 @@ const Display& TheDisplay();
 // The map's entry for v in [lo, hi]: round(clamp((v - lo) / (hi - lo), 0, 1) * 255); 0 when the
 // range has no width. viewer-web's colourIndex is the same arithmetic.
 int ColourIndex(double v, double lo, double hi);
-// The first of nice_steps times a power of ten at or above x (> 0); 1 for x <= 0 or not finite.
+// The first of nice_steps times a power of ten at or above x (> 0), within a part in a million;
+// 1 for x <= 0 or not finite.
 double NiceCeil(double x);
 // The displacement colour range's top for a rest surface: NiceCeil(range_fraction x the mean
 // length of the triangles' sides, each triangle's three in order). 1 for an empty surface.
