@@ -51,6 +51,19 @@ export function modelPage(name, role) {
     /** @type {any} */ (window).__idmsPreview = { version, vertices: surface.numVertices, triangles: surface.numTriangles,
       colourBy: view.surface.colourBy, lo: view.surface.lo, hi: view.surface.hi };
   }
+  // For the tests: where the stiffer half of the range's vertices fall on the canvas (their centre
+  // and half their extent across and up, CSS pixels); null when the model is one stiffness.
+  /** @type {any} */ (window).__idmsStiffRegion = () => {
+    const g = view.surface;
+    if (!stiffness || !(g.hi > g.lo)) return null;
+    const points = [];
+    for (let v = 0; v < g.numVertices; v++) {
+      if (stiffness[v] >= (g.lo + g.hi) / 2) points.push(view.project(g.actual[3 * v], g.actual[3 * v + 1], g.actual[3 * v + 2]));
+    }
+    const xs = points.map((p) => p.x), ys = points.map((p) => p.y);
+    const [x0, x1, y0, y1] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+    return { x: (x0 + x1) / 2, y: (y0 + y1) / 2, rx: (x1 - x0) / 2, ry: (y1 - y0) / 2, count: points.length };
+  };
 
   async function load() {
     const m = await api(`/api/models/${encodeURIComponent(name)}`);

@@ -3,7 +3,10 @@
 // colour), and notes (the deformation scale when it is not 1; rest's time when it is not the
 // session's start). idms-render draws the same lines into its image (viewer-offscreen/src/legend.cc).
 // Rebuilt only when what it shows changes.
-import { kMapRgba, legendTicks, tickText } from './display.js';
+import { display, legendTicks, tickText } from './display.js';
+
+/** The map as a CSS gradient, bottom (entry 0) to top: one stop per entry. */
+const kGradient = `linear-gradient(to top, ${display.map.srgb.map((c, i) => `${c} ${((100 * i) / 255).toFixed(2)}%`).join(', ')})`;
 
 /** Bar height, CSS pixels. */
 const kBarPx = 130;
@@ -35,17 +38,10 @@ export class Legend {
     const labels = ticks.map((t, i) => (i === ticks.length - 1 && ticks.length > 1 && spec.saturates ? '≥' : '') + tickText(t));
     this.el.setAttribute('aria-label', `Colour legend: ${spec.title} in ${spec.unit}, ${labels[0]} to ${labels[labels.length - 1]}`
       + (spec.notes.length ? `; ${spec.notes.join('; ')}` : ''));
-    // The bar: one row per pixel, the top the range's top.
-    const bar = document.createElement('canvas');
-    bar.width = 1;
-    bar.height = kBarPx;
-    const ctx = /** @type {CanvasRenderingContext2D} */ (bar.getContext('2d'));
-    const img = ctx.createImageData(1, kBarPx);
-    for (let r = 0; r < kBarPx; r++) {
-      const i = Math.round((255 * (kBarPx - 1 - r)) / (kBarPx - 1));
-      img.data.set(kMapRgba.subarray(4 * i, 4 * i + 4), 4 * r);
-    }
-    ctx.putImageData(img, 0, 0);
+    // The bar, the range's top at the top (a gradient, not a canvas: the view's canvas stays its only one).
+    const bar = document.createElement('div');
+    bar.className = 'legend-bar';
+    bar.style.background = kGradient;
     const scale = document.createElement('div');
     scale.className = 'legend-scale';
     scale.style.height = `${kBarPx}px`;

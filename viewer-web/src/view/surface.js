@@ -260,6 +260,13 @@ export class SurfaceView {
     this.invalidate();
   }
 
+  /** The model at rest (SurfaceGeometry.setModelRest). @param {Float32Array} positions */
+  setModelRest(positions) {
+    this.surface.setModelRest(positions);
+    this.showLegend();
+    this.invalidate();
+  }
+
   /** The deformation scale (drawn = rest + scale (p - rest)). @param {number} scale > 0 */
   setScale(scale) {
     this.surface.setScale(scale);

@@ -32,6 +32,8 @@ export class SurfaceGeometry {
     this.restVertices = -1;
     /** Session time of rest, s. */
     this.restTimeS = 0;
+    /** The model at rest from elsewhere (the library), for a surface of its size. @type {Float32Array | null} */
+    this.modelRest = null;
     this.scale = 1;
     /** @type {ColourBy} */
     this.colourBy = 'displacement';
@@ -87,11 +89,13 @@ export class SurfaceGeometry {
     this.numVertices = nv;
     this.numTriangles = nt;
     this.buildAdjacency(s.triangles, nv, nt);
-    // Rest: the first surface, or the first of a new size (a cut that exposed atoms).
+    // Rest: the model's at rest when known and of this size; else the first surface, or the first
+    // of a new size (a cut that exposed atoms).
     if (this.restVertices !== nv) {
-      this.rest.set(s.positions.subarray(0, 3 * nv));
+      const model = this.modelRest && this.modelRest.length === 3 * nv ? this.modelRest : null;
+      this.rest.set(model ?? s.positions.subarray(0, 3 * nv));
       this.restVertices = nv;
-      this.restTimeS = timeS;
+      this.restTimeS = model ? 0 : timeS;
     }
     this.geometry.setDrawRange(0, 3 * nt);
     this.redrawAll();
@@ -167,6 +171,21 @@ export class SurfaceGeometry {
       values[v] = colourIndex(this.stiffness[v], this.lo, this.hi) / 255;
     } else {
       values[v] = 0;
+    }
+  }
+
+  /**
+   * The model at rest (num_vertices x 3), as the session's first keyframe had it: rest from now on
+   * for a surface of its size, the one shown included.
+   * @param {Float32Array} positions
+   */
+  setModelRest(positions) {
+    this.modelRest = positions;
+    if (this.numVertices > 0 && positions.length === 3 * this.numVertices) {
+      this.rest.set(positions);
+      this.restVertices = this.numVertices;
+      this.restTimeS = 0;
+      this.redrawAll();
     }
   }
 
