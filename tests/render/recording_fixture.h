@@ -20,7 +20,7 @@ struct RecordedSession {
   double peak_tool_pos[3] = {0, 0, 0};
   double tool_radius = 0;
   double before_contact_t_s = -1;  // session time of the last device batch with no contact before the first contact
-  std::string error;  // why the session could not be made
+  std::string error;               // why the session could not be made
 };
 
 // Made once per test program (the first call runs the server and agent: a few seconds).

@@ -349,11 +349,16 @@ TEST_F(RecordingRenderTest, TheDeformationScaleExaggeratesTheDentNotItsColours) 
   EXPECT_NE(a1.rgba, a10.rgba);
   // The legend says so.
   above.legend = true;
-  const Image legend1 = Draw(state, [&] { RenderOptions l = above; l.deformation_scale = 1; return l; }());
+  const Image legend1 = Draw(state, [&] {
+    RenderOptions l = above;
+    l.deformation_scale = 1;
+    return l;
+  }());
   const Image legend10 = Draw(state, above);
   int64_t differ = 0;
   for (int y = 0; y < 300; ++y) {
-    for (int x = above.width - 250; x < above.width; ++x) differ += std::memcmp(legend1.Pixel(x, y), legend10.Pixel(x, y), 3) != 0;
+    for (int x = above.width - 250; x < above.width; ++x)
+      differ += std::memcmp(legend1.Pixel(x, y), legend10.Pixel(x, y), 3) != 0;
   }
   EXPECT_GT(differ, 20) << "the legend's corner does not name the scale";
 }
@@ -432,7 +437,8 @@ TEST_F(RecordingRenderTest, TheToolIsAnOutlineWhereTheDeviceWasAndTheForceArrowS
   const double fn = std::hypot(f[0], f[1]);
   double cx = 0, cy = 0, tx = 0, ty = 0;
   ASSERT_TRUE(renderer_.Project(c, &cx, &cy));
-  ASSERT_TRUE(renderer_.Project({c[0] + state.tool_radius * f[1] / fn, c[1] - state.tool_radius * f[0] / fn, c[2]}, &tx, &ty));
+  ASSERT_TRUE(
+      renderer_.Project({c[0] + state.tool_radius * f[1] / fn, c[1] - state.tool_radius * f[0] / fn, c[2]}, &tx, &ty));
   const double radius_px = std::hypot(tx - cx, ty - cy);
   // In contact: a ring of the contact colour around where the device was, most of its circumference.
   const int64_t ring = RingPixels(with_tool, TheDisplay().tool_contact, cx, cy, radius_px);

@@ -1,14 +1,13 @@
 // The legend drawn into idms-render's pixels after GL has finished: a panel, the colour bar, ticks
 // and text in a 5x7 bitmap font of our own (no font library, no font file at run time: the
 // image is the same on every machine).
-#include "legend_internal.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 
 #include "idms/render/display.h"
+#include "legend_internal.h"
 
 namespace idms::render {
 namespace {

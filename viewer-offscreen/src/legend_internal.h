@@ -11,11 +11,11 @@
 namespace idms::render {
 
 struct LegendSpec {
-  std::string title;                // "displacement" or "stiffness"
-  std::string unit;                 // "model units", ...
-  double lo = 0, hi = 1;            // the range the map spans
-  bool saturates = false;           // values beyond hi take its colour: the top label says ">="
-  std::vector<std::string> notes;   // further lines under the bar ("deformation x3", ...)
+  std::string title;               // "displacement" or "stiffness"
+  std::string unit;                // "model units", ...
+  double lo = 0, hi = 1;           // the range the map spans
+  bool saturates = false;          // values beyond hi take its colour: the top label says ">="
+  std::vector<std::string> notes;  // further lines under the bar ("deformation x3", ...)
 };
 
 // The legend's tick values, lo to hi in `ticks` equal steps (a range of zero width: lo alone).

@@ -248,7 +248,8 @@ struct Renderer::Impl {
     } else if (by == ColourBy::kStiffness) {
       const auto [min_k, max_k] = std::minmax_element(scene.stiffness.begin(), scene.stiffness.end());
       *lo = *min_k, *hi = *max_k;
-      for (size_t v = 0; v < nv; ++v) values[v] = static_cast<float>(ColourIndex(scene.stiffness[v], *lo, *hi)) / 255.0f;
+      for (size_t v = 0; v < nv; ++v)
+        values[v] = static_cast<float>(ColourIndex(scene.stiffness[v], *lo, *hi)) / 255.0f;
     }
   }
 
@@ -432,7 +433,8 @@ struct Renderer::Impl {
       spec.unit = d.length_unit;
       spec.saturates = true;
       if (o.deformation_scale != 1) spec.notes.push_back("deformation \x02" + TickText(o.deformation_scale));
-      if (scene.rest_time_s > d.rest_note_after_s) spec.notes.push_back("from t = " + TickText(scene.rest_time_s) + " s");
+      if (scene.rest_time_s > d.rest_note_after_s)
+        spec.notes.push_back("from t = " + TickText(scene.rest_time_s) + " s");
     } else {
       spec.title = "stiffness k";
       spec.unit = d.stiffness_unit;
@@ -466,7 +468,8 @@ bool Renderer::Render(const SceneView& scene, const RenderOptions& o, Image* out
   if (!scene.rest.empty() && scene.rest.size() != scene.positions.size())
     return *error = "the rest surface has another number of vertices than the surface", false;
   if (o.colour_by == ColourBy::kStiffness && scene.stiffness.size() != nv)
-    return *error = "colour by stiffness needs the model's elements (a model, not a recording or a live session)", false;
+    return *error = "colour by stiffness needs the model's elements (a model, not a recording or a live session)",
+           false;
   if (!(o.deformation_scale > 0 && o.deformation_scale <= kMaxDeformationScale))
     return *error = "the deformation scale is out of (0, 100]", false;
   // Bind the image as the colour buffer (rows top first); the context stays the same.

@@ -25,11 +25,11 @@ struct Light {
 
 // protocol/display.json, parsed once (immutable; any thread).
 struct Display {
-  std::vector<Srgb> map;             // the colour map, lightest (0) to darkest
-  double range_fraction = 0.1;       // displacement range: this times the mean triangle side, rounded up
-  std::vector<double> nice_steps;    // ... to one of these times a power of ten
-  int ticks = 5;                     // intervals on the legend
-  double rest_note_after_s = 0.1;    // a later rest is named on the legend (a late joiner's)
+  std::vector<Srgb> map;           // the colour map, lightest (0) to darkest
+  double range_fraction = 0.1;     // displacement range: this times the mean triangle side, rounded up
+  std::vector<double> nice_steps;  // ... to one of these times a power of ten
+  int ticks = 5;                   // intervals on the legend
+  double rest_note_after_s = 0.1;  // a later rest is named on the legend (a late joiner's)
   std::string length_unit, stiffness_unit;
   double ambient = 0;
   Light key, fill;

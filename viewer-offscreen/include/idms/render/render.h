@@ -55,7 +55,7 @@ struct SceneView {
   bool contact = false, grasp = false;      // the device's last sample's flags
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
-  double rest_time_s = 0;  // session time of `rest`; > 0: not the session's start (a late join)
+  double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
   std::span<const double> stiffness;  // (num_vertices) for ColourBy::kStiffness; empty = unknown
 };
 

@@ -26,8 +26,8 @@ struct ViewerState {
   double tool_radius = 0;   // from the scene (0 = unknown)
   // The surface at rest (display.json's rule, as the browser's): the first keyframe applied, or
   // the first of another number of vertices; a model's own rest; a recording's first keyframe.
-  std::vector<float> rest;  // (num_vertices x 3), model units
-  double rest_time_s = 0;   // its session time
+  std::vector<float> rest;        // (num_vertices x 3), model units
+  double rest_time_s = 0;         // its session time
   std::vector<double> stiffness;  // per vertex (a model's: StiffnessPerVertex); empty = unknown
   // A view of the above for Renderer::Render (valid while this state is unchanged).
   SceneView View() const;
