@@ -1,5 +1,6 @@
 // The shared recorded session: idms-server on a free port, idms-agent with scripted:palpate for
-// 3 s (the palpation reaches contact), the recording downloaded, its peak force located.
+// 3 s (the palpation reaches contact), the recording downloaded, its peak force and the last
+// moment before contact located.
 #include "recording_fixture.h"
 
 #include <cmath>
@@ -46,7 +47,14 @@ void Make(RecordedSession* s) {
   if (!reader.Open(s->recording, options, &error)) return void(s->error = error);
   s->duration_s = (reader.end_ns() - reader.start_ns()) * 1e-9;
   RecordedMessage m;
+  bool touched = false;
   while (reader.Next(&m, &error)) {
+    // Before the first contact: the last batch none of whose ticks touched.
+    bool contact = false;
+    for (const v1::DeviceSample& d : m.envelope.device_samples().samples()) contact = contact || d.contact();
+    touched = touched || contact;
+    if (!touched && m.envelope.device_samples().samples_size() > 0)
+      s->before_contact_t_s = (m.log_time_ns - reader.start_ns()) * 1e-9;
     for (const v1::DeviceSample& d : m.envelope.device_samples().samples()) {
       const double f = std::hypot(d.force().x(), d.force().y(), d.force().z());
       if (f > s->peak_force) {

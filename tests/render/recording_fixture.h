@@ -19,7 +19,8 @@ struct RecordedSession {
   double peak_force = 0;
   double peak_tool_pos[3] = {0, 0, 0};
   double tool_radius = 0;
-  std::string error;  // why the session could not be made
+  double before_contact_t_s = -1;  // session time of the last device batch with no contact before the first contact
+  std::string error;               // why the session could not be made
 };
 
 // Made once per test program (the first call runs the server and agent: a few seconds).

@@ -7,6 +7,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import * as THREE from '../../viewer-web/node_modules/three/build/three.module.js';
 import { ToolMesh } from '../../viewer-web/src/view/tool.js';
+import { display } from '../../viewer-web/src/view/display.js';
 
 /** @param {ToolMesh} m @param {number} v */
 const vertex = (m, v) => new THREE.Vector3().fromArray(m.positions, 3 * v);
@@ -90,12 +91,12 @@ test('the arrow is drawn after the sphere, and only with a force', () => {
   assert.equal(m.geometry.drawRange.count, m.numSphereIndices);
 });
 
-test('the sphere is half see-through in its state colour; the arrow opaque', () => {
+test('the sphere\'s fill is see-through (display.json\'s fill_alpha) in its state colour; the arrow opaque', () => {
   const m = new ToolMesh(0x4f7cac, 0x1d5fa8);
   m.setColor(0xe08a1e);
   const want = new THREE.Color(0xe08a1e);
   for (let v = 0; v < m.numSphere; v++) {
-    assert.deepEqual(Array.from(m.colors.subarray(4 * v, 4 * v + 4)), [Math.fround(want.r), Math.fround(want.g), Math.fround(want.b), 0.5]);
+    assert.deepEqual(Array.from(m.colors.subarray(4 * v, 4 * v + 4)), [Math.fround(want.r), Math.fround(want.g), Math.fround(want.b), Math.fround(display.tool.fill_alpha)]);
   }
   const arrow = new THREE.Color(0x1d5fa8);
   assert.deepEqual(Array.from(m.colors.subarray(4 * m.numSphere, 4 * m.numSphere + 4)),

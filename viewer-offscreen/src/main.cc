@@ -112,8 +112,9 @@ int RunLive(Output& o, const LiveOptions& live, double every_s, const std::strin
 int main(int argc, char** argv) {
   CLI::App app{"idms-render: PNG screenshots of idms models, recordings and live sessions (OSMesa, no display)"};
   std::string model, recording, server, session, token, out, size = "1280x720", camera = "auto";
-  std::string at_text, every_text;
-  bool wireframe = false, show_tool = false, show_force = false;
+  std::string at_text, every_text, colour = "displacement";
+  double deformation_scale = 1;
+  bool wireframe = false, show_tool = false, show_force = false, no_legend = false;
   auto* model_opt = app.add_option("--model", model, "A model at rest: PREFIX of PREFIX.fem + PREFIX.plg");
   auto* rec_opt = app.add_option("--recording", recording, "A session recording (.mcap)");
   auto* server_opt = app.add_option("--server", server, "A live session's server, http://HOST:PORT");
@@ -127,6 +128,13 @@ int main(int argc, char** argv) {
   app.add_flag("--wireframe", wireframe, "Draw the triangles' edges instead of the shaded surface");
   app.add_flag("--show-tool", show_tool, "Draw the tool sphere at the device position");
   app.add_flag("--show-force", show_force, "Draw the device force as an arrow from the tool");
+  app.add_option("--color,--colour", colour,
+                 "What the surface's colour shows: displacement (from rest), stiffness (--model only) or plain")
+      ->capture_default_str();
+  app.add_option("--deformation-scale", deformation_scale,
+                 "Exaggerate the deformation: drawn = rest + S (p - rest), S in (0, 100]; colours stay true")
+      ->capture_default_str();
+  app.add_flag("--no-legend", no_legend, "Leave out the colour legend");
   model_opt->excludes(rec_opt)->excludes(server_opt);
   rec_opt->excludes(server_opt);
   CLI11_PARSE(app, argc, argv);
@@ -153,6 +161,23 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "idms-render: --every needs a positive period and a recording or a live session\n");
     return 1;
   }
+  if (colour != "displacement" && colour != "stiffness" && colour != "plain") {
+    std::fprintf(stderr, "idms-render: --color %s: expected displacement, stiffness or plain\n", colour.c_str());
+    return 1;
+  }
+  if (colour == "stiffness" && model.empty()) {
+    std::fprintf(stderr, "idms-render: --color stiffness needs --model (a recording carries no elements)\n");
+    return 1;
+  }
+  if (!(deformation_scale > 0 && deformation_scale <= kMaxDeformationScale)) {
+    std::fprintf(stderr, "idms-render: --deformation-scale: expected a number in (0, 100]\n");
+    return 1;
+  }
+  o.options.colour_by = colour == "stiffness" ? ColourBy::kStiffness
+                        : colour == "plain"   ? ColourBy::kPlain
+                                              : ColourBy::kDisplacement;
+  o.options.deformation_scale = deformation_scale;
+  o.options.legend = !no_legend;
   o.options.wireframe = wireframe;
   o.options.show_tool = show_tool;
   o.options.show_force = show_force;

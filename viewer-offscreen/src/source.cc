@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "idms/protocol/mesh_codec.h"
+#include "idms/render/display.h"
 #include "idms/sim/model.h"
 #include "idms/sim/model_io.h"
 
@@ -20,7 +21,11 @@ SceneView ViewerState::View() const {
   if (has_sample) {
     v.tool_pos = {sample.tool_pos().x(), sample.tool_pos().y(), sample.tool_pos().z()};
     v.force = {sample.force().x(), sample.force().y(), sample.force().z()};
+    v.contact = sample.contact();
+    v.grasp = sample.grasp();
   }
+  if (rest.size() == v.positions.size()) v.rest = rest, v.rest_time_s = rest_time_s;
+  if (stiffness.size() * 3 == v.positions.size()) v.stiffness = stiffness;
   return v;
 }
 
@@ -32,6 +37,11 @@ bool ViewerState::Apply(const v1::Envelope& e, std::string* error) {
   if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
     const MirrorStatus status = mirror.Apply(e, error);
     if (status == MirrorStatus::kInvalid) return false;
+    // Rest: the first surface, or the first of a new size (a cut that exposed atoms).
+    if (status == MirrorStatus::kOk && e.has_mesh_keyframe() && rest.size() != mirror.positions().size()) {
+      rest.assign(mirror.positions().begin(), mirror.positions().end());
+      rest_time_s = mirror.time_s();
+    }
     return true;  // a gap keeps the last frame, as a viewer does until its next keyframe
   }
   if (e.has_device_samples() && e.device_samples().samples_size() > 0) {
@@ -50,7 +60,9 @@ bool LoadRestState(const Model& model, ViewerState* state, std::string* error) {
   v1::Envelope keyframe;
   if (!encoder.Encode(0, surface, &keyframe, error)) return false;
   state->has_sample = false;
-  return state->mirror.Apply(keyframe, error) == MirrorStatus::kOk;
+  state->rest.clear();
+  state->stiffness = StiffnessPerVertex(model);
+  return state->Apply(keyframe, error);
 }
 
 bool LoadRestState(const std::string& prefix, ViewerState* state, std::string* error) {
@@ -84,6 +96,19 @@ bool RecordingPlayer::Open(const std::string& path, std::string* error) {
   v1::Scene parsed;
   if (scene != reader_.session().end() && google::protobuf::TextFormat::ParseFromString(scene->second, &parsed))
     state_->SetScene(parsed);
+  // Rest: the recording's first keyframe (the session's start), whatever time is asked for.
+  RecordingReader first;
+  RecordingReaderOptions mesh_only;
+  mesh_only.device = mesh_only.events = mesh_only.annotations = false;
+  if (!first.Open(path, mesh_only, error)) return false;
+  RecordedMessage m;
+  ViewerState start;
+  while (start.rest.empty() && first.Next(&m, error)) {
+    if (m.envelope.has_mesh_keyframe() && !start.Apply(m.envelope, error)) return *error = path + ": " + *error, false;
+  }
+  if (!error->empty()) return *error = path + ": " + *error, false;
+  state_->rest = std::move(start.rest);
+  state_->rest_time_s = start.rest_time_s;
   position_ns_ = reader_.start_ns();
   pending_.reset();
   at_end_ = false;
@@ -119,6 +144,8 @@ bool RecordingPlayer::MoveTo(double t_s, std::string* error) {
     // A fresh mirror: frames from before the seek must not stand in for the surface at t_s.
     auto fresh = std::make_unique<ViewerState>();
     fresh->tool_radius = state_->tool_radius;
+    fresh->rest = state_->rest;
+    fresh->rest_time_s = state_->rest_time_s;
     state_ = std::move(fresh);
   }
   // Apply what was logged up to the target.

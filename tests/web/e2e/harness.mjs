@@ -95,13 +95,15 @@ export class Server {
 }
 
 /**
- * The real agent publishing a scripted palpation of the shipped hex model.
- * @param {Server} server @param {number} durationS @param {string} [device]
+ * The real agent publishing a scripted palpation of the shipped hex model: its files, or with
+ * `library` the server's library's copy by name (downloaded, as a deployed agent does).
+ * @param {Server} server @param {number} durationS @param {string} [device] @param {{library?: boolean}} [options]
  */
-export function startAgent(server, durationS, device = 'scripted:palpate') {
+export function startAgent(server, durationS, device = 'scripted:palpate', options = {}) {
+  const model = options.library ? ['--model', 'hex_4x5_home', '--cache-dir', tempDir('agent-cache')]
+    : ['--model-file', join(sourceDir(), 'models', 'hex_4x5_home')];
   const child = spawn(agentBin(), ['--server', `ws://127.0.0.1:${server.port}`, '--token', server.token('agent'),
-    '--model-file', join(sourceDir(), 'models', 'hex_4x5_home'), '--device', device, '--no-realtime',
-    '--duration', String(durationS)], { stdio: ['ignore', 'ignore', 'pipe'] });
+    ...model, '--device', device, '--no-realtime', '--duration', String(durationS)], { stdio: ['ignore', 'ignore', 'pipe'] });
   let log = '';
   child.stderr.on('data', (d) => { log += d; });
   const exited = new Promise((resolve) => child.once('exit', (code) => resolve(code)));
@@ -138,6 +140,61 @@ export async function shot(target, name) {
   const buffer = await target.screenshot();
   writeFileSync(join(artifacts(), name), buffer);
   return buffer;
+}
+
+/**
+ * A PNG's pixels, decoded by the browser in a blank page of the same context (no Content-Security-
+ * Policy there): RGBA rows, top first.
+ * @param {import('playwright-core').BrowserContext} context @param {Buffer} png
+ * @returns {Promise<{width: number, height: number, data: Uint8Array}>}
+ */
+export async function decodePng(context, png) {
+  const blank = await context.newPage();
+  try {
+    const { width, height, data } = await blank.evaluate(async (b64) => {
+      const img = new Image();
+      img.src = `data:image/png;base64,${b64}`;
+      await img.decode();
+      const c = document.createElement('canvas');
+      c.width = img.width;
+      c.height = img.height;
+      const ctx = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
+      ctx.drawImage(img, 0, 0);
+      const pixels = ctx.getImageData(0, 0, c.width, c.height).data;
+      let text = '';
+      for (let i = 0; i < pixels.length; i += 8192) text += String.fromCharCode(...pixels.subarray(i, i + 8192));
+      return { width: c.width, height: c.height, data: btoa(text) };
+    }, png.toString('base64'));
+    return { width, height, data: new Uint8Array(Buffer.from(data, 'base64')) };
+  } finally {
+    await blank.close();
+  }
+}
+
+/**
+ * The share of pixels that changed clearly (some channel by more than 24 levels: a change a person
+ * sees, not a level of shading; render_test.cc's ClearChange) between two images of one size, in a
+ * disc of radius r around (cx, cy) (an ellipse of radii r and ry when given), and over the whole image.
+ * @param {{width: number, height: number, data: Uint8Array}} a @param {{width: number, height: number, data: Uint8Array}} b
+ * @param {number} cx @param {number} cy @param {number} r pixels @param {number} [ry]
+ */
+export function clearChange(a, b, cx, cy, r, ry = r) {
+  let inside = 0, insideChanged = 0, changed = 0, outsideChanged = 0;
+  for (let y = 0; y < a.height; y++) {
+    for (let x = 0; x < a.width; x++) {
+      const i = 4 * (y * a.width + x);
+      const clear = Math.max(Math.abs(a.data[i] - b.data[i]), Math.abs(a.data[i + 1] - b.data[i + 1]), Math.abs(a.data[i + 2] - b.data[i + 2])) > 24;
+      if (clear) changed++;
+      if (Math.hypot((x + 0.5 - cx) / r, (y + 0.5 - cy) / ry) > 1) {
+        if (clear) outsideChanged++;
+        continue;
+      }
+      inside++;
+      if (clear) insideChanged++;
+    }
+  }
+  const n = a.width * a.height;
+  return { region: inside ? insideChanged / inside : 0, image: changed / n, outside: outsideChanged / n };
 }
 
 /**

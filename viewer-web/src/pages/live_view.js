@@ -65,7 +65,7 @@ export class LiveView {
     if (status === 'ok') {
       if (keyframe) {
         st.keyframes++;
-        this.view.setSurface(this.mirror);
+        this.view.setSurface(this.mirror, this.mirror.timeS);
         this.hosts.gapNote.textContent = '';
       } else {
         st.deltas++;

@@ -1,20 +1,24 @@
 // /models/{name}: the model's versions with their hashes, a 3D preview of a version at rest (its
-// .obj surface), and delete for admins.
+// .obj surface) coloured by stiffness (each surface atom's mean element k, from its .fem: an
+// inclusion shows), and delete for admins.
 import { api } from '../net/api.js';
 import { parseObj } from '../codec/obj.js';
 import { SurfaceView } from '../view/surface.js';
+import { stiffnessPerVertex } from '../view/display.js';
 import { h, page, formatDate } from './dom.js';
 
 /** @param {string} name @param {string} role */
 export function modelPage(name, role) {
   const viewHost = h('div', { class: 'view3d preview', id: 'preview' });
+  const colour = h('select', { id: 'colour-by', 'aria-label': 'Colour the preview by' },
+    [h('option', { value: 'stiffness', text: 'stiffness' }), h('option', { value: 'plain', text: 'plain' })]);
   const info = h('p', { class: 'meta', id: 'preview-info', role: 'status', text: 'Loading…' });
   const body = h('tbody');
   page(`Model ${name}`, [
     h('h1', {}, ['Model ', h('code', { text: name })]),
     info,
     h('div', { class: 'model-grid' }, [
-      h('section', { 'aria-label': 'Preview at rest' }, [viewHost]),
+      h('section', { 'aria-label': 'Preview at rest' }, [viewHost, h('div', { class: 'toolbar' }, [h('label', {}, ['Colour ', colour])])]),
       h('section', { 'aria-labelledby': 'versions-title' }, [h('h2', { id: 'versions-title', text: 'Versions' }),
         h('div', { class: 'scroll' }, [h('table', { class: 'list', id: 'versions' }, [
           h('thead', {}, [h('tr', {}, ['Version', 'Atoms', 'Elements', 'Triangles', 'Description', 'Added', 'fem SHA-256', '']
@@ -22,17 +26,44 @@ export function modelPage(name, role) {
     ]),
   ]);
   const view = new SurfaceView(viewHost);
+  /** Per surface vertex of the version shown; null until its .fem is read (or when it cannot be). @type {Float64Array | null} */
+  let stiffness = null;
+  const applyColour = () => view.setColourBy(colour.value === 'stiffness' && stiffness ? 'stiffness' : 'plain', stiffness);
+  colour.addEventListener('change', applyColour);
 
   /** @param {number} version */
   async function preview(version) {
-    const res = await fetch(`/api/models/${encodeURIComponent(name)}/obj?version=${version}`, { credentials: 'same-origin' });
-    if (!res.ok) throw new Error(`obj: HTTP ${res.status}`);
-    const surface = parseObj(await res.text());
+    const file = (/** @type {string} */ kind) => fetch(`/api/models/${encodeURIComponent(name)}/${kind}?version=${version}`,
+      { credentials: 'same-origin' }).then((res) => {
+      if (!res.ok) throw new Error(`${kind}: HTTP ${res.status}`);
+      return res.text();
+    });
+    const [obj, fem] = await Promise.all([file('obj'), file('fem')]);
+    const surface = parseObj(obj);
+    stiffness = stiffnessPerVertex(fem);
+    if (stiffness.length !== surface.numVertices) stiffness = null;
     view.fitted = false;
     view.setSurface(surface);
-    info.textContent = `Version ${version} at rest: ${surface.numVertices} surface vertices, ${surface.numTriangles} triangles`;
-    /** @type {any} */ (window).__idmsPreview = { version, vertices: surface.numVertices, triangles: surface.numTriangles };
+    applyColour();
+    let kRange = '';
+    if (stiffness) kRange = `, stiffness k ${view.surface.lo.toPrecision(3)} to ${view.surface.hi.toPrecision(3)}`;
+    info.textContent = `Version ${version} at rest: ${surface.numVertices} surface vertices, ${surface.numTriangles} triangles${kRange}`;
+    /** @type {any} */ (window).__idmsPreview = { version, vertices: surface.numVertices, triangles: surface.numTriangles,
+      colourBy: view.surface.colourBy, lo: view.surface.lo, hi: view.surface.hi };
   }
+  // For the tests: where the stiffer half of the range's vertices fall on the canvas (their centre
+  // and half their extent across and up, CSS pixels); null when the model is one stiffness.
+  /** @type {any} */ (window).__idmsStiffRegion = () => {
+    const g = view.surface;
+    if (!stiffness || !(g.hi > g.lo)) return null;
+    const points = [];
+    for (let v = 0; v < g.numVertices; v++) {
+      if (stiffness[v] >= (g.lo + g.hi) / 2) points.push(view.project(g.actual[3 * v], g.actual[3 * v + 1], g.actual[3 * v + 2]));
+    }
+    const xs = points.map((p) => p.x), ys = points.map((p) => p.y);
+    const [x0, x1, y0, y1] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+    return { x: (x0 + x1) / 2, y: (y0 + y1) / 2, rx: (x1 - x0) / 2, ry: (y1 - y0) / 2, count: points.length };
+  };
 
   async function load() {
     const m = await api(`/api/models/${encodeURIComponent(name)}`);

@@ -7,6 +7,8 @@ import { EnvelopeSocket } from '../net/socket.js';
 import { FrameLoop } from '../view/frame_loop.js';
 import { api } from '../net/api.js';
 import { h, page } from './dom.js';
+import { display } from '../view/display.js';
+import { parseObj } from '../codec/obj.js';
 import { Timeline } from './timeline.js';
 import { LiveView } from './live_view.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel } from './session_panels.js';
@@ -43,6 +45,11 @@ function layout(id, mode, panels) {
     gapNote: h('p', { class: 'gap-note', id: 'gap-note', role: 'status' }),
   };
   const wire = h('input', { type: 'checkbox', id: 'wireframe' });
+  // What the colours say and how much the deformation is exaggerated (display.json's scales).
+  const colour = h('select', { id: 'colour-by', 'aria-label': 'Colour the surface by' },
+    [h('option', { value: 'displacement', text: 'displacement' }), h('option', { value: 'plain', text: 'plain' })]);
+  const scale = h('select', { id: 'deformation-scale', 'aria-label': 'Deformation scale' },
+    display.displacement.scales.map((x) => h('option', { value: String(x), text: `×${x}` })));
   const plots = h('aside', { class: 'side plots-side' }, [
     h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }),
       hosts.force, hosts.position, hosts.depth]),
@@ -61,13 +68,14 @@ function layout(id, mode, panels) {
     h('div', { class: 'session-grid' }, [
       h('section', { class: 'view-section', 'aria-label': '3D view' }, [
         hosts.view,
-        h('div', { class: 'toolbar' }, [h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
+        h('div', { class: 'toolbar' }, [h('label', {}, ['Colour ', colour]), h('label', {}, ['Deformation ', scale]),
+          h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
       ]),
       plots,
       below,
     ]),
   ].filter((x) => x !== null));
-  return { hosts, wire };
+  return { hosts, wire, colour, scale };
 }
 
 /**
@@ -96,8 +104,34 @@ function dispatch(p, env) {
   } else if (env.welcome) {
     const tools = env.welcome.scene?.tools || [];
     p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
+    if (env.welcome.scene?.model) loadModelRest(p, env.welcome.scene.model, env.welcome.scene.quantStep || 1e-4);
   }
   p.health.invalidate();
+}
+
+/**
+ * The displacement's rest: the library model the scene names ("NAME" or "NAME@VERSION") at rest,
+ * its positions on the session's quantisation grid as its first keyframe had them; without it
+ * (a model from a file, a library that lost it) rest is the first surface the page gets, which in
+ * a replay opened or a live session joined after the start is not the model at rest (the legend
+ * then says from when).
+ * @param {Parts} p @param {string} model @param {number} quantStep
+ */
+function loadModelRest(p, model, quantStep) {
+  const [name, version] = model.split('@');
+  const query = version ? `?version=${encodeURIComponent(version)}` : '';
+  fetch(`/api/models/${encodeURIComponent(name)}/obj${query}`, { credentials: 'same-origin' })
+    .then((res) => (res.ok ? res.text() : Promise.reject(new Error(`HTTP ${res.status}`))))
+    .then((text) => {
+      // Quantised as protocol/'s encoder does (half away from zero), dequantised as its mirror.
+      const rest = parseObj(text).positions, inv = 1 / quantStep;
+      for (let i = 0; i < rest.length; i++) {
+        const v = rest[i] * inv;
+        rest[i] = Math.trunc(v + (v >= 0 ? 0.5 : -0.5)) * quantStep;
+      }
+      p.view.view.setModelRest(rest);
+    })
+    .catch(() => {});  // rest stays the first surface
 }
 
 /** The connection's state in the top bar (nothing while connected). @param {string} state @param {string} text */
@@ -151,17 +185,24 @@ export function sessionPage(id, role, mode) {
   const health = new HealthPanel(st, loop, timeline ? () => timeline.time : undefined);
   const events = new EventList(st);
   const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
-  const { hosts, wire } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
+  const { hosts, wire, colour, scale } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
     annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el,
     commands: mode === 'live' && role === 'admin' ? commandPanel(send) : null });
   const view = new LiveView(st, hosts, kWindowS, loop);
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
+  colour.addEventListener('change', () => view.view.setColourBy(/** @type {'displacement' | 'plain'} */ (colour.value)));
+  scale.addEventListener('change', () => view.view.setScale(Number(scale.value)));
   Object.defineProperty(st, 'forcePoints', { get: () => view.forcePlot.length + view.forcePlot.numPending, enumerable: true });
   Object.defineProperty(st, 'forceShown', { get: () => view.forcePlot.shown, enumerable: true });
   Object.defineProperty(st, 'forceFirstS', { get: () => view.forcePlot.shownFirstS, enumerable: true });
   Object.defineProperty(st, 'forceLastS', { get: () => view.forcePlot.shownLastS, enumerable: true });
   // Where the surface and the tool fall in the view, for the tests (computed when asked).
   /** @type {any} */ (window).__idmsFraming = () => view.view.framing();
+  // What the surface shows, and where a model point falls on the canvas, for the tests.
+  /** @type {any} */ (window).__idmsSurface = () => ({ contacts: view.view.numContacts, lo: view.view.surface.lo, hi: view.view.surface.hi,
+    colourBy: view.view.surface.colourBy, scale: view.view.surface.scale, restTimeS: view.view.surface.restTimeS,
+    camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius });
+  /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
 
   /** @type {Parts} */

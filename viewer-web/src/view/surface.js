@@ -1,19 +1,26 @@
 // The tissue in 3D: the surface as one three.js BufferGeometry updated in place (SurfaceGeometry:
-// only moved vertices' positions and the normals around them, uploaded as update ranges; the
-// normals once per frame drawn, for every vertex moved since the last), the tool as a
-// sphere of its radius (thesis 6.1), the force as an arrow scaled to its magnitude. Renders only
-// when something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the
-// first keyframe is drawn.
+// only moved vertices' positions, colour values and the normals around them, uploaded as update
+// ranges; the normals once per frame drawn, for every vertex moved since the last), coloured by
+// displacement from rest (or stiffness) through protocol/display.json's map and lit by its grazing
+// key and fill lights (surface_material.js: idms-render's arithmetic), with a legend; the vertices
+// in contact marked; the tool as an outlined see-through sphere of its radius (thesis 6.1) so the
+// contact patch keeps its colours, the force as an arrow scaled to its magnitude. Renders only when
+// something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the first
+// keyframe is drawn.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { FrameLoop } from './frame_loop.js';
 import { SurfaceGeometry } from './surface_geometry.js';
+import { surfaceMaterial } from './surface_material.js';
+import { Legend } from './legend.js';
+import { display, tickText } from './display.js';
 import { ToolMesh } from './tool.js';
 import { length3 } from '../length3.js';
 
-const kToolFree = 0x4f7cac;
-const kToolContact = 0xe08a1e;
-const kToolGrasp = 0xc0392b;
+const hexNumber = (/** @type {string} */ hex) => Number.parseInt(hex.slice(1), 16);
+const kToolFree = hexNumber(display.tool.free_srgb);
+const kToolContact = hexNumber(display.tool.contact_srgb);
+const kToolGrasp = hexNumber(display.tool.grasp_srgb);
 
 /** The camera's direction from what it looks at: in front, a little above and to the side. */
 const kViewFrom = new THREE.Vector3(0.3, -2.6, 1.0).normalize();
@@ -158,17 +165,35 @@ export class SurfaceView {
     this.renderer.domElement.tabIndex = 0;
     this.controls.listenToKeyEvents(this.renderer.domElement);
     this.controls.addEventListener('change', () => this.invalidate());
+    // The arrow's light (Lambert); the surface lights itself (surface_material.js).
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8090a0, 1.6));
     const sun = new THREE.DirectionalLight(0xffffff, 1.8);
     sun.position.set(3, 5, 8);
     this.scene.add(sun);
-    // The surface.
+    // The surface, its legend, and the contact markers (two squares per vertex, dark then light,
+    // over everything: seen on any colour of the map).
     this.surface = new SurfaceGeometry();
-    this.material = new THREE.MeshStandardMaterial({ color: 0xe3a6a0, roughness: 0.7, side: THREE.DoubleSide });
+    this.material = surfaceMaterial();
     this.mesh = new THREE.Mesh(this.surface.geometry, this.material);
     this.mesh.frustumCulled = false;
     this.mesh.visible = false;
     this.scene.add(this.mesh);
+    this.legend = new Legend(host);
+    this.contactIds = new Uint32Array(0);
+    this.numContacts = 0;
+    this.contactGeometry = new THREE.BufferGeometry();
+    /** @type {THREE.Points[]} */
+    this.contactMarks = [[display.contact.outer_srgb, display.contact.outer_px], [display.contact.inner_srgb, display.contact.inner_px]]
+      .map(([colour, size], i) => {
+        const m = new THREE.Points(this.contactGeometry, new THREE.PointsMaterial({ color: new THREE.Color(String(colour)),
+          size: Number(size), sizeAttenuation: false, depthTest: false, depthWrite: false }));
+        m.frustumCulled = false;
+        m.renderOrder = 5 + i;
+        m.visible = false;
+        this.scene.add(m);
+        return m;
+      });
+    this.contact = false;
     // The tool and the force.
     this.tool = new ToolMesh(kToolFree, 0x1d5fa8);
     this.tool.visible = false;
@@ -222,6 +247,7 @@ export class SurfaceView {
     if (!this.dirty) return false;
     this.dirty = false;
     if (this.surface.moved) this.surface.updateNormals();
+    this.markContacts();
     this.renderer.render(this.scene, this.camera);
     this.surface.rendered();
     this.onRender?.();
@@ -234,16 +260,88 @@ export class SurfaceView {
     this.invalidate();
   }
 
+  /** The model at rest (SurfaceGeometry.setModelRest). @param {Float32Array} positions */
+  setModelRest(positions) {
+    this.surface.setModelRest(positions);
+    this.showLegend();
+    this.invalidate();
+  }
+
+  /** The deformation scale (drawn = rest + scale (p - rest)). @param {number} scale > 0 */
+  setScale(scale) {
+    this.surface.setScale(scale);
+    this.showLegend();
+    this.invalidate();
+  }
+
+  /**
+   * What the surface's colours say.
+   * @param {import('./surface_geometry.js').ColourBy} by @param {Float64Array | null} [stiffness] per vertex
+   */
+  setColourBy(by, stiffness = null) {
+    this.surface.setColourBy(by, stiffness);
+    this.material.uniforms.useMap.value = by !== 'plain';
+    this.showLegend();
+    this.invalidate();
+  }
+
+  /** The legend for what the colours say now. */
+  showLegend() {
+    const g = this.surface;
+    if (g.colourBy === 'plain' || g.numVertices === 0) return this.legend.show(null);
+    /** @type {string[]} */
+    const notes = [];
+    if (g.colourBy === 'displacement') {
+      if (g.scale !== 1) notes.push(`deformation ×${tickText(g.scale)}`);
+      if (g.restTimeS > display.displacement.rest_note_after_s) notes.push(`from t = ${tickText(g.restTimeS)} s`);
+      this.legend.show({ title: 'displacement', unit: display.unit.length, lo: g.lo, hi: g.hi, saturates: true, notes });
+    } else {
+      this.legend.show({ title: 'stiffness k', unit: display.unit.stiffness, lo: g.lo, hi: g.hi, saturates: false, notes });
+    }
+  }
+
+  /**
+   * The vertices in contact (display.json's "contact"), while the device reports contact: those
+   * within (1 + tolerance) tool radii of its centre, at their true positions; drawn where they are
+   * drawn. Once per frame drawn; allocates only when the surface grows.
+   */
+  markContacts() {
+    const g = this.surface;
+    let n = 0;
+    if (this.contact && this.tool.visible && g.numVertices > 0) {
+      if (this.contactIds.length < g.numVertices) {
+        this.contactIds = new Uint32Array(g.capacityV);
+        this.contactGeometry.setIndex(new THREE.BufferAttribute(this.contactIds, 1));
+      }
+      const c = this.tool.position, a = g.actual;
+      const reach = this.toolRadius * (1 + display.contact.radius_tolerance);
+      for (let v = 0; v < g.numVertices; v++) {
+        const dx = a[3 * v] - c.x, dy = a[3 * v + 1] - c.y, dz = a[3 * v + 2] - c.z;
+        if (dx * dx + dy * dy + dz * dz < reach * reach) this.contactIds[n++] = v;
+      }
+      if (this.contactGeometry.getAttribute('position') !== g.posAttr && g.posAttr) this.contactGeometry.setAttribute('position', g.posAttr);
+      const index = /** @type {THREE.BufferAttribute} */ (this.contactGeometry.index);
+      index.clearUpdateRanges();
+      index.addUpdateRange(0, Math.max(n, 1));
+      index.needsUpdate = true;
+      this.contactGeometry.setDrawRange(0, n);
+    }
+    this.numContacts = n;
+    for (const m of this.contactMarks) m.visible = n > 0 && !this.material.wireframe;
+  }
+
   /**
    * A whole surface (a keyframe); the same triangles again are taken as the vertices that moved
    * (SurfaceGeometry.setSurface).
    * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
+   * @param {number} [timeS] its session time (rest's, for the legend, when it becomes rest)
    */
-  setSurface(s) {
-    if (this.surface.setSurface(s)) {
+  setSurface(s, timeS = 0) {
+    if (this.surface.setSurface(s, timeS)) {
       this.mesh.geometry = this.surface.geometry;
       this.mesh.visible = s.numTriangles > 0;
       if (!this.fitted && s.numVertices > 0) this.fit();
+      this.showLegend();
       this.invalidate();
     } else if (this.surface.moved) {
       this.invalidate();
@@ -274,6 +372,7 @@ export class SurfaceView {
     this.tool.position.set(x, y, z);
     if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
     this.tool.setColor(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
+    this.contact = contact;
     const f = length3(fx, fy, fz);
     if (f > 1e-9) {
       this.forceDir.set(fx / f, fy / f, fz / f);
@@ -351,10 +450,24 @@ export class SurfaceView {
       tool: round(c), aspect: Number(this.camera.aspect.toFixed(3)) };
   }
 
+  /**
+   * Where a model-frame point falls on the canvas, CSS pixels from its top left (the tests read it).
+   * @param {number} x @param {number} y @param {number} z
+   */
+  project(x, y, z) {
+    this.camera.updateMatrixWorld();
+    const p = new THREE.Vector3(x, y, z).project(this.camera);
+    const r = this.renderer.domElement.getBoundingClientRect();
+    return { x: ((p.x + 1) / 2) * r.width, y: ((1 - p.y) / 2) * r.height };
+  }
+
   dispose() {
     this.loop.remove(this);
     this.resizeObserver.disconnect();
     this.controls.dispose();
+    this.legend.dispose();
+    this.contactGeometry.dispose();
+    for (const m of this.contactMarks) /** @type {THREE.Material} */ (m.material).dispose();
     this.surface.dispose();
     this.tool.dispose();
     this.renderer.dispose();

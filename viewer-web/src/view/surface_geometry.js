@@ -1,11 +1,16 @@
 // The tissue's surface as one three.js BufferGeometry updated in place: a keyframe sets it whole
 // (or, with the triangles already shown, as the vertices that moved), a delta moves vertices, and
 // once per frame drawn the normals around every vertex moved since the last frame are recomputed
-// and only the spans that changed are uploaded, as update ranges. Nothing is allocated per frame
-// once the first keyframe is set. No renderer, canvas or camera: SurfaceView draws it, and the
-// tests build it in Node.
+// and only the spans that changed are uploaded, as update ranges. Each vertex also carries its
+// colour-map value (display.json: its displacement from rest over the model's fixed range, or its
+// stiffness), and is drawn at rest + scale (p - rest) (the deformation scale). Nothing is
+// allocated per frame once the first keyframe is set. No renderer, canvas or camera: SurfaceView
+// draws it, and the tests build it in Node.
 import * as THREE from 'three';
 import { length3 } from '../length3.js';
+import { colourIndex, displacementRange } from './display.js';
+
+/** @typedef {'displacement' | 'stiffness' | 'plain'} ColourBy */
 
 export class SurfaceGeometry {
   constructor() {
@@ -18,6 +23,25 @@ export class SurfaceGeometry {
     this.numTriangles = 0;
     /** @type {THREE.BufferAttribute | null} */ this.posAttr = null;
     /** @type {THREE.BufferAttribute | null} */ this.normAttr = null;
+    /** Each vertex's colour-map entry / 255 (the material's `value`). @type {THREE.BufferAttribute | null} */
+    this.valueAttr = null;
+    // The true positions (the drawn ones are exaggerated when scale != 1), rest, and what colours.
+    this.actual = new Float32Array(0);
+    this.rest = new Float32Array(0);
+    /** Vertices rest holds (display.json: the first surface, or the first of a new size). */
+    this.restVertices = -1;
+    /** Session time of rest, s. */
+    this.restTimeS = 0;
+    /** The model at rest from elsewhere (the library), for a surface of its size. @type {Float32Array | null} */
+    this.modelRest = null;
+    this.scale = 1;
+    /** @type {ColourBy} */
+    this.colourBy = 'displacement';
+    /** Per vertex, for colourBy 'stiffness'. @type {Float64Array | null} */
+    this.stiffness = null;
+    /** The range the map spans. */
+    this.lo = 0;
+    this.hi = 1;
     // The buffers go whole with the next render (new triangles): until then no update range is
     // set (three.js uploads only the ranges when there are any).
     this.wholePending = false;
@@ -48,9 +72,10 @@ export class SurfaceGeometry {
    * triangles again (the stream's periodic keyframe, every few seconds of a session) are taken as
    * a delta of the vertices that moved: nothing rebuilt, nothing uploaded but what moved.
    * @param {{numVertices: number, numTriangles: number, positions: Float32Array, triangles: Uint32Array}} s
+   * @param {number} [timeS] the surface's session time (rest's, when it becomes rest)
    * @returns {boolean} whether it was rebuilt whole (new triangles), not taken as moved vertices
    */
-  setSurface(s) {
+  setSurface(s, timeS = 0) {
     const nv = s.numVertices;
     const nt = s.numTriangles;
     if (nt > 0 && nv === this.numVertices && nt === this.numTriangles && this.sameTriangles(s.triangles)) {
@@ -58,28 +83,129 @@ export class SurfaceGeometry {
       return false;
     }
     if (nv > this.capacityV || nt > this.capacityT) this.allocate(Math.max(nv, this.capacityV), Math.max(nt, this.capacityT));
-    const pos = /** @type {THREE.BufferAttribute} */ (this.posAttr);
-    const norm = /** @type {THREE.BufferAttribute} */ (this.normAttr);
-    /** @type {Float32Array} */ (pos.array).set(s.positions.subarray(0, 3 * nv));
+    this.actual.set(s.positions.subarray(0, 3 * nv));
     const index = /** @type {THREE.BufferAttribute} */ (this.geometry.index);
     /** @type {Uint32Array} */ (index.array).set(s.triangles.subarray(0, 3 * nt));
     this.numVertices = nv;
     this.numTriangles = nt;
     this.buildAdjacency(s.triangles, nv, nt);
-    // Every face normal, then every vertex normal.
-    for (let t = 0; t < nt; t++) this.faceNormal(t);
-    for (let v = 0; v < nv; v++) this.vertexNormal(v);
-    this.geometry.setDrawRange(0, 3 * nt);
-    for (const a of [pos, norm, index]) {
-      a.clearUpdateRanges();
-      a.needsUpdate = true;
+    // Rest: the model's at rest when known and of this size; else the first surface, or the first
+    // of a new size (a cut that exposed atoms).
+    if (this.restVertices !== nv) {
+      const model = this.modelRest && this.modelRest.length === 3 * nv ? this.modelRest : null;
+      this.rest.set(model ?? s.positions.subarray(0, 3 * nv));
+      this.restVertices = nv;
+      this.restTimeS = model ? 0 : timeS;
     }
-    this.wholePending = true;
+    this.geometry.setDrawRange(0, 3 * nt);
+    this.redrawAll();
+    /** @type {THREE.BufferAttribute} */ (this.geometry.index).needsUpdate = true;
     // Everything is new: nothing moved is left to do (a new stamp: the arrays may be new too).
     this.stamp++;
     this.numTouchedTris = 0;
     this.movedHi = -1;
     return true;
+  }
+
+  /**
+   * Every vertex's drawn position, value and normal again, uploaded whole with the next render (a
+   * new surface, scale, or what the colours say).
+   */
+  redrawAll() {
+    const nv = this.numVertices, nt = this.numTriangles;
+    if (!this.posAttr || !this.normAttr || !this.valueAttr) return;
+    const p = /** @type {Float32Array} */ (this.posAttr.array);
+    this.range();
+    for (let v = 0; v < nv; v++) this.drawVertex(v, p);
+    for (let t = 0; t < nt; t++) this.faceNormal(t);
+    for (let v = 0; v < nv; v++) this.vertexNormal(v);
+    for (const a of [this.posAttr, this.normAttr, this.valueAttr]) {
+      a.clearUpdateRanges();
+      a.needsUpdate = true;
+    }
+    this.wholePending = true;
+    this.stamp++;
+    this.numTouchedTris = 0;
+    this.movedHi = -1;
+  }
+
+  /** The range the colour map spans for what it says (display.json's rules). */
+  range() {
+    this.lo = 0;
+    this.hi = 1;
+    if (this.colourBy === 'displacement') {
+      const index = /** @type {Uint32Array} */ (/** @type {THREE.BufferAttribute} */ (this.geometry.index).array);
+      this.hi = displacementRange(this.rest, index, this.numTriangles);
+    } else if (this.colourBy === 'stiffness' && this.stiffness) {
+      this.lo = Infinity;
+      this.hi = -Infinity;
+      for (const k of this.stiffness) {
+        this.lo = Math.min(this.lo, k);
+        this.hi = Math.max(this.hi, k);
+      }
+    }
+  }
+
+  /**
+   * Vertex v's drawn position (rest + scale (p - rest)) into p, and its value.
+   * @param {number} v @param {Float32Array} p the position attribute's array
+   */
+  drawVertex(v, p) {
+    const a = this.actual, r = this.rest, i = 3 * v;
+    if (this.scale === 1) {
+      p[i] = a[i];
+      p[i + 1] = a[i + 1];
+      p[i + 2] = a[i + 2];
+    } else {
+      const s = this.scale;
+      p[i] = r[i] + s * (a[i] - r[i]);
+      p[i + 1] = r[i + 1] + s * (a[i + 1] - r[i + 1]);
+      p[i + 2] = r[i + 2] + s * (a[i + 2] - r[i + 2]);
+    }
+    const values = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.valueAttr).array);
+    if (this.colourBy === 'displacement') {
+      // In doubles from the float positions, as idms-render does.
+      const dx = a[i] - r[i], dy = a[i + 1] - r[i + 1], dz = a[i + 2] - r[i + 2];
+      values[v] = colourIndex(Math.sqrt(dx * dx + dy * dy + dz * dz), this.lo, this.hi) / 255;
+    } else if (this.colourBy === 'stiffness' && this.stiffness) {
+      values[v] = colourIndex(this.stiffness[v], this.lo, this.hi) / 255;
+    } else {
+      values[v] = 0;
+    }
+  }
+
+  /**
+   * The model at rest (num_vertices x 3), as the session's first keyframe had it: rest from now on
+   * for a surface of its size, the one shown included.
+   * @param {Float32Array} positions
+   */
+  setModelRest(positions) {
+    this.modelRest = positions;
+    if (this.numVertices > 0 && positions.length === 3 * this.numVertices) {
+      this.rest.set(positions);
+      this.restVertices = this.numVertices;
+      this.restTimeS = 0;
+      this.redrawAll();
+    }
+  }
+
+  /**
+   * The deformation scale: drawn = rest + scale (p - rest); colours stay true.
+   * @param {number} scale > 0
+   */
+  setScale(scale) {
+    this.scale = scale;
+    this.redrawAll();
+  }
+
+  /**
+   * What the colours say; stiffness per vertex for 'stiffness' (the same count as the surface's).
+   * @param {ColourBy} by @param {Float64Array | null} [stiffness]
+   */
+  setColourBy(by, stiffness = null) {
+    this.colourBy = by;
+    if (stiffness) this.stiffness = stiffness;
+    this.redrawAll();
   }
 
   /**
@@ -92,14 +218,16 @@ export class SurfaceGeometry {
     const n = s.numChanged;
     if (n === 0 || !this.posAttr || !this.normAttr) return false;
     const p = /** @type {Float32Array} */ (this.posAttr.array);
+    const a = this.actual;
     const stamp = this.stamp;
     let numTris = this.numTouchedTris;
-    // Positions of the moved vertices, and the triangles around them not yet collected.
+    // Positions (and values) of the moved vertices, and the triangles around them not yet collected.
     for (let k = 0; k < n; k++) {
       const v = s.changed[k];
-      p[3 * v] = s.positions[3 * v];
-      p[3 * v + 1] = s.positions[3 * v + 1];
-      p[3 * v + 2] = s.positions[3 * v + 2];
+      a[3 * v] = s.positions[3 * v];
+      a[3 * v + 1] = s.positions[3 * v + 1];
+      a[3 * v + 2] = s.positions[3 * v + 2];
+      this.drawVertex(v, p);
       for (let a = this.adjStart[v]; a < this.adjStart[v + 1]; a++) {
         const t = this.adjTris[a];
         if (this.triStamp[t] !== stamp) {
@@ -148,6 +276,10 @@ export class SurfaceGeometry {
       pos.clearUpdateRanges();
       pos.addUpdateRange(3 * this.movedLo, 3 * (this.movedHi - this.movedLo + 1));
       pos.needsUpdate = true;
+      const values = /** @type {THREE.BufferAttribute} */ (this.valueAttr);
+      values.clearUpdateRanges();
+      values.addUpdateRange(this.movedLo, this.movedHi - this.movedLo + 1);
+      values.needsUpdate = true;
       if (hi >= lo) {
         norm.clearUpdateRanges();
         norm.addUpdateRange(3 * lo, 3 * (hi - lo + 1));
@@ -169,8 +301,15 @@ export class SurfaceGeometry {
     this.geometry = new THREE.BufferGeometry();
     this.posAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
     this.normAttr = new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    this.valueAttr = new THREE.BufferAttribute(new Float32Array(nv), 1).setUsage(THREE.DynamicDrawUsage);
     this.geometry.setAttribute('position', this.posAttr);
     this.geometry.setAttribute('normal', this.normAttr);
+    this.geometry.setAttribute('value', this.valueAttr);
+    // Rest survives a larger buffer (more triangles, the same vertices).
+    const rest = new Float32Array(3 * nv);
+    rest.set(this.rest.subarray(0, Math.min(this.rest.length, 3 * nv)));
+    this.rest = rest;
+    this.actual = new Float32Array(3 * nv);
     this.geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(3 * nt), 1));
     this.faceNormals = new Float32Array(3 * nt);
     this.triStamp = new Uint32Array(nt);
@@ -197,7 +336,7 @@ export class SurfaceGeometry {
    * @param {Float32Array} positions
    */
   movedSince(positions) {
-    const shown = /** @type {Float32Array} */ (/** @type {THREE.BufferAttribute} */ (this.posAttr).array);
+    const shown = this.actual;
     const moved = this.keyframeMoved;
     let n = 0;
     for (let v = 0; v < this.numVertices; v++) {

@@ -1,7 +1,11 @@
 // The tool and the force on it as one mesh, drawn in one draw call: the tool a sphere of its
-// radius (thesis 6.1), half see-through, in the colour of its state; the force an arrow from its
-// centre, scaled to the force's magnitude, drawn over the sphere. As two objects (a sphere and
-// three.js's ArrowHelper, itself a line and a cone) they were three draws.
+// radius (thesis 6.1), drawn as its outline (a ring of display.json's outline_px pixels at its
+// silhouette, in the colour of its state) over a faint fill (fill_alpha), unlit, so that the
+// contact patch under it keeps its colours: a shaded half see-through sphere halved the patch's
+// contrast and tinted it, and a wire sphere's lines crossed it like the tissue's own mesh;
+// idms-render draws the same outline. The force an arrow from its centre, scaled to the force's
+// magnitude, drawn over the sphere. As two objects (a sphere and three.js's ArrowHelper, itself a
+// line and a cone) they were three draws.
 //
 // The sphere is an impostor: a square of two triangles facing the eye, whose shader keeps the
 // pixels inside the sphere's silhouette and shades each with the sphere's normal where its ray
@@ -12,13 +16,14 @@
 // Only the arrow's vertices are rewritten when the force changes, and only they are uploaded;
 // nothing is allocated.
 import * as THREE from 'three';
+import { display } from './display.js';
 
 /** Segments around the arrow's shaft and head. */
 const kSides = 12;
 /** The arrow's rings (shaft base, shaft top, head side, head base) and its tip and base centre. */
 const kArrowVertices = 4 * kSides + 2;
 const kUp = new THREE.Vector3(0, 1, 0);
-const kSeeThrough = 0.5;
+const kSeeThrough = display.tool.fill_alpha;
 /** The cosine and sine of each side's angle around the arrow. */
 const kSideCos = Float64Array.from({ length: kSides }, (_, i) => Math.cos((2 * Math.PI * i) / kSides));
 const kSideSin = Float64Array.from({ length: kSides }, (_, i) => Math.sin((2 * Math.PI * i) / kSides));
@@ -59,13 +64,18 @@ if (toolCorner.z > 0.5) {
 `;
 const kFragmentPars = /* glsl */ `
 uniform float toolRadius;
+const float kOutlinePx = ${display.tool.outline_px.toFixed(3)};
 varying vec3 vToolCorner;
 varying vec3 vToolCentre;
 `;
 const kFragmentNormal = /* glsl */ `
 if (vToolCorner.z > 0.5) {
   float q = length(vToolCorner.xy);
-  diffuseColor.a *= clamp((1.0 - q) / max(fwidth(q), 1e-6) + 0.5, 0.0, 1.0);
+  // Pixels inside the silhouette: past kOutlinePx the fill, within it the opaque ring (its inner
+  // edge smoothed over a pixel); outside nothing (its outer edge smoothed likewise).
+  float px = (1.0 - q) / max(fwidth(q), 1e-6);
+  float ring = clamp(kOutlinePx - px + 0.5, 0.0, 1.0);
+  diffuseColor.a = mix(diffuseColor.a, 1.0, ring) * clamp(px + 0.5, 0.0, 1.0);
   if (diffuseColor.a <= 0.0) discard;
   vec3 ray = normalize(-vViewPosition);
   float b = dot(ray, vToolCentre);
@@ -122,7 +132,9 @@ export class ToolMesh extends THREE.Mesh {
         .replace('#include <project_vertex>', `#include <project_vertex>\n${kVertexMain}`);
       shader.fragmentShader = shader.fragmentShader
         .replace('#include <common>', `#include <common>\n${kFragmentPars}`)
-        .replace('#include <normal_fragment_begin>', `#include <normal_fragment_begin>\n${kFragmentNormal}`);
+        .replace('#include <normal_fragment_begin>', `#include <normal_fragment_begin>\n${kFragmentNormal}`)
+        // The sphere unlit: its colour as it is (three.js converts it to sRGB after).
+        .replace('#include <opaque_fragment>', 'if (vToolCorner.z > 0.5) outgoingLight = diffuseColor.rgb;\n#include <opaque_fragment>');
     };
     super(geometry, material);
     this.renderOrder = 10;

@@ -21,12 +21,27 @@ struct Image {
   const uint8_t* Pixel(int x, int y) const { return &rgba[(static_cast<size_t>(y) * width + x) * 4]; }
 };
 
+// What the surface's colour says (protocol/display.json has the map and the range rules).
+enum class ColourBy {
+  kDisplacement,  // |p - p_rest| per vertex, range fixed per model (DisplacementRange); the default
+  kStiffness,     // per-vertex stiffness (SceneView::stiffness; a model's, StiffnessPerVertex)
+  kPlain,         // one tissue colour
+};
+
+inline constexpr double kMaxDeformationScale = 100;
+
 struct RenderOptions {
   int width = 1280, height = 720;  // pixels, each within [kMinSize, kMaxSize]
   Camera camera;
   bool wireframe = false;   // the triangles' edges instead of the shaded surface
-  bool show_tool = false;   // the tool sphere at the device position, with its radius
+  bool show_tool = false;   // the tool at the device position, with its radius (outlined, see-through)
   bool show_force = false;  // the device force as an arrow from the tool
+  ColourBy colour_by = ColourBy::kDisplacement;
+  // Drawn position = rest + scale (p - rest): exaggerates the deformation; colours, contacts and
+  // the tool stay true. In (0, kMaxDeformationScale].
+  double deformation_scale = 1;
+  bool legend = true;         // the colour bar, its ticks and unit (not below 400x300 pixels)
+  bool show_contacts = true;  // the surface vertices in contact, while the device reports contact
 };
 
 // What to draw: a view of the mirror's arrays (not copied) and the device's last sample.
@@ -37,17 +52,18 @@ struct SceneView {
   std::array<double, 3> tool_pos{0, 0, 0};  // model frame, model units
   double tool_radius = 0;                   // model units; 0 = unknown (drawn as 5 % of the view)
   std::array<double, 3> force{0, 0, 0};     // force on the device, model frame, force units
+  bool contact = false, grasp = false;      // the device's last sample's flags
+  // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
+  std::span<const float> rest;
+  double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
+  std::span<const double> stiffness;  // (num_vertices) for ColourBy::kStiffness; empty = unknown
 };
 
-// Colours, as the tests expect them (linear 0..1).
+// Colours (0..1, written to the image as they are). The surface's, the lights and the tool's are
+// protocol/display.json's (display.h), shared with the browser.
 inline constexpr std::array<float, 3> kBackground{0.93f, 0.94f, 0.96f};
-inline constexpr std::array<float, 3> kTissue{0.86f, 0.50f, 0.45f};      // front faces
-inline constexpr std::array<float, 3> kTissueBack{0.45f, 0.45f, 0.58f};  // back faces
-inline constexpr std::array<float, 3> kToolColour{0.20f, 0.45f, 0.95f};
 inline constexpr std::array<float, 3> kForceColour{0.95f, 0.80f, 0.10f};
 inline constexpr std::array<float, 3> kWireColour{0.15f, 0.20f, 0.30f};
-// Light: directional, in eye coordinates, from the viewer's upper left.
-inline constexpr std::array<float, 3> kLightDirEye{-0.45f, 0.55f, 0.70f};
 // The force arrow is this many tool radii long per unit of force, at most kMaxArrowRadii radii.
 inline constexpr double kArrowRadiiPerForce = 1.0;
 inline constexpr double kMaxArrowRadii = 4.0;
@@ -65,12 +81,15 @@ class Renderer {
   const std::string& error() const { return error_; }
 
   // Draws `scene` into *out (resized to the options' size; reuse it to avoid allocation).
-  // Fails on an empty surface, a vertex id out of range, or a size out of range.
+  // Fails on an empty surface, a vertex id out of range, a size out of range, rest or stiffness
+  // of another size than the surface, colour by stiffness without it, or a scale out of range.
   bool Render(const SceneView& scene, const RenderOptions& options, Image* out, std::string* error);
 
   // Where a model-frame point landed in the last image, in pixels (x right, y down); false when
   // behind the camera.
   bool Project(const std::array<double, 3>& p, double* x, double* y) const;
+  // The surface vertices marked in contact in the last image.
+  const std::vector<int32_t>& contacts() const;
 
  private:
   struct Impl;

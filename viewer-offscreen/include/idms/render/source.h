@@ -18,18 +18,23 @@ struct Model;
 
 namespace idms::render {
 
-// A mirror, the device's last sample and the tool's radius: what a viewer holds.
+// A mirror, the device's last sample, the tool's radius and the surface at rest: what a viewer holds.
 struct ViewerState {
   MeshMirror mirror;
   bool has_sample = false;
   v1::DeviceSample sample;  // the last one received
   double tool_radius = 0;   // from the scene (0 = unknown)
+  // The surface at rest (display.json's rule, as the browser's): the first keyframe applied, or
+  // the first of another number of vertices; a model's own rest; a recording's first keyframe.
+  std::vector<float> rest;        // (num_vertices x 3), model units
+  double rest_time_s = 0;         // its session time
+  std::vector<double> stiffness;  // per vertex (a model's: StiffnessPerVertex); empty = unknown
   // A view of the above for Renderer::Render (valid while this state is unchanged).
   SceneView View() const;
   // Reads the tool radius from a scene (its first tool).
   void SetScene(const v1::Scene& scene);
   // Applies a mesh frame or takes a device batch; other bodies are ignored. False on a mesh frame
-  // the mirror refuses (with *error).
+  // the mirror refuses (with *error). A keyframe sets rest when there is none of its size.
   bool Apply(const v1::Envelope& envelope, std::string* error);
 };
 
