@@ -16,12 +16,12 @@
 #include <thread>
 #include <vector>
 
-#include "idms/protocol/cli.h"
 #include "idms/agent/device.h"
 #include "idms/agent/loop.h"
 #include "idms/agent/model_source.h"
 #include "idms/agent/setup.h"
 #include "idms/agent/uplink.h"
+#include "idms/protocol/cli.h"
 #include "idms/protocol/scene.h"
 #include "idms/sim/model_io.h"
 #include "idms/sim/preset.h"
@@ -34,7 +34,8 @@ constexpr int kExitConfig = 1;   // bad arguments, scene, model or device
 constexpr int kExitRefused = 2;  // the server refused the token or the session
 
 struct Args {
-  std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json, dump_final, cache_dir;
+  std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json,
+      dump_final, cache_dir;
   std::string rotation, offset;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
@@ -187,8 +188,9 @@ bool DumpFinal(const std::string& path, const Loop& loop) {
 void AddOptions(CLI::App& app, Args& a) {
   app.add_option("--server", a.server, "ws://HOST:PORT (or http://) of the idms-server, or 'none' to run offline")
       ->required();
-  auto* token_opt = app.add_option("--token", a.token, "Agent token (sent as Authorization: Bearer); `ps` shows it: "
-                                                        "prefer IDMS_TOKEN or --token-file")
+  auto* token_opt = app.add_option("--token", a.token,
+                                   "Agent token (sent as Authorization: Bearer); `ps` shows it: "
+                                   "prefer IDMS_TOKEN or --token-file")
                         ->envname("IDMS_TOKEN");
   app.add_option("--token-file", a.token_file, "A file holding the agent token alone")->excludes(token_opt);
   app.set_version_flag("--version", Version());

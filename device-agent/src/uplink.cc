@@ -611,7 +611,7 @@ struct Uplink::Impl final : ConnectionHandler {
   Backlog backlog;
   FrameOrder order;
   uint64_t last_tick = 0;
-  double last_time_s = 0;  // of the last sample, for ENDED
+  double last_time_s = 0;           // of the last sample, for ENDED
   uint64_t limited_unreported = 0;  // clamped ticks since the last KIND_FORCE_LIMIT event
   double limited_event_time_s = 0;
   bool has_limited_event = false;

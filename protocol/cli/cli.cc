@@ -31,9 +31,8 @@ bool ParseServerUrl(std::string_view url, std::string_view option, ServerUrl* ou
   u.port = colon == std::string_view::npos ? "8740" : std::string(authority.substr(colon + 1));
   if (slash != std::string_view::npos && slash + 1 < rest.size()) u.path = std::string(rest.substr(slash));
   if (u.host.empty()) return fail("no host");
-  if (u.port.empty() || u.port.size() > 5 ||
-      u.port.find_first_not_of("0123456789") != std::string::npos || std::stoi(u.port) == 0 ||
-      std::stoi(u.port) > 65535) {
+  if (u.port.empty() || u.port.size() > 5 || u.port.find_first_not_of("0123456789") != std::string::npos ||
+      std::stoi(u.port) == 0 || std::stoi(u.port) > 65535) {
     return fail("the port must be a number from 1 to 65535");
   }
   *out = std::move(u);

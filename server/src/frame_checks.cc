@@ -78,7 +78,8 @@ bool CheckAgentFrame(const v1::Envelope& e, std::string* error) {
     for (int i = 0; i < ds.samples_size(); ++i) {
       const v1::DeviceSample& s = ds.samples(i);
       const std::string where = "DeviceSamples.samples[" + std::to_string(i) + "]";
-      if (s.tick() >= kMaxTick) return Fail(error, where + ".tick " + std::to_string(s.tick()) + " is at or above 2^63");
+      if (s.tick() >= kMaxTick)
+        return Fail(error, where + ".tick " + std::to_string(s.tick()) + " is at or above 2^63");
       if (!TimeOk(s.time_s())) return Fail(error, TimeError(where + ".time_s", s.time_s()));
       if (!VecOk(s.tool_pos()) || !VecOk(s.force())) return Fail(error, where + ": tool_pos and force must be finite");
     }

@@ -7,9 +7,9 @@
 #include <boost/asio/post.hpp>
 #include <cmath>
 
+#include "frame_checks.h"
 #include "idms/protocol/envelope.h"
 #include "idms/server/log.h"
-#include "frame_checks.h"
 #include "idms/sim/check.h"
 #include "recordings.h"
 #include "sessions.h"

@@ -3,7 +3,6 @@
 #include <sys/stat.h>
 
 #include <algorithm>
-
 #include <nlohmann/json.hpp>
 
 #include "idms/protocol/recording.h"
@@ -18,17 +17,10 @@ using json = nlohmann::json;
 json RowJson(const SessionRow& r, int viewers) {
   json summary = json::object();
   if (!r.summary_json.empty()) summary = json::parse(r.summary_json, nullptr, false);
-  return json{{"id", r.id},
-              {"state", r.state},
-              {"model", r.model},
-              {"device", r.device},
-              {"identity", r.identity},
-              {"trainee", r.trainee},
-              {"started", r.started},
-              {"duration_s", r.duration_s},
-              {"samples", r.samples},
-              {"viewers", viewers},
-              {"summary", summary}};
+  return json{{"id", r.id},           {"state", r.state},           {"model", r.model},
+              {"device", r.device},   {"identity", r.identity},     {"trainee", r.trainee},
+              {"started", r.started}, {"duration_s", r.duration_s}, {"samples", r.samples},
+              {"viewers", viewers},   {"summary", summary}};
 }
 
 // GET /api/sessions/{id}/recording.mcap: streamed from the file (FileRangeBody), with one byte
@@ -143,29 +135,27 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,
                      [hub](ApiContext&, ApiRequest& req) { return GetRecording(*hub, req); }, true});
   // {"trainee": "NAME"}: who was at the device, corrected by an admin.
-  routes->push_back({V::patch, "/api/sessions/{id}", P::kWrite, false, false,
-                     [hub](ApiContext&, ApiRequest& req) {
-                       const json body = json::parse(req.message.body(), nullptr, false);
-                       if (!body.is_object() || !body.contains("trainee") || !body["trainee"].is_string()) {
-                         return JsonError(req, http::status::bad_request,
-                                          "expected a JSON object {\"trainee\": \"NAME\"}");
-                       }
-                       const std::string trainee = body["trainee"];
-                       const bool printable = std::all_of(trainee.begin(), trainee.end(), [](char c) {
-                         return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f;
-                       });
-                       if (trainee.size() > 256 || !printable) {
-                         return JsonError(req, http::status::bad_request,
-                                          "trainee: at most 256 bytes, no control characters");
-                       }
-                       std::string error;
-                       if (!hub->SetTrainee(req.params[0], trainee, &error)) {
-                         return JsonError(req, http::status::not_found, error);
-                       }
-                       const std::optional<SessionRow> r = hub->Get(req.params[0]);
-                       return JsonResponse(req, http::status::ok, JsonText(RowJson(*r, 0)));
-                     },
-                     true});
+  routes->push_back(
+      {V::patch, "/api/sessions/{id}", P::kWrite, false, false,
+       [hub](ApiContext&, ApiRequest& req) {
+         const json body = json::parse(req.message.body(), nullptr, false);
+         if (!body.is_object() || !body.contains("trainee") || !body["trainee"].is_string()) {
+           return JsonError(req, http::status::bad_request, "expected a JSON object {\"trainee\": \"NAME\"}");
+         }
+         const std::string trainee = body["trainee"];
+         const bool printable = std::all_of(trainee.begin(), trainee.end(),
+                                            [](char c) { return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f; });
+         if (trainee.size() > 256 || !printable) {
+           return JsonError(req, http::status::bad_request, "trainee: at most 256 bytes, no control characters");
+         }
+         std::string error;
+         if (!hub->SetTrainee(req.params[0], trainee, &error)) {
+           return JsonError(req, http::status::not_found, error);
+         }
+         const std::optional<SessionRow> r = hub->Get(req.params[0]);
+         return JsonResponse(req, http::status::ok, JsonText(RowJson(*r, 0)));
+       },
+       true});
   routes->push_back({V::delete_, "/api/sessions/{id}", P::kWrite, false, false,
                      [hub](ApiContext&, ApiRequest& req) {
                        std::string error;

@@ -233,12 +233,14 @@ void DeviceForces(State& s, const Workspace& ws, StepReport* report) {
       f[0] = f[1] = f[2] = mag = 0;
     }
     const double prev = std::sqrt(ts.force[0] * ts.force[0] + ts.force[1] * ts.force[1] + ts.force[2] * ts.force[2]);
-    const double rate = ts.easing ? std::min(o.transition_force_rate, o.max_device_force_rate) : o.max_device_force_rate;
+    const double rate =
+        ts.easing ? std::min(o.transition_force_rate, o.max_device_force_rate) : o.max_device_force_rate;
     double limit = o.max_device_force;
     if (prev + rate * o.dt_s < limit) limit = prev + rate * o.dt_s;
     if (mag > limit) {
       // Easing in is the expected path after a jump, not a numerical event.
-      if (!ts.easing) ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
+      if (!ts.easing)
+        ++(limit < o.max_device_force ? s.warnings.device_force_rate_limited : s.warnings.device_force_clamped);
       for (int c = 0; c < 3; ++c) f[c] *= limit / mag;
     } else if (ts.easing_ticks == 0) {
       ts.easing = false;  // the window is over and the contact force met: the ordinary limits again

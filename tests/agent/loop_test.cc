@@ -193,9 +193,10 @@ TEST(Loop, AResetDuringContactDoesNotJoltTheHand) {
   std::vector<TickSample> samples;
   f.Run(400, &samples);
   const double rate = f.step.transition_force_rate;
-  std::printf("reset at %.3f N: largest rise per tick %.4f N after it (normal contact: %.4f N), peak %.3f N, "
-              "%.3f N 0.4 s later\n",
-              pressed, f.device->max_rise_, normal_rise, f.device->max_force_, f.device->last_force_);
+  std::printf(
+      "reset at %.3f N: largest rise per tick %.4f N after it (normal contact: %.4f N), peak %.3f N, "
+      "%.3f N 0.4 s later\n",
+      pressed, f.device->max_rise_, normal_rise, f.device->max_force_, f.device->last_force_);
   EXPECT_LE(f.device->max_rise_, rate * f.step.dt_s * (1 + 1e-9)) << "the transition rate";
   EXPECT_LE(f.device->max_rise_, normal_rise) << "faster than the palpation's own contact made it";
   EXPECT_LT(f.device->max_force_, 0.9 * f.registration.max_force) << "the device limit was reached";

@@ -132,9 +132,8 @@ TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
   std::ofstream(dir + "/agent.token") << server.Token("agent") << "\n";
   ChildProcess agent(IDMS_AGENT_BIN,
                      {"--server", "http://127.0.0.1:" + server.port_string(), "--token-file", dir + "/agent.token",
-                      "--model", "hex_4x5_home",
-                      "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--max-force", "0.5",
-                      "--duration", "4", "--no-realtime"},
+                      "--model", "hex_4x5_home", "--cache-dir", dir + "/cache", "--device", "scripted:palpate",
+                      "--max-force", "0.5", "--duration", "4", "--no-realtime"},
                      dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
   std::string id;

@@ -72,8 +72,8 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
     // 1 s in contact at 1 N, with an 8 N peak and a warning at 0.5 s.
     for (uint64_t t = 0; t < 1000; t += 100) ASSERT_TRUE(SendPress(agent, t, 100, 1.0, 500, 8.0));
     // Stored: the server acknowledges every tick (its recording flushed).
-    ASSERT_TRUE(agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().next_tick() == 1000; },
-                                seconds(20)));
+    ASSERT_TRUE(
+        agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().next_tick() == 1000; }, seconds(20)));
     server->process().Signal(SIGKILL);
     ASSERT_TRUE(server->process().Wait(seconds(30)));
   }
@@ -126,11 +126,11 @@ TEST(Figures, ATraineeNamesTheSessionAndTheListFiltersByTraineeModelAndDate) {
   const std::string port = server->port_string(), observer = server->Token("observer"), admin = server->Token("admin");
   std::ofstream(dir + "/agent.token") << server->Token("agent");
   const auto run = [&](const std::string& trainee, const std::string& model) {
-    ChildProcess agent(IDMS_AGENT_BIN,
-                       {"--server", "ws://127.0.0.1:" + port, "--token-file", dir + "/agent.token", "--model", model,
-                        "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "0.3",
-                        "--no-realtime", "--trainee", trainee},
-                       dir + "/agent-" + trainee + ".log");
+    ChildProcess agent(
+        IDMS_AGENT_BIN,
+        {"--server", "ws://127.0.0.1:" + port, "--token-file", dir + "/agent.token", "--model", model, "--cache-dir",
+         dir + "/cache", "--device", "scripted:palpate", "--duration", "0.3", "--no-realtime", "--trainee", trainee},
+        dir + "/agent-" + trainee + ".log");
     return agent.Wait(seconds(120));
   };
   ASSERT_EQ(run("Ada Lovelace", "hex_4x5_home"), 0);
@@ -156,9 +156,9 @@ TEST(Figures, ATraineeNamesTheSessionAndTheListFiltersByTraineeModelAndDate) {
   const json ada = json::parse(Get(server->port(), "/api/sessions?trainee=Ada%20Lovelace", observer).body);
   const std::string id = ada["sessions"][0]["id"];
   const auto patch = [&](const std::string& token, const std::string& target, const std::string& body) {
-    return Http(server->port(), HttpCall{"PATCH", target,
-                                         {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}},
-                                         body});
+    return Http(
+        server->port(),
+        HttpCall{"PATCH", target, {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}}, body});
   };
   const HttpReply ok = patch(admin, "/api/sessions/" + id, R"({"trainee": "Ada King"})");
   EXPECT_EQ(ok.status, 200) << ok.body;

@@ -35,7 +35,7 @@ struct TickSample {
   uint32_t warnings = 0;  // warnings raised this tick (the step's, plus a zeroed device force)
   uint32_t num_contacts = 0;
   bool contact = false, grasp = false;
-  bool overrun = false;  // the work ended after the next deadline
+  bool overrun = false;        // the work ended after the next deadline
   bool force_limited = false;  // the device force was clamped at its limit this tick
 };
 
