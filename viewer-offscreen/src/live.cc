@@ -6,6 +6,7 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
 
+#include "idms/protocol/cli.h"
 #include "idms/protocol/envelope.h"
 
 namespace idms::render {
@@ -15,24 +16,6 @@ namespace beast = boost::beast;
 namespace websocket = beast::websocket;
 
 namespace {
-
-// "http://host:port/..." or "ws://host:port" -> host, port.
-bool SplitUrl(const std::string& url, std::string* host, std::string* port, std::string* error) {
-  std::string rest = url;
-  for (const char* scheme : {"http://", "ws://"}) {
-    if (rest.rfind(scheme, 0) == 0) rest = rest.substr(std::string(scheme).size());
-  }
-  if (rest.rfind("https://", 0) == 0 || rest.rfind("wss://", 0) == 0 || rest.find("://") != std::string::npos) {
-    *error = "--server " + url + ": expected http://HOST:PORT or ws://HOST:PORT (TLS is not supported here)";
-    return false;
-  }
-  rest = rest.substr(0, rest.find('/'));
-  const size_t colon = rest.rfind(':');
-  *host = colon == std::string::npos ? rest : rest.substr(0, colon);
-  *port = colon == std::string::npos ? "8740" : rest.substr(colon + 1);
-  if (host->empty() || port->empty()) return *error = "--server " + url + ": no host", false;
-  return true;
-}
 
 // Beast 1.74 does not fill the response of a declined upgrade: the same request as plain HTTP
 // says why ("HTTP 401: {\"error\": \"unknown token\"}").
@@ -63,8 +46,9 @@ std::string DeclinedReason(const asio::ip::tcp::resolver::results_type& endpoint
 
 bool WatchLive(const LiveOptions& o, ViewerState* state, const std::function<bool(const ViewerState&)>& on_update,
                std::string* error) {
-  std::string host, port;
-  if (!SplitUrl(o.url, &host, &port, error)) return false;
+  ServerUrl url;
+  if (!ParseServerUrl(o.url, "--server", &url, error)) return false;
+  const std::string &host = url.host, &port = url.port;
   asio::io_context io;
   websocket::stream<beast::tcp_stream> ws(io);
   beast::error_code ec;

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "idms/protocol/cli.h"
 #include "idms/render/live.h"
 #include "idms/render/png.h"
 #include "idms/render/render.h"
@@ -111,15 +112,20 @@ int RunLive(Output& o, const LiveOptions& live, double every_s, const std::strin
 
 int main(int argc, char** argv) {
   CLI::App app{"idms-render: PNG screenshots of idms models, recordings and live sessions (OSMesa, no display)"};
-  std::string model, recording, server, session, token, out, size = "1280x720", camera = "auto";
+  std::string model, recording, server, session, token, token_file, out, size = "1280x720", camera = "auto";
   std::string at_text, every_text, colour = "displacement";
   double deformation_scale = 1;
   bool wireframe = false, show_tool = false, show_force = false, no_legend = false;
   auto* model_opt = app.add_option("--model", model, "A model at rest: PREFIX of PREFIX.fem + PREFIX.plg");
   auto* rec_opt = app.add_option("--recording", recording, "A session recording (.mcap)");
-  auto* server_opt = app.add_option("--server", server, "A live session's server, http://HOST:PORT");
+  auto* server_opt = app.add_option("--server", server, "A live session's server, http://HOST:PORT (or ws://)");
   app.add_option("--session", session, "The live session's id (with --server)");
-  app.add_option("--token", token, "Bearer token for --server (observer or above)");
+  auto* token_opt = app.add_option("--token", token,
+                                   "Bearer token for --server (observer or above); `ps` shows it: prefer IDMS_TOKEN "
+                                   "or --token-file")
+                        ->envname("IDMS_TOKEN");
+  app.add_option("--token-file", token_file, "A file holding the token alone")->excludes(token_opt);
+  app.set_version_flag("--version", idms::Version());
   app.add_option("--at", at_text, "Session time to render, s (recordings; default: the end)");
   app.add_option("--every", every_text, "Render a frame every S seconds of session time into --out DIR");
   app.add_option("--out", out, "The PNG to write, or with --every the directory for frame_NNNNNN.png")->required();
@@ -146,6 +152,10 @@ int main(int argc, char** argv) {
   if (!ParseSize(size, &o.options.width, &o.options.height, &error) ||
       !ParseCamera(camera, &o.options.camera, &error) || (!at_text.empty() && !ParseSeconds(at_text, &at_s, &error)) ||
       (!every_text.empty() && !ParseSeconds(every_text, &every_s, &error))) {
+    std::fprintf(stderr, "idms-render: %s\n", error.c_str());
+    return 1;
+  }
+  if (!token_file.empty() && !idms::ReadTokenFile(token_file, &token, &error)) {
     std::fprintf(stderr, "idms-render: %s\n", error.c_str());
     return 1;
   }
