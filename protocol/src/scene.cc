@@ -200,6 +200,13 @@ Checker CheckScene(const v1::Scene& scene) {
     c.Fail(Path{{"sample_batch", -1}}, "must be in [1, 1000], got " + std::to_string(scene.sample_batch()));
   }
   if (scene.has_device()) CheckDevice(scene.device(), &c);
+  if (scene.has_grading()) {
+    const v1::Grading& g = scene.grading();
+    const auto at = [](const char* field) { return Path{{"grading", -1}, {field, -1}}; };
+    if (g.has_max_peak_force()) c.Range(at("max_peak_force"), g.max_peak_force(), 0, kInf, false);
+    if (g.has_max_contact_time_s()) c.Range(at("max_contact_time_s"), g.max_contact_time_s(), 0, kInf, false);
+    if (g.has_max_path_length()) c.Range(at("max_path_length"), g.max_path_length(), 0, kInf, false);
+  }
   return c;
 }
 

@@ -129,6 +129,54 @@ ApiResponse JsonError(const ApiRequest& req, http::status status, const std::str
   return JsonResponse(req, status, JsonText(json{{"error", message}}));
 }
 
+namespace {
+
+// A browser that asks for a page that does not exist gets a page saying so, with the way back;
+// API clients (no text/html in Accept, or an /api/ or /ws/ path) get the JSON error.
+bool WantsPage(const ApiRequest& req) {
+  const auto accept = req.message.find(http::field::accept);
+  const bool html = accept != req.message.end() && Sv(accept->value()).find("text/html") != std::string_view::npos;
+  const bool get = req.message.method() == http::verb::get || req.message.method() == http::verb::head;
+  return html && get && req.path.rfind("/api/", 0) != 0 && req.path.rfind("/ws/", 0) != 0;
+}
+
+std::string HtmlEscaped(std::string_view text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '&':
+        out += "&amp;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+ApiResponse NotFoundPage(const ApiRequest& req) {
+  ApiResponse res{http::status::not_found, req.message.version()};
+  res.set(http::field::content_type, "text/html; charset=utf-8");
+  res.set(http::field::cache_control, "no-store");
+  res.body() =
+      "<!doctype html><html lang=\"en\"><meta charset=\"utf-8\"><meta name=\"viewport\" "
+      "content=\"width=device-width\"><title>Not found - idms</title><body style=\"font: 16px system-ui; "
+      "margin: 3em auto; max-width: 40em\"><h1>No page here</h1><p>There is no page at <code>" +
+      HtmlEscaped(req.path) + "</code>.</p><p><a href=\"/\">Go to the sessions</a></p></body></html>\n";
+  return res;
+}
+
+}  // namespace
+
 std::vector<Route> MakeRoutes() {
   using P = Permission;
   using V = http::verb;
@@ -188,6 +236,10 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
     break;
   }
   if (a.route == nullptr) {
+    if (!path_known && WantsPage(req)) {
+      a.error = NotFoundPage(req);
+      return a;
+    }
     if (!path_known) return fail(http::status::not_found, "no such resource: " + req.path);
     fail(http::status::method_not_allowed,
          std::string(req.message.method_string()) + " is not allowed on " + req.path + " (allowed: " + allow + ")");

@@ -23,6 +23,8 @@ namespace {
 
 constexpr size_t kViewerQueueLimit = 256;              // frames queued for a viewer before it counts as behind
 constexpr size_t kViewerQueueBytes = size_t{8} << 20;  // bytes queued for a viewer, likewise
+constexpr size_t kHistoryFrames = 512;                 // events and notes kept for late viewers
+constexpr size_t kHistoryBytes = size_t{1} << 20;      // likewise, in bytes
 constexpr uint16_t kNormal = 1000;
 constexpr uint16_t kGoingAway = 1001;
 constexpr uint16_t kPolicyError = 1008;
@@ -114,8 +116,19 @@ void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& me
   ev->set_peer(peer);
   ev->set_tick(next_tick_);
   ev->set_time_s(summary_.last_time_s);
-  Broadcast(Serialized(*e), false, false);
+  const auto bytes = Serialized(*e);
+  Broadcast(bytes, false, false);
+  if (kind != v1::SessionEvent::KIND_VIEWER_JOINED && kind != v1::SessionEvent::KIND_VIEWER_LEFT) Remember(bytes);
   Record(std::move(e));
+}
+
+void LiveSession::Remember(const std::shared_ptr<const std::string>& bytes) {
+  history_.push_back(bytes);
+  history_bytes_ += bytes->size();
+  while (history_.size() > kHistoryFrames || history_bytes_ > kHistoryBytes) {
+    history_bytes_ -= history_.front()->size();
+    history_.pop_front();
+  }
 }
 
 void LiveSession::SendToAgent(const v1::Envelope& e) {
@@ -288,6 +301,7 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
   }
   if (event.has_session_event() || event.has_topology_event()) {
     Broadcast(bytes, false, false);
+    Remember(bytes);
     return Record(std::move(envelope));
   }
   Refuse(std::string("unexpected ") + EnvelopeBodyName(event) + " from the agent");
@@ -381,6 +395,8 @@ void LiveSession::ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer_wea
   v.drain_wanted = std::move(drain_wanted);
   SendTo(v, Serialized(w));
   if (mirror_.has_keyframe()) KeyframeFor(v);
+  // What happened before it joined: the events and notes so far, in order.
+  for (const auto& bytes : history_) SendTo(v, bytes);
   num_viewers_ = static_cast<int>(viewers_.size());
   RecordEvent(v1::SessionEvent::KIND_VIEWER_JOINED, "a viewer joined", peer->peer());
 }
@@ -411,7 +427,9 @@ void LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string
   a->set_author(peer);
   a->set_id(++annotations_);
   if (!(note.time_s() > 0)) a->set_time_s(summary_.last_time_s);
-  Broadcast(Serialized(*e), false, false);
+  const auto bytes = Serialized(*e);
+  Broadcast(bytes, false, false);
+  Remember(bytes);
   Record(std::move(e));
 }
 

@@ -8,6 +8,7 @@
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
 #include <chrono>
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -104,6 +105,11 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   uint64_t agent_conn_ = 0;  // 0: no agent
   std::chrono::steady_clock::time_point agent_gone_since_ = std::chrono::steady_clock::now();
   std::vector<Viewer> viewers_;
+  // The events and notes so far (not viewers coming and going), for a viewer who joins late:
+  // bounded, the oldest dropped first.
+  std::deque<std::shared_ptr<const std::string>> history_;
+  size_t history_bytes_ = 0;
+  void Remember(const std::shared_ptr<const std::string>& bytes);
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
   uint64_t annotations_ = 0;

@@ -1,8 +1,11 @@
 // The sessions' REST routes: list, one session with its events, the recording (with HTTP range
 // requests), delete. Added to the route table by the server (they need the live sessions).
+#include <fcntl.h>
+#include <google/protobuf/text_format.h>
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <nlohmann/json.hpp>
 
 #include "idms/protocol/recording.h"
@@ -14,13 +17,37 @@ namespace {
 
 using json = nlohmann::json;
 
+// The session's figures against its scene's limits (Scene.grading): {"passed", "checks": [{"figure",
+// "limit", "value", "passed"}]}; null when the scene sets none.
+json GradeJson(const SessionRow& r, const json& summary) {
+  if (r.scene_text.find("grading") == std::string::npos || !summary.is_object()) return nullptr;
+  v1::Scene scene;
+  if (!google::protobuf::TextFormat::ParseFromString(r.scene_text, &scene) || !scene.has_grading()) return nullptr;
+  const v1::Grading& g = scene.grading();
+  json checks = json::array();
+  bool passed = true;
+  const auto check = [&](const char* figure, bool has, double limit) {
+    if (!has) return;
+    const double value = summary.value(figure, 0.0);
+    const bool ok = value <= limit;
+    passed = passed && ok;
+    checks.push_back({{"figure", figure}, {"limit", limit}, {"value", value}, {"passed", ok}});
+  };
+  check("peak_force", g.has_max_peak_force(), g.max_peak_force());
+  check("contact_time_s", g.has_max_contact_time_s(), g.max_contact_time_s());
+  check("path_length", g.has_max_path_length(), g.max_path_length());
+  check("force_limit_hits", g.has_max_force_limit_hits(), g.max_force_limit_hits());
+  if (checks.empty()) return nullptr;
+  return json{{"passed", passed}, {"checks", checks}};
+}
+
 json RowJson(const SessionRow& r, int viewers) {
   json summary = json::object();
   if (!r.summary_json.empty()) summary = json::parse(r.summary_json, nullptr, false);
   return json{{"id", r.id},           {"state", r.state},           {"model", r.model},
               {"device", r.device},   {"identity", r.identity},     {"trainee", r.trainee},
               {"started", r.started}, {"duration_s", r.duration_s}, {"samples", r.samples},
-              {"viewers", viewers},   {"summary", summary}};
+              {"viewers", viewers},   {"summary", summary},         {"grade", GradeJson(r, summary)}};
 }
 
 // GET /api/sessions/{id}/recording.mcap: streamed from the file (FileRangeBody), with one byte
@@ -65,6 +92,61 @@ HandlerResponse GetRecording(SessionHub& hub, ApiRequest& req) {
   res.body().file = std::move(file);
   res.body().offset = kind == RangeRequest::kPartial ? wanted.first : 0;
   res.body().length = kind == RangeRequest::kPartial ? wanted.last - wanted.first + 1 : size;
+  return res;
+}
+
+// GET /api/sessions/{id}/samples.csv: every device sample of the recording, one line each. Written
+// on a worker into an unnamed file beside the recordings (O_TMPFILE: gone when its descriptor
+// closes, even after a crash), then streamed from it: memory stays bounded whatever the length.
+HandlerResponse GetSamplesCsv(SessionHub& hub, ApiRequest& req) {
+  const std::optional<SessionRow> r = hub.Get(req.params[0]);
+  if (!r) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
+  const std::string path = hub.RecordingPath(*r);
+  RecordingReader reader;
+  RecordingReaderOptions options;
+  options.mesh = options.events = options.annotations = false;
+  std::string error;
+  if (!reader.Open(path, options, &error)) {
+    return JsonError(req, http::status::not_found, "session " + r->id + " has no readable recording: " + error);
+  }
+  const std::string dir = path.substr(0, path.find_last_of('/'));
+  const int fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+  if (fd < 0) return JsonError(req, http::status::internal_server_error, "no temporary file for the CSV");
+  boost::beast::file file;
+  file.native_handle(fd);  // owns it from here
+  std::string text = "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings\n";
+  bool ok = true;
+  const auto flush = [&] {
+    boost::beast::error_code ec;
+    for (size_t done = 0; ok && done < text.size();) {
+      done += file.write(text.data() + done, text.size() - done, ec);
+      ok = !ec;
+    }
+    text.clear();
+  };
+  RecordedMessage m;
+  char line[320];
+  while (ok && reader.Next(&m, &error)) {
+    if (!m.envelope.has_device_samples()) continue;
+    for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) {
+      const int n = std::snprintf(line, sizeof line, "%llu,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%u,%u\n",
+                                  static_cast<unsigned long long>(s.tick()), s.time_s(), s.tool_pos().x(),
+                                  s.tool_pos().y(), s.tool_pos().z(), s.force().x(), s.force().y(), s.force().z(),
+                                  s.contact() ? 1 : 0, s.force_limited() ? 1 : 0, s.num_contacts(), s.warnings());
+      text.append(line, static_cast<size_t>(std::max(n, 0)));
+    }
+    if (text.size() >= (1u << 20)) flush();
+  }
+  flush();
+  boost::beast::error_code ec;
+  const uint64_t size = ok ? file.size(ec) : 0;
+  if (!ok || ec) return JsonError(req, http::status::internal_server_error, "the CSV could not be written");
+  FileResponse res{http::status::ok, req.message.version()};
+  res.set(http::field::content_type, "text/csv; charset=utf-8");
+  res.set(http::field::content_disposition, "attachment; filename=\"" + r->id + "-samples.csv\"");
+  res.body().file = std::move(file);
+  res.body().offset = 0;
+  res.body().length = size;
   return res;
 }
 
@@ -134,6 +216,8 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                      true});
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,
                      [hub](ApiContext&, ApiRequest& req) { return GetRecording(*hub, req); }, true});
+  routes->push_back({V::get, "/api/sessions/{id}/samples.csv", P::kRead, false, false,
+                     [hub](ApiContext&, ApiRequest& req) { return GetSamplesCsv(*hub, req); }, true});
   // {"trainee": "NAME"}: who was at the device, corrected by an admin.
   routes->push_back(
       {V::patch, "/api/sessions/{id}", P::kWrite, false, false,

@@ -4,10 +4,12 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <algorithm>
 #include <ctime>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "idms/protocol/envelope.h"
 #include "server_process.h"
 #include "session_checks.h"
 #include "test_clients.h"
@@ -106,6 +108,15 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
   EXPECT_NEAR(row["summary"]["contact_time_s"].get<double>(), 1.999, 1e-6);
   EXPECT_NEAR(row["summary"]["mean_contact_force"].get<double>(), (1999 * 1.0 + 8.0) / 2000, 1e-9);
 
+  // The samples as CSV: every tick once, the peak where it was.
+  const HttpReply csv = Get(server->port(), "/api/sessions/" + id + "/samples.csv", observer);
+  ASSERT_EQ(csv.status, 200);
+  EXPECT_EQ(csv.headers.at("content-type"), "text/csv; charset=utf-8");
+  EXPECT_EQ(std::count(csv.body.begin(), csv.body.end(), '\n'), 2001) << csv.body.substr(0, 300);
+  EXPECT_EQ(csv.body.substr(0, csv.body.find('\n')),
+            "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings");
+  EXPECT_NE(csv.body.find("\n500,0.501,0,0,1.4,0,0,8,1,1,0,1\n"), std::string::npos);
+
   // Every event at its session time: started at 0, resumed at 1 s, ended at 2 s.
   const HttpReply detail = Get(server->port(), "/api/sessions/" + id, observer);
   ASSERT_EQ(detail.status, 200);
@@ -173,6 +184,132 @@ TEST(Figures, ATraineeNamesTheSessionAndTheListFiltersByTraineeModelAndDate) {
   server = std::make_unique<ServerProcess>(dir + "/data", std::vector<std::string>{"--listen", "127.0.0.1:" + port});
   ASSERT_TRUE(server->ready()) << server->Log();
   EXPECT_EQ(ids("?trainee=Ada%20King"), std::vector<std::string>{"Ada King"});
+}
+
+// A scene names limits; each session shows how it did against them (and one without is not graded).
+TEST(Figures, ASessionIsGradedAgainstItsScenesLimits) {
+  const std::string dir = TempDir("figures-grading");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  const auto session = [&](bool graded) {
+    FakeAgent agent(server.port(), server.Token("agent"));
+    v1::Envelope hello;
+    v1::Hello* h = hello.mutable_hello();
+    h->set_protocol_version(kProtocolVersion);
+    h->set_role(v1::ROLE_AGENT);
+    h->mutable_scene()->set_model("hex_4x5_home");
+    if (graded) {
+      v1::Grading* g = h->mutable_scene()->mutable_grading();
+      g->set_max_peak_force(5);
+      g->set_max_contact_time_s(10);
+      g->set_max_force_limit_hits(0);
+    }
+    EXPECT_TRUE(agent.Send(hello));
+    const auto welcome = agent.ReadUntil([](const v1::Envelope& e) { return e.has_welcome(); });
+    EXPECT_TRUE(welcome);
+    if (!welcome) return std::string();
+    EXPECT_TRUE(SendPress(agent, 0, 1000, 1.0, 500, 8.0));
+    EXPECT_TRUE(agent.End(999));
+    return welcome->welcome().session_id();
+  };
+  const std::string graded = session(true), plain = session(false);
+  const json row = Row(server.port(), observer, graded);
+  ASSERT_TRUE(row["grade"].is_object()) << row.dump();
+  EXPECT_EQ(row["grade"]["passed"], false);
+  std::map<std::string, bool> passed;
+  for (const json& c : row["grade"]["checks"]) passed[c["figure"].get<std::string>()] = c["passed"].get<bool>();
+  EXPECT_EQ(passed, (std::map<std::string, bool>{
+                        {"contact_time_s", true}, {"force_limit_hits", false}, {"peak_force", false}}));
+  EXPECT_TRUE(Row(server.port(), observer, plain)["grade"].is_null());
+  // The session's own page says the same.
+  const HttpReply detail = Get(server.port(), "/api/sessions/" + graded, observer);
+  ASSERT_EQ(detail.status, 200);
+  EXPECT_EQ(json::parse(detail.body)["grade"]["passed"], false);
+}
+
+// A viewer who joins a live session late sees the events and notes from before it joined (not the
+// other viewers' comings and goings), in order.
+TEST(Figures, AViewerWhoJoinsLateSeesTheEarlierEventsAndNotes) {
+  const std::string dir = TempDir("figures-late");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  FakeAgent agent(server.port(), server.Token("agent"));
+  const auto welcome = agent.Hello();
+  ASSERT_TRUE(welcome && welcome->has_welcome());
+  const std::string id = welcome->welcome().session_id();
+  ASSERT_TRUE(SendPress(agent, 0, 500, 1.0));
+  v1::Envelope warning;
+  warning.mutable_session_event()->set_kind(v1::SessionEvent::KIND_WARNING);
+  warning.mutable_session_event()->set_time_s(0.4);
+  warning.mutable_session_event()->set_message("a warning before anyone watched");
+  ASSERT_TRUE(agent.Send(warning));
+  {
+    TestViewer early(server.port(), id, server.Token("admin"));
+    // It has the warning (as history: the agent's frames and this viewer's are not ordered).
+    ASSERT_TRUE(Eventually([&] {
+      for (const v1::Envelope& f : early.Frames()) {
+        if (f.has_session_event() && f.session_event().kind() == v1::SessionEvent::KIND_WARNING) return true;
+      }
+      return false;
+    }));
+    v1::Envelope note;
+    note.mutable_annotation()->set_text("pressed too hard");
+    note.mutable_annotation()->set_time_s(0.45);
+    early.Send(note);
+    ASSERT_TRUE(Eventually([&] {
+      for (const v1::Envelope& f : early.Frames()) {
+        if (f.has_annotation()) return true;
+      }
+      return false;
+    }));
+  }
+  TestViewer late(server.port(), id, server.Token("observer"));
+  std::vector<std::string> seen;
+  ASSERT_TRUE(Eventually([&] {
+    seen.clear();
+    for (const v1::Envelope& f : late.Frames()) {
+      if (f.has_annotation()) seen.push_back("note: " + f.annotation().text());
+      if (f.has_session_event() && f.session_event().kind() != v1::SessionEvent::KIND_VIEWER_JOINED &&
+          f.session_event().kind() != v1::SessionEvent::KIND_VIEWER_LEFT) {
+        seen.push_back(v1::SessionEvent::Kind_Name(f.session_event().kind()));
+      }
+    }
+    return seen.size() >= 3;
+  })) << seen.size();
+  EXPECT_EQ(seen, (std::vector<std::string>{"KIND_STARTED", "KIND_WARNING", "note: pressed too hard"}));
+}
+
+// Rewind a live session: its replay plays what was recorded up to when it opened (once a 404).
+TEST(Figures, ALiveSessionCanBeRewound) {
+  const std::string dir = TempDir("figures-rewind");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  FakeAgent agent(server.port(), server.Token("agent"));
+  const auto welcome = agent.Hello();
+  ASSERT_TRUE(welcome && welcome->has_welcome());
+  const std::string id = welcome->welcome().session_id();
+  for (uint64_t t = 0; t < 2000; t += 100) ASSERT_TRUE(SendPress(agent, t, 100, 1.0));
+  ASSERT_TRUE(
+      agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().next_tick() == 2000; }, seconds(20)));
+  FakeAgent replay(server.port(), server.Token("observer"), "/ws/replay/" + id);
+  ASSERT_TRUE(replay.connected());
+  ASSERT_TRUE(replay.ReadUntil([](const v1::Envelope& e) { return e.has_welcome(); }));
+  v1::Envelope play;
+  play.mutable_playback_control()->set_action(v1::PlaybackControl::ACTION_SET_SPEED);
+  play.mutable_playback_control()->set_speed(16);
+  ASSERT_TRUE(replay.Send(play));
+  play.mutable_playback_control()->set_action(v1::PlaybackControl::ACTION_PLAY);
+  ASSERT_TRUE(replay.Send(play));
+  const auto last = replay.ReadUntil(
+      [](const v1::Envelope& e) {
+        return e.has_device_samples() && e.device_samples().samples_size() > 0 &&
+               e.device_samples().samples(e.device_samples().samples_size() - 1).tick() == 1999;
+      },
+      seconds(20));
+  EXPECT_TRUE(last) << "the replay did not reach the last acknowledged tick";
+  // The session is still live meanwhile.
+  EXPECT_EQ(Row(server.port(), server.Token("observer"), id)["state"], "live");
 }
 
 }  // namespace

@@ -70,6 +70,32 @@ TEST_F(StaticFilesTest, PageUrlsServeIndexWithoutAToken) {
   EXPECT_EQ(Get("/models/a/b").result_int(), 404);
 }
 
+// Issue 28: a browser sent to an unknown URL got raw JSON; it gets a page with the way back now,
+// while API clients keep the JSON error.
+TEST_F(StaticFilesTest, AnUnknownPageIsAPageForABrowserAndJsonForTheApi) {
+  const auto get = [&](const std::string& target, const char* accept) {
+    ApiRequest req;
+    req.message = http::request<http::string_body>(http::verb::get, target, 11);
+    req.message.set(http::field::host, "idms.local:8740");
+    if (accept != nullptr) req.message.set(http::field::accept, accept);
+    Admission a = Admit(ctx_, routes_, req);
+    EXPECT_TRUE(a.error) << target;
+    return a.error ? *a.error : ApiResponse{};
+  };
+  const char* browser = "text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8";
+  const ApiResponse page = get("/no/such/%3Cpage%3E", browser);
+  EXPECT_EQ(page.result_int(), 404);
+  EXPECT_EQ(page[http::field::content_type], "text/html; charset=utf-8");
+  EXPECT_NE(page.body().find("<code>/no/such/&lt;page&gt;</code>"), std::string::npos) << page.body();
+  EXPECT_NE(page.body().find("<a href=\"/\">"), std::string::npos);
+  for (const auto& [target, accept] :
+       {std::pair{"/no/such/page", static_cast<const char*>(nullptr)}, std::pair{"/api/nothing", browser}}) {
+    const ApiResponse json = get(target, accept);
+    EXPECT_EQ(json.result_int(), 404) << target;
+    EXPECT_EQ(json[http::field::content_type], "application/json") << target;
+  }
+}
+
 TEST_F(StaticFilesTest, AssetsHaveTypesAndRevalidate) {
   ApiResponse js = Get("/assets/app.js");
   ASSERT_EQ(js.result_int(), 200);
