@@ -11,7 +11,8 @@ import { display } from '../view/display.js';
 import { parseObj } from '../codec/obj.js';
 import { Timeline } from './timeline.js';
 import { LiveView } from './live_view.js';
-import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName } from './session_panels.js';
+import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName,
+  messageWords } from './session_panels.js';
 
 /** Seconds the time plots keep; the server's replay sends as much with a seek (kPlotWindowNs in server/src/replay.cc). */
 const kWindowS = 5;
@@ -156,9 +157,10 @@ function loadRecord(id, mode, p) {
     for (const a of s.annotations || []) p.notes.add({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
     // The events so far: in the list at their times (a late joiner sees those before it came; the
     // stream's own copies are not listed twice), and on a replay's timeline.
-    for (const e of s.events || []) {
-      p.events.add(eventFromRecord(e));
-      if (mode === 'replay') p.timeline?.addMark(e.time_s, 'event', `${eventName(e.kind)}: ${e.message}`);
+    for (const record of s.events || []) {
+      const e = eventFromRecord(record);
+      p.events.add(e);
+      if (mode === 'replay') p.timeline?.addMark(record.time_s, 'event', `${eventName(e.kind)}: ${messageWords(Number(e.kind), e.message || '')}`);
     }
     p.timeline?.setDuration(s.duration_s);
     p.view.countLimitHits = mode === 'live';
@@ -213,6 +215,9 @@ export function sessionPage(id, role, mode) {
     camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius });
   /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
+  // The force-against-depth plot's axes as last drawn, for the tests.
+  /** @type {any} */ (window).__idmsDepthAxes = () => ({ ...view.depthPlot.axes, xUnit: view.depthPlot.units.length,
+    yUnit: view.depthPlot.units.force });
   // The force plot's sample times: whether they run in order and how far (a replay played again
   // must not keep the last pass's), for the tests.
   /** @type {any} */ (window).__idmsForceTimes = () => {

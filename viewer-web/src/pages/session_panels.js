@@ -41,6 +41,20 @@ function countWords(kind, count) {
   return '';
 }
 
+/** The agent's commands as the buttons name them (a relayed command's event names its enum). */
+const kCommandWords = new Map([['KIND_TWEEZERS_CLOSE', 'Close tweezers'], ['KIND_TWEEZERS_OPEN', 'Open tweezers'],
+  ['KIND_RESET', 'Reset model'], ['KIND_KEYFRAME_REQUEST', 'Request keyframe']]);
+
+/**
+ * An event's message with the enum names the server writes into some ("command KIND_RESET relayed
+ * to the agent") as words: a command as its button says it, anything else in lower case.
+ * @param {number} kind @param {string} message
+ */
+export function messageWords(kind, message) {
+  return message.replace(/\bKIND_[A-Z_]+\b/g, (name) => (kind === EventKind.KIND_COMMAND && kCommandWords.get(name))
+    || `"${name.slice(5).toLowerCase().replace(/_/g, ' ')}"`);
+}
+
 /**
  * An event as the REST API lists it ({kind: "KIND_RESET", time_s, tick, count, message, peer}), as
  * the stream carries it.
@@ -250,7 +264,7 @@ export class EventList {
     const counted = countWords(kind, Number(e.count || 0));
     const li = h('li', { class: `event ${kEventSlugs.get(kind) || 'note'}`, 'data-time': String(t) }, [
       h('span', { class: 'time', text: formatTime(t) }), ' ', h('strong', { text: eventName(kind) }),
-      counted ? ` (${counted})` : '', ' ', e.message || '']);
+      counted ? ` (${counted})` : '', ' ', messageWords(kind, e.message || '')]);
     // Newest first: before the first one that is not later (a live event is at the top at once).
     let next = this.el.firstElementChild;
     while (next && Number(/** @type {HTMLElement} */ (next).dataset.time) > t) next = next.nextElementSibling;
