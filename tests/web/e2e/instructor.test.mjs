@@ -77,7 +77,7 @@ test('sessions list: trainee column, force-limit hits, filters by trainee, model
   assert.ok(hits > 0);
   assert.equal(await limitedRow.locator('td[data-label="Force-limit hits"] .limit-hits').innerText(), String(hits));
   assert.equal(await page.locator(`#sessions tr[data-id="${ids.bob}"] td[data-label="Force-limit hits"] .limit-hits`).innerText(), '0');
-  assert.match(await page.locator('#sessions thead').innerText(), /Peak force \(model force units\)/);
+  assert.match(await page.locator('#sessions thead').innerText(), /Peak force\s+model force units/);
   const right = await page.evaluate(() => /** @type {HTMLElement} */ (document.getElementById('sessions')).getBoundingClientRect().right);
   assert.ok(right <= 1280, `the session list is ${right} px wide at 1280`);
   await docShot(page, 'sessions-trainee.png');
@@ -304,7 +304,7 @@ test('phone: the lists are cards with their figures in sight; the model page\'s 
       .map((td) => ({ label: /** @type {HTMLElement} */ (td).dataset.label, left: td.getBoundingClientRect().left, right: td.getBoundingClientRect().right })));
     const out = cells.filter((c) => c.left < 0 || c.right > 390);
     assert.deepEqual(out, [], 'cells outside the screen');
-    assert.ok(cells.some((c) => c.label === 'Trainee') && cells.some((c) => c.label === 'Peak force'));
+    assert.ok(cells.some((c) => c.label === 'Trainee') && cells.some((c) => c.label === 'Peak force (model force units)'));
     const box = await page.$eval('#sessions', (t) => ({ scroll: t.parentElement?.scrollWidth ?? 0, client: t.parentElement?.clientWidth ?? 0 }));
     assert.ok(box.scroll <= box.client, `the table scrolls sideways: ${JSON.stringify(box)}`);
     await docShot(page, 'sessions-phone.png');

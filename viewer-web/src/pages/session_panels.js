@@ -51,6 +51,8 @@ const kCommandWords = new Map([['KIND_TWEEZERS_CLOSE', 'Close tweezers'], ['KIND
  * @param {number} kind @param {string} message
  */
 export function messageWords(kind, message) {
+  // "Command: command reset ..." says it twice.
+  if (kind === EventKind.KIND_COMMAND) message = message.replace(/^command /, '');
   return message.replace(/\bKIND_[A-Z_]+\b/g, (name) => (kind === EventKind.KIND_COMMAND && kCommandWords.get(name))
     || `"${name.slice(5).toLowerCase().replace(/_/g, ' ')}"`);
 }
@@ -264,7 +266,8 @@ export class EventList {
     const counted = countWords(kind, Number(e.count || 0));
     const li = h('li', { class: `event ${kEventSlugs.get(kind) || 'note'}`, 'data-time': String(t) }, [
       h('span', { class: 'time', text: formatTime(t) }), ' ', h('strong', { text: eventName(kind) }),
-      counted ? ` (${counted})` : '', ' ', messageWords(kind, e.message || '')]);
+      counted ? ` (${counted})` : '', ' ', messageWords(kind, e.message || ''),
+      e.peer && kind === EventKind.KIND_COMMAND ? h('span', { class: 'muted', text: ` — ${e.peer}` }) : null]);
     // Newest first: before the first one that is not later (a live event is at the top at once).
     let next = this.el.firstElementChild;
     while (next && Number(/** @type {HTMLElement} */ (next).dataset.time) > t) next = next.nextElementSibling;

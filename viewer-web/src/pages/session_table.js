@@ -14,19 +14,19 @@ const kForceUnit = display.unit.force;
  * keep the figures within a 1280 px window.
  */
 export const kColumns = [
-  { head: 'Preview', label: '', cls: 'thumb-cell' },
-  { head: 'Session, started', label: 'Session', cls: 'id-cell' },
-  { head: 'State, duration', label: 'State', cls: undefined },
-  { head: 'Trainee', label: 'Trainee', cls: 'trainee' },
-  { head: 'Model', label: 'Model', cls: 'model' },
-  { head: 'Device', label: 'Device', cls: 'device' },
-  { head: `Peak force (${kForceUnit})`, label: 'Peak force', cls: 'num' },
-  { head: 'Contact', label: 'Contact', cls: 'num' },
-  { head: 'Force-limit hits, time at the limit', label: 'Force-limit hits', cls: 'num' },
-  { head: 'Path (model units)', label: 'Path', cls: 'num' },
-  { head: 'Tick p99', label: 'Tick p99', cls: 'num' },
-  { head: 'Warnings', label: 'Warnings', cls: 'num' },
-  { head: '', label: '', cls: 'actions' },
+  { head: 'Preview', unit: '', label: '', cls: 'thumb-cell' },
+  { head: 'Session', unit: 'started', label: 'Session', cls: 'id-cell' },
+  { head: 'State', unit: 'duration', label: 'State', cls: undefined },
+  { head: 'Trainee', unit: '', label: 'Trainee', cls: 'trainee' },
+  { head: 'Model', unit: '', label: 'Model', cls: 'model' },
+  { head: 'Device', unit: '', label: 'Device', cls: 'device' },
+  { head: 'Peak force', unit: kForceUnit, label: `Peak force (${kForceUnit})`, cls: 'num' },
+  { head: 'Contact', unit: 's', label: 'Contact', cls: 'num' },
+  { head: 'Force-limit hits', unit: 'time at the limit', label: 'Force-limit hits', cls: 'num' },
+  { head: 'Path', unit: 'model units', label: 'Path (model units)', cls: 'num' },
+  { head: 'Tick p99', unit: '', label: 'Tick p99', cls: 'num' },
+  { head: 'Warnings', unit: '', label: 'Warnings', cls: 'num' },
+  { head: '', unit: '', label: '', cls: 'actions' },
 ];
 const kPeak = 6, kLimit = 8, kActions = 12;
 
@@ -88,6 +88,7 @@ class SessionRow {
     this.set(5, `${s.device}|${identity}`, () => [s.device, identity ? h('div', { class: 'under identity', text: identity }) : null]);
     const sum = s.summary || {};
     this.text(kPeak, fixed(sum.peak_force ?? NaN));
+    this.cells[kPeak].title = `${fixed(sum.peak_force ?? NaN)} ${kForceUnit}`;
     this.text(7, `${fixed(sum.contact_time_s ?? NaN, 1)} s`);
     // Hits: how often the device force reached its limit; under it, for how long it stayed there.
     const hits = sum.force_limit_hits ?? NaN;
@@ -118,7 +119,9 @@ export function sessionTable(id, caption, role, refresh) {
   const body = h('tbody');
   const table = h('table', { class: 'list cards', id }, [
     h('caption', { text: caption }),
-    h('thead', {}, [h('tr', {}, kColumns.map((c) => h('th', { scope: 'col', text: c.head })))]),
+    // Each header with its unit (or what the cell's second line says) under it.
+    h('thead', {}, [h('tr', {}, kColumns.map((c) => h('th', { scope: 'col', class: c.cls === 'num' ? 'num' : undefined },
+      [c.head, c.unit ? h('span', { class: 'unit', text: c.unit }) : null])))]),
     body,
   ]);
   /** @type {Map<string, SessionRow>} */

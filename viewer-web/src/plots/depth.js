@@ -142,6 +142,9 @@ export class DepthPlot {
       if (this.depth[i] > dMax) dMax = this.depth[i];
       if (this.force[i] > fMax) fMax = this.force[i];
     }
+    // A press that has not moved yet (the tool held still, as after a reset) still gets an axis
+    // of readable ticks: a thousandth of a model unit at least (ten of the default quantum).
+    if (dMax - dMin < 1e-3) dMax = dMin + 1e-3;
     // The frame, with room for the ticks' labels and the axes' titles.
     const left = 58, right = w - 12, top = 24, bottom = h - 40;
     const xs = niceTicks(dMin, dMax, Math.max(3, Math.min(6, Math.floor((right - left) / 70))));

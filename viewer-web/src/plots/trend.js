@@ -27,6 +27,9 @@ export function startRange(min, max) {
   return [lo - pad, hi + pad];
 }
 
+/** Tall enough that the axes' labels with their units fit beside the plot. */
+const kHeight = 300;
+
 export class TrendPlot {
   /**
    * @param {HTMLElement} host
@@ -40,7 +43,7 @@ export class TrendPlot {
     this.plot = withCpuCanvases(() => new uPlot({
       title: 'Peak force and time in contact per session',
       width,
-      height: 240,
+      height: kHeight,
       scales: { x: { time: true, range: (_u, min, max) => startRange(min, max) },
         force: { range: (_u, min, max) => figureRange(min, max) }, contact: { range: (_u, min, max) => figureRange(min, max) } },
       cursor: { drag: { x: false, y: false } },
@@ -51,11 +54,12 @@ export class TrendPlot {
       ],
       axes: [
         { label: 'session start (local time)' },
-        { scale: 'force', label: `peak force (${units.forceUnit})`, size: 56, stroke: '#c0392b' },
-        { scale: 'contact', side: 1, label: 'time in contact (s)', size: 56, stroke: '#2471a3', grid: { show: false } },
+        { scale: 'force', label: `peak force (${units.forceUnit})`, size: 56, stroke: '#c0392b', labelFont: '12px system-ui, sans-serif' },
+        { scale: 'contact', side: 1, label: 'time in contact (s)', size: 56, stroke: '#2471a3', grid: { show: false },
+          labelFont: '12px system-ui, sans-serif' },
       ],
     }, [[], [], []], host));
-    this.resizeObserver = new ResizeObserver(() => this.plot.setSize({ width: Math.max(280, host.clientWidth), height: 240 }));
+    this.resizeObserver = new ResizeObserver(() => this.plot.setSize({ width: Math.max(280, host.clientWidth), height: kHeight }));
     this.resizeObserver.observe(host);
   }
 
