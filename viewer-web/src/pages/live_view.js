@@ -23,7 +23,7 @@ import { display } from '../view/display.js';
  */
 
 /** The time plots' titles, units and series (the bench's standing panel draws the same). */
-export const kForcePlot = { title: 'Force on the device', unit: display.unit.force, axis: 'force', series: [
+export const kForcePlot = { title: 'Device force', unit: display.unit.force, axis: 'force', series: [
   { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] };
 export const kPositionPlot = { title: 'Tool position', unit: display.unit.length, axis: 'position', series: [
   { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] };
