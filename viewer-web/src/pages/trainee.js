@@ -46,7 +46,7 @@ export function traineePage(name, role) {
         const hits = sessions.reduce((/** @type {number} */ n, /** @type {any} */ s) => n + Number(s.summary?.force_limit_hits ?? 0), 0);
         const starts = sessions.map((/** @type {any} */ s) => String(s.started)).sort();
         status.textContent = `${sessions.length} sessions from ${formatDate(starts[0])} to ${formatDate(starts[starts.length - 1])}; `
-          + `highest peak force ${fixed(peak)} ${display.unit.force}; force limit reached ${hits} times in all.`;
+          + `highest peak force ${fixed(peak)} ${display.unit.force}; force limit reached ${hits} ${hits === 1 ? 'time' : 'times'} in all.`;
       }
     } catch (e) {
       status.textContent = `Cannot load the sessions: ${e instanceof Error ? e.message : String(e)}; retrying…`;
