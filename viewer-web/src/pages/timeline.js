@@ -130,9 +130,14 @@ export class Timeline {
     this.layoutMarks();
   }
 
-  /** The time of the samples being shown. @param {number} t */
+  /**
+   * The time of the samples being shown, while playing. Paused, the time is the server's (its
+   * PlaybackState): a seek's catch-up samples end just before the time sought, and a key's step
+   * from there would land a sample short (0.1 s on from 0.6 s made 0.699 s).
+   * @param {number} t
+   */
   setTime(t) {
-    if (!Number.isNaN(this.seekTarget)) return;
+    if (!Number.isNaN(this.seekTarget) || !this.playing) return;
     this.time = t;
     this.showTime();
   }
