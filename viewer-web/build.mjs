@@ -1,6 +1,6 @@
 // Builds the viewer: protobufjs static code from protocol/idms.proto (so the schema has one
 // source), then one esbuild bundle (JS + CSS) and index.html into the output directory that
-// idms-server serves (--web-root; CMake writes build/web).
+// idms-server serves (--web-root; CMake writes build/web), with the favicon.
 //   node build.mjs OUT_DIR [--dev]
 import { execFileSync } from 'node:child_process';
 import { copyFileSync, mkdirSync, statSync, existsSync, utimesSync } from 'node:fs';
@@ -49,4 +49,6 @@ await esbuild.build({
   legalComments: 'linked',
 });
 copyFileSync(join(here, 'index.html'), join(outDir, 'index.html'));
+// The tab's icon (a page without one makes the browser ask for /favicon.ico: a 404 on every page).
+copyFileSync(join(here, 'favicon.svg'), join(outDir, 'assets', 'favicon.svg'));
 console.log(`viewer-web: built ${outDir}`);

@@ -87,11 +87,12 @@ async function viewerPage() {
     return e;
   };
   const hosts = { view: /** @type {HTMLElement} */ (document.getElementById('view')), force: el('div', 'force'),
-    position: el('div', 'position'), depth: el('div', 'depth'), toolState: el('span', 'tool'), gapNote: el('p', 'gap') };
+    position: el('div', 'position'), depth: el('div', 'depth'), toolState: el('span', 'tool'), gapNote: el('p', 'gap'),
+    forceLimit: el('span', 'force-limit') };
   const st = { frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0, warnings: 0,
-    fallbacks: 0, lastError: '', lastInvalid: '', movedVertices: 0, peakForce: 0, contactSamples: 0 };
+    fallbacks: 0, lastError: '', lastInvalid: '', movedVertices: 0, peakForce: 0, contactSamples: 0, forceLimited: false, forceLimitHits: 0 };
   // The three plots on screen (they skip drawing when scrolled away), the panel's text below them.
-  panel.append(hosts.force, hosts.position, hosts.depth, hosts.toolState, hosts.gapNote);
+  panel.append(hosts.force, hosts.position, hosts.depth, hosts.toolState, hosts.forceLimit, hosts.gapNote);
   const view = new LiveView(st, hosts, 5);
   if (flags.has('nopanel')) panel.style.display = 'none';
   const health = new HealthPanel(st, view.loop);

@@ -7,6 +7,7 @@ import { sessionsPage } from './pages/sessions.js';
 import { sessionPage } from './pages/session.js';
 import { modelsPage } from './pages/models.js';
 import { modelPage } from './pages/model.js';
+import { traineePage } from './pages/trainee.js';
 import { h } from './pages/dom.js';
 
 /** @param {string} path */
@@ -17,6 +18,7 @@ function route(path) {
   if (first === 'sessions' && parts.length === 1) return (/** @type {string} */ role) => sessionsPage(role);
   if (first === 'session' && parts.length === 2) return (/** @type {string} */ role) => sessionPage(second, role, 'live');
   if (first === 'replay' && parts.length === 2) return (/** @type {string} */ role) => sessionPage(second, role, 'replay');
+  if (first === 'trainee' && parts.length === 2) return (/** @type {string} */ role) => traineePage(second, role);
   if (first === 'models' && parts.length === 1) return (/** @type {string} */ role) => modelsPage(role);
   if (first === 'models' && parts.length === 2) return (/** @type {string} */ role) => modelPage(second, role);
   return undefined;

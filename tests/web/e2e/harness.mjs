@@ -96,14 +96,16 @@ export class Server {
 
 /**
  * The real agent publishing a scripted palpation of the shipped hex model: its files, or with
- * `library` the server's library's copy by name (downloaded, as a deployed agent does).
- * @param {Server} server @param {number} durationS @param {string} [device] @param {{library?: boolean}} [options]
+ * `library` the server's library's copy by name (downloaded, as a deployed agent does); `args`: more
+ * of the agent's options (--trainee NAME, --max-force F, --scene FILE).
+ * @param {Server} server @param {number} durationS @param {string} [device] @param {{library?: boolean, args?: string[]}} [options]
  */
 export function startAgent(server, durationS, device = 'scripted:palpate', options = {}) {
   const model = options.library ? ['--model', 'hex_4x5_home', '--cache-dir', tempDir('agent-cache')]
     : ['--model-file', join(sourceDir(), 'models', 'hex_4x5_home')];
   const child = spawn(agentBin(), ['--server', `ws://127.0.0.1:${server.port}`, '--token', server.token('agent'),
-    ...model, '--device', device, '--no-realtime', '--duration', String(durationS)], { stdio: ['ignore', 'ignore', 'pipe'] });
+    ...model, '--device', device, '--no-realtime', '--duration', String(durationS), ...(options.args ?? [])],
+  { stdio: ['ignore', 'ignore', 'pipe'] });
   let log = '';
   child.stderr.on('data', (d) => { log += d; });
   const exited = new Promise((resolve) => child.once('exit', (code) => resolve(code)));

@@ -28,8 +28,11 @@ after(async () => {
 
 /** @param {import('playwright-core').Page} page */
 const state = (page) => page.evaluate(() => /** @type {any} */ (window).__idms);
-/** The header's duration, s (NaN before the session's record came). @param {import('playwright-core').Page} page */
-const headerDuration = (page) => page.evaluate(() => Number.parseFloat(document.getElementById('duration')?.textContent ?? ''));
+/** The header's duration, s, from its m:ss.sss (NaN before the session's record came). @param {import('playwright-core').Page} page */
+const headerDuration = (page) => page.evaluate(() => {
+  const m = /^(\d+):(\d+\.\d+)$/.exec(document.getElementById('duration')?.textContent ?? '');
+  return m ? 60 * Number(m[1]) + Number(m[2]) : NaN;
+});
 
 test('live: list, surface that moves, tool and force, plots, late join, command, annotation', async () => {
   const { page, context, errors } = browser;
@@ -43,7 +46,7 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   await row.waitFor();
   assert.match(await row.innerText(), /hex_4x5_home/);
   // The device the agent drives, and the agent (its host and pid) under it, said once each.
-  const device = await row.locator('td').nth(4).innerText();
+  const device = await row.locator('td.device').innerText();
   assert.match(device, /^scripted:palpate\n+idms-agent \S+ pid \d+$/);
   await shot(page, 'sessions-live.png');
   // The list refreshes in place: a link with the keyboard's focus keeps it through a refresh, and
@@ -68,7 +71,7 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   const said = JSON.stringify(framing);
   assert.ok(framing.toolShown && framing.toolInView, `the tool is wholly in view: ${said}`);
   assert.ok(framing.surfaceSpan >= 0.4, `the tissue spans at least 40% of the view: ${said}`);
-  await page.waitForFunction(() => /\d/.test(document.getElementById('duration')?.textContent ?? ''));
+  await page.waitForFunction(() => /^\d+:\d+\.\d+$/.test(document.getElementById('duration')?.textContent ?? ''));
   const duration1 = await headerDuration(page);
   const before1 = await state(page);
   await page.waitForFunction((t) => { const s = /** @type {any} */ (window).__idms; return s.timeS > t + 1.5 && s.movedVertices > 0 && s.contactSamples > 0; }, before1.timeS, { timeout: 60000 });
@@ -86,8 +89,10 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   assert.ok(after1.depthSamples > 10, `force-depth plot of the press: ${after1.depthSamples} samples`);
   assert.match(await page.locator('#tool-state').innerText(), /^tool: (free|in contact|grasping)$/);
   // The header's duration follows the session's time (not the list's figure when the page opened).
-  await page.waitForFunction((d) => Number.parseFloat(document.getElementById('duration')?.textContent ?? '') >= d + 1, duration1,
-    { timeout: 10000 }).catch(() => {});
+  await page.waitForFunction((d) => {
+    const m = /^(\d+):(\d+\.\d+)$/.exec(document.getElementById('duration')?.textContent ?? '');
+    return m !== null && 60 * Number(m[1]) + Number(m[2]) >= d + 1;
+  }, duration1, { timeout: 10000 }).catch(() => {});
   const duration2 = await headerDuration(page);
   const now1 = (await state(page)).timeS;
   assert.ok(duration2 >= duration1 + 1, `the header's duration went from ${duration1} s to ${duration2} s while the session ran on`);

@@ -15,7 +15,7 @@ test('static files: types, ETag revalidation, page URLs get index.html, the API 
   assert.match(index.headers.get('content-type') ?? '', /^text\/html/);
   const html = await index.text();
   assert.match(html, /<script type="module" src="\/assets\/app.js">/);
-  for (const path of ['/', '/login', '/session/abc', '/replay/abc', '/models', '/models/hex_4x5_home']) {
+  for (const path of ['/', '/login', '/session/abc', '/replay/abc', '/trainee/alice', '/models', '/models/hex_4x5_home']) {
     const res = await fetch(server.base + path);
     assert.equal(res.status, 200, path);
     assert.equal(await res.text(), html, path);

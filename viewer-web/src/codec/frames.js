@@ -10,7 +10,8 @@ import { idms } from './proto.js';
 
 /**
  * One tick, as idms.v1.DeviceSample's fields the viewer reads (unset fields read 0 / false).
- * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number}} Sample
+ * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number,
+ *   forceLimited: boolean}} Sample
  */
 
 /**
@@ -45,7 +46,8 @@ const kWireFixed64 = 1;
 const kWireLength = 2;
 
 /** @returns {Sample} */
-const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0 });
+const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0,
+  forceLimited: false });
 
 export class FrameDecoder {
   constructor() {
@@ -134,6 +136,7 @@ export class FrameDecoder {
     s.contact = false;
     s.grasp = false;
     s.warnings = 0;
+    s.forceLimited = false;
     zero(s.toolPos);
     zero(s.force);
     while (r.pos < end) {
@@ -145,6 +148,7 @@ export class FrameDecoder {
         case 7: s.contact = r.bool(); break;
         case 8: s.grasp = r.bool(); break;
         case 10: s.warnings = r.uint32(); break;
+        case 12: s.forceLimited = r.bool(); break;
         default: r.skipType(tag & 7);
       }
     }

@@ -7,24 +7,25 @@ import { FrameLoop } from '../view/frame_loop.js';
 import { RollingPlot } from '../plots/rolling.js';
 import { DepthPlot } from '../plots/depth.js';
 import { length3 } from '../length3.js';
+import { display } from '../view/display.js';
 
 /**
  * What the view has seen (a part of the page's state object, window.__idms).
  * @typedef {{frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, lastError: string, lastInvalid: string,
- *   movedVertices: number, peakForce: number, contactSamples: number}} ViewState
+ *   movedVertices: number, peakForce: number, contactSamples: number, forceLimited: boolean, forceLimitHits: number}} ViewState
  */
 
 /**
  * Where the view draws: elements the page has laid out.
  * @typedef {{view: HTMLElement, force: HTMLElement, position: HTMLElement, depth: HTMLElement,
- *   toolState: HTMLElement, gapNote: HTMLElement}} ViewHosts
+ *   toolState: HTMLElement, gapNote: HTMLElement, forceLimit: HTMLElement}} ViewHosts
  */
 
 /** The time plots' titles, units and series (the bench's standing panel draws the same). */
-export const kForcePlot = { title: 'Force on the device', unit: 'force', series: [
+export const kForcePlot = { title: 'Device force', unit: display.unit.force, axis: 'force', series: [
   { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] };
-export const kPositionPlot = { title: 'Tool position', unit: 'model units', series: [
+export const kPositionPlot = { title: 'Tool position', unit: display.unit.length, axis: 'position', series: [
   { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] };
 
 export class LiveView {
@@ -44,8 +45,41 @@ export class LiveView {
     const capacity = windowS * 1000;
     this.forcePlot = new RollingPlot(hosts.force, { ...kForcePlot, capacity }, this.loop);
     this.posPlot = new RollingPlot(hosts.position, { ...kPositionPlot, capacity }, this.loop);
-    this.depthPlot = new DepthPlot(hosts.depth, capacity, this.loop);
+    this.depthPlot = new DepthPlot(hosts.depth, capacity, this.loop, { force: display.unit.force, length: display.unit.length });
     this.shownToolState = '';
+    /** Force-limit hits from before the page's samples (the record's count when it came); -1 until then. */
+    this.limitBase = -1;
+    /** Hits seen in the samples since limitBase was set. */
+    this.limitSeen = 0;
+    /**
+     * Whether the samples' hits add to the count: live, yes; a replay's samples come again after
+     * each seek, so it shows the recording's count (setForceLimitHits).
+     */
+    this.countLimitHits = true;
+    this.shownLimit = '';
+  }
+
+  /**
+   * The session's hits so far when the page asked (its summary): the indicator counts on from it.
+   * @param {number} hits
+   */
+  setForceLimitHits(hits) {
+    this.limitBase = hits;
+    this.limitSeen = 0;
+    this.showForceLimit();
+  }
+
+  /** The indicator: lit while the device force is at its limit, with the session's hits. */
+  showForceLimit() {
+    const st = this.st;
+    st.forceLimitHits = Math.max(0, this.limitBase) + this.limitSeen;
+    const hits = this.limitBase < 0 && this.limitSeen === 0 ? ''
+      : ` · ${st.forceLimitHits} ${st.forceLimitHits === 1 ? 'hit' : 'hits'}${this.countLimitHits ? '' : ' in the recording'}`;
+    const text = (st.forceLimited ? 'AT FORCE LIMIT' : 'Force limit: not reached') + hits;
+    if (text === this.shownLimit) return;
+    this.shownLimit = text;
+    this.hosts.forceLimit.textContent = text;
+    this.hosts.forceLimit.classList.toggle('lit', st.forceLimited);
   }
 
   /** @param {any} msg a MeshKeyframe */
@@ -89,7 +123,7 @@ export class LiveView {
    * Allocates nothing.
    * @param {{timeS?: number | null, force?: {x?: number | null, y?: number | null, z?: number | null} | null,
    *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
-   *   grasp?: boolean | null, warnings?: number | null}[]} samples
+   *   grasp?: boolean | null, warnings?: number | null, forceLimited?: boolean | null}[]} samples
    * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
   onSamples(samples, count = samples.length) {
@@ -107,9 +141,14 @@ export class LiveView {
       this.posPlot.push(t, px, py, pz);
       this.depthPlot.push(px, py, pz, fx, fy, fz, !!s.contact);
       st.warnings += s.warnings || 0;
+      // A hit: the force comes to the limit (the server's summary counts the same way).
+      const limited = !!s.forceLimited;
+      if (limited && !st.forceLimited && this.countLimitHits) this.limitSeen++;
+      st.forceLimited = limited;
     }
     st.samples += count;
     if (count === 0) return;
+    this.showForceLimit();
     const last = samples[count - 1];
     const f = last.force, p = last.toolPos;
     this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp);
@@ -121,6 +160,7 @@ export class LiveView {
 
   /** Forgets the plots' samples (a seek in a replay). */
   clearPlots() {
+    this.st.forceLimited = false;
     this.forcePlot.clear();
     this.posPlot.clear();
     this.depthPlot.clear();

@@ -7,6 +7,8 @@ import { SurfaceView } from '../view/surface.js';
 import { stiffnessPerVertex } from '../view/display.js';
 import { h, page, formatDate } from './dom.js';
 
+const kVersionColumns = ['Version', '', 'Atoms', 'Elements', 'Triangles', 'Description', 'Added', 'fem SHA-256'];
+
 /** @param {string} name @param {string} role */
 export function modelPage(name, role) {
   const viewHost = h('div', { class: 'view3d preview', id: 'preview' });
@@ -21,8 +23,7 @@ export function modelPage(name, role) {
       h('section', { 'aria-label': 'Preview at rest' }, [viewHost, h('div', { class: 'toolbar' }, [h('label', {}, ['Colour ', colour])])]),
       h('section', { 'aria-labelledby': 'versions-title' }, [h('h2', { id: 'versions-title', text: 'Versions' }),
         h('div', { class: 'scroll' }, [h('table', { class: 'list', id: 'versions' }, [
-          h('thead', {}, [h('tr', {}, ['Version', 'Atoms', 'Elements', 'Triangles', 'Description', 'Added', 'fem SHA-256', '']
-            .map((t) => h('th', { scope: 'col', text: t })))]), body])])]),
+          h('thead', {}, [h('tr', {}, kVersionColumns.map((t) => h('th', { scope: 'col', text: t })))]), body])])]),
     ]),
   ]);
   const view = new SurfaceView(viewHost);
@@ -68,15 +69,12 @@ export function modelPage(name, role) {
   async function load() {
     const m = await api(`/api/models/${encodeURIComponent(name)}`);
     const versions = [...(m.versions || [])].sort((/** @type {any} */ a, /** @type {any} */ b) => b.version - a.version);
+    // The actions next to the version they act on (last, they sat past the right edge at 1280 px).
+    const cell = (/** @type {number} */ k, /** @type {Record<string, any>} */ attrs, /** @type {(Node | string | null)[]} */ children = []) =>
+      h('td', { ...attrs, 'data-label': kVersionColumns[k] || undefined }, children);
     body.replaceChildren(...versions.map((/** @type {any} */ v) => h('tr', { 'data-version': v.version }, [
-      h('td', { class: 'num', text: String(v.version) }),
-      h('td', { class: 'num', text: String(v.atoms) }),
-      h('td', { class: 'num', text: String(v.elements) }),
-      h('td', { class: 'num', text: String(v.triangles) }),
-      h('td', { text: v.description }),
-      h('td', { text: formatDate(v.created) }),
-      h('td', {}, [h('code', { text: String(v.fem_sha256).slice(0, 12) + '…', title: v.fem_sha256 })]),
-      h('td', {}, [
+      cell(0, { class: 'num', text: String(v.version) }),
+      cell(1, { class: 'actions' }, [
         h('button', { type: 'button', class: 'small', text: 'Preview', 'aria-label': `Preview version ${v.version}`, onclick: () => preview(v.version) }),
         role === 'admin' ? h('button', { type: 'button', class: 'small danger', text: 'Delete', 'aria-label': `Delete version ${v.version}`,
           onclick: async () => {
@@ -86,6 +84,12 @@ export function modelPage(name, role) {
             else load();
           } }) : null,
       ]),
+      cell(2, { class: 'num', text: String(v.atoms) }),
+      cell(3, { class: 'num', text: String(v.elements) }),
+      cell(4, { class: 'num', text: String(v.triangles) }),
+      cell(5, { text: v.description }),
+      cell(6, { text: formatDate(v.created) }),
+      cell(7, { class: 'hash' }, [h('code', { text: String(v.fem_sha256).slice(0, 12) + '…', title: v.fem_sha256 })]),
     ])));
     if (versions.length) await preview(versions[0].version);
   }

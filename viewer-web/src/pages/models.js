@@ -3,13 +3,14 @@
 import { api, ApiError } from '../net/api.js';
 import { h, page, formatDate } from './dom.js';
 
+const kColumns = ['Model', 'Latest version', 'Atoms', 'Elements', 'Triangles', 'Size', 'Description', 'Added'];
+
 /** @param {string} role */
 export function modelsPage(role) {
   const body = h('tbody');
   const status = h('p', { class: 'muted', role: 'status' });
-  const table = h('table', { class: 'list', id: 'models' }, [
-    h('thead', {}, [h('tr', {}, ['Model', 'Latest version', 'Atoms', 'Elements', 'Triangles', 'Size', 'Description', 'Added']
-      .map((t) => h('th', { scope: 'col', text: t })))]),
+  const table = h('table', { class: 'list cards', id: 'models' }, [
+    h('thead', {}, [h('tr', {}, kColumns.map((t) => h('th', { scope: 'col', text: t })))]),
     body,
   ]);
   page('Models', [h('h1', { text: 'Model library' }), status, h('div', { class: 'scroll' }, [table]),
@@ -18,15 +19,18 @@ export function modelsPage(role) {
   async function refresh() {
     try {
       const { models } = await api('/api/models');
+      // Each cell labelled for a phone's card (style.css, table.cards).
+      const cell = (/** @type {number} */ k, /** @type {Record<string, any>} */ attrs, /** @type {Node[]} */ children = []) =>
+        h('td', { ...attrs, 'data-label': kColumns[k] }, children);
       body.replaceChildren(...models.map((/** @type {any} */ m) => h('tr', { 'data-name': m.name }, [
-        h('td', {}, [h('a', { href: `/models/${encodeURIComponent(m.name)}`, text: m.name })]),
-        h('td', { class: 'num', text: String(m.latest_version) }),
-        h('td', { class: 'num', text: String(m.atoms) }),
-        h('td', { class: 'num', text: String(m.elements) }),
-        h('td', { class: 'num', text: String(m.triangles) }),
-        h('td', { class: 'num', text: `${(m.bytes / 1024).toFixed(1)} KiB` }),
-        h('td', { text: m.description }),
-        h('td', { text: formatDate(m.created) }),
+        cell(0, {}, [h('a', { href: `/models/${encodeURIComponent(m.name)}`, text: m.name })]),
+        cell(1, { class: 'num', text: String(m.latest_version) }),
+        cell(2, { class: 'num', text: String(m.atoms) }),
+        cell(3, { class: 'num', text: String(m.elements) }),
+        cell(4, { class: 'num', text: String(m.triangles) }),
+        cell(5, { class: 'num', text: `${(m.bytes / 1024).toFixed(1)} KiB` }),
+        cell(6, { text: m.description }),
+        cell(7, { text: formatDate(m.created) }),
       ])));
       status.textContent = `${models.length} models`;
     } catch (e) {

@@ -11,7 +11,8 @@ import { display } from '../view/display.js';
 import { parseObj } from '../codec/obj.js';
 import { Timeline } from './timeline.js';
 import { LiveView } from './live_view.js';
-import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel } from './session_panels.js';
+import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName,
+  messageWords } from './session_panels.js';
 
 /** Seconds the time plots keep; the server's replay sends as much with a seek (kPlotWindowNs in server/src/replay.cc). */
 const kWindowS = 5;
@@ -22,7 +23,7 @@ const kWindowS = 5;
  *   samples: number, renders: number, timeS: number, warnings: number, fallbacks: number, lastError: string, lastInvalid: string,
  *   annotations: number, connection: string, ended: boolean, movedVertices: number, peakForce: number,
  *   contactSamples: number, forcePoints: number, forceShown: number, forceFirstS: number, forceLastS: number,
- *   depthSamples: number}} PageState
+ *   depthSamples: number, forceLimited: boolean, forceLimitHits: number, commandsSent: number}} PageState
  */
 
 /**
@@ -42,6 +43,7 @@ function layout(id, mode, panels) {
     position: h('div', { class: 'plot', id: 'position-plot' }),
     depth: h('div', { class: 'plot', id: 'depth-plot' }),
     toolState: h('span', { id: 'tool-state', class: 'tool-state', role: 'status', text: 'tool: –' }),
+    forceLimit: h('span', { id: 'force-limit', class: 'force-limit', role: 'status', text: 'Force limit: not reached' }),
     gapNote: h('p', { class: 'gap-note', id: 'gap-note', role: 'status' }),
   };
   const wire = h('input', { type: 'checkbox', id: 'wireframe' });
@@ -69,7 +71,7 @@ function layout(id, mode, panels) {
       h('section', { class: 'view-section', 'aria-label': '3D view' }, [
         hosts.view,
         h('div', { class: 'toolbar' }, [h('label', {}, ['Colour ', colour]), h('label', {}, ['Deformation ', scale]),
-          h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.gapNote]),
+          h('label', {}, [wire, ' Wireframe']), hosts.toolState, hosts.forceLimit, hosts.gapNote]),
       ]),
       plots,
       below,
@@ -81,7 +83,8 @@ function layout(id, mode, panels) {
 /**
  * What each message feeds.
  * @typedef {{st: PageState, view: LiveView, health: HealthPanel, header: SessionHeader, timeline: Timeline | null,
- *   notes: AnnotationList, onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
+ *   notes: AnnotationList, events: EventList, commands: {setTools: (tools: idms.v1.ITool[]) => void} | null,
+ *   onEvent: (e: idms.v1.ISessionEvent) => void}} Parts
  */
 
 /** @param {Parts} p @param {import('../codec/frames.js').Frame} env */
@@ -104,6 +107,8 @@ function dispatch(p, env) {
   } else if (env.welcome) {
     const tools = env.welcome.scene?.tools || [];
     p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
+    p.commands?.setTools(tools);
+    p.health.setRate(env.welcome.scene?.device?.maxRateHz || 1000);
     if (env.welcome.scene?.model) loadModelRest(p, env.welcome.scene.model, env.welcome.scene.quantStep || 1e-4);
   }
   p.health.invalidate();
@@ -150,10 +155,16 @@ function loadRecord(id, mode, p) {
   api(`/api/sessions/${encodeURIComponent(id)}`).then((s) => {
     p.header.setRecord(s);
     for (const a of s.annotations || []) p.notes.add({ id: a.id, timeS: a.time_s, text: a.text, author: a.author });
-    for (const e of s.events || []) {
-      if (mode === 'replay') p.timeline?.addMark(e.time_s, 'event', `${e.kind}: ${e.message}`);
+    // The events so far: in the list at their times (a late joiner sees those before it came; the
+    // stream's own copies are not listed twice), and on a replay's timeline.
+    for (const record of s.events || []) {
+      const e = eventFromRecord(record);
+      p.events.add(e);
+      if (mode === 'replay') p.timeline?.addMark(record.time_s, 'event', `${eventName(e.kind)}: ${messageWords(Number(e.kind), e.message || '')}`);
     }
     p.timeline?.setDuration(s.duration_s);
+    p.view.countLimitHits = mode === 'live';
+    p.view.setForceLimitHits(Number(s.summary?.force_limit_hits ?? 0));
   }).catch((e) => p.header.fail(`Cannot load the session: ${e instanceof Error ? e.message : String(e)}`));
 }
 
@@ -167,7 +178,7 @@ export function sessionPage(id, role, mode) {
   const st = { mode, frames: 0, keyframes: 0, deltas: 0, gaps: 0, invalid: 0, samples: 0, renders: 0, timeS: 0,
     warnings: 0, fallbacks: 0, lastError: '', lastInvalid: '', annotations: 0, connection: 'connecting', ended: false,
     movedVertices: 0, peakForce: 0, contactSamples: 0, forcePoints: 0, forceShown: 0, forceFirstS: NaN, forceLastS: NaN,
-    depthSamples: 0 };
+    depthSamples: 0, forceLimited: false, forceLimitHits: 0, commandsSent: 0 };
   /** @type {any} */ (window).__idms = st;
 
   // The panels, the layout, then what draws into it (the plots take their width from their boxes).
@@ -176,7 +187,7 @@ export function sessionPage(id, role, mode) {
   /** @param {idms.v1.IEnvelope} env */
   const send = (env) => socket?.send(env) ?? false;
   const loop = new FrameLoop();
-  const header = new SessionHeader(mode, st, loop);
+  const header = new SessionHeader(id, mode, role, st, loop);
   const timelineHost = h('section', { class: 'timeline-section', 'aria-label': 'Timeline' });
   /** @type {Timeline | null} */
   const timeline = mode === 'replay' ? new Timeline(timelineHost, (msg) => send({ playbackControl: msg })) : null;
@@ -185,9 +196,9 @@ export function sessionPage(id, role, mode) {
   const health = new HealthPanel(st, loop, timeline ? () => timeline.time : undefined);
   const events = new EventList(st);
   const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
+  const commands = mode === 'live' && role === 'admin' ? commandPanel(send, st) : null;
   const { hosts, wire, colour, scale } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
-    annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el,
-    commands: mode === 'live' && role === 'admin' ? commandPanel(send) : null });
+    annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el, commands: commands?.el ?? null });
   const view = new LiveView(st, hosts, kWindowS, loop);
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
   colour.addEventListener('change', () => view.view.setColourBy(/** @type {'displacement' | 'plain'} */ (colour.value)));
@@ -204,9 +215,21 @@ export function sessionPage(id, role, mode) {
     camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius });
   /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
+  // The force-against-depth plot's axes as last drawn, for the tests.
+  /** @type {any} */ (window).__idmsDepthAxes = () => ({ ...view.depthPlot.axes, xUnit: view.depthPlot.units.length,
+    yUnit: view.depthPlot.units.force });
+  // The force plot's sample times: whether they run in order and how far (a replay played again
+  // must not keep the last pass's), for the tests.
+  /** @type {any} */ (window).__idmsForceTimes = () => {
+    const p = view.forcePlot, w = p.numSeries + 1;
+    const times = [...p.columns[0].subarray(0, p.length)];
+    for (let i = 0; i < p.numPending; i++) times.push(p.pending[i * w]);
+    const ordered = times.every((t, i) => i === 0 || t >= times[i - 1]);
+    return { count: times.length, first: times[0] ?? NaN, last: times[times.length - 1] ?? NaN, max: Math.max(...times), ordered };
+  };
 
   /** @type {Parts} */
-  const parts = { st, view, health, header, timeline, notes, onEvent: (e) => {
+  const parts = { st, view, health, header, timeline, notes, events, commands, onEvent: (e) => {
     events.add(e);
     if (e.kind !== idms.v1.SessionEvent.Kind.KIND_ENDED || mode !== 'live') return;
     // The end of a live session: say so, link its replay, stop reconnecting.

@@ -3,7 +3,10 @@
 // The header and the health list are parts of the page's frame loop, redrawn a few times a second.
 import { idms } from '../codec/proto.js';
 import { FrameLoop, isDue } from '../view/frame_loop.js';
-import { h, fixed, formatTime } from './dom.js';
+import { api } from '../net/api.js';
+import { h, formatTime } from './dom.js';
+import { LoopWatch } from './loop_verdict.js';
+import { traineeHref } from './session_table.js';
 
 /** @typedef {(env: idms.v1.IEnvelope) => boolean} Send  sends a frame; false when not connected */
 
@@ -11,21 +14,79 @@ import { h, fixed, formatTime } from './dom.js';
 const kPanelHz = 4;
 
 const v1 = idms.v1;
-const kEventNames = new Map(Object.entries(v1.SessionEvent.Kind).map(([name, n]) => [n, name.replace(/^KIND_/, '')]));
+const EventKind = v1.SessionEvent.Kind;
+/** Each event kind's enum name without KIND_, lower case: its CSS class ("force_limit"). */
+/** The enum's values by name. @type {Record<string, number>} */
+const kKindByName = /** @type {any} */ (EventKind);
+const kEventSlugs = new Map(Object.entries(EventKind).map(([name, n]) => [n, name.replace(/^KIND_/, '').toLowerCase()]));
 
 /**
- * The line under the title: model, device, identity, state and duration. A live session's
- * duration follows the session's time as samples arrive; a replay's is the recording's.
+ * An event kind as words: "Reset", "Force limit", "Agent disconnected".
+ * @param {number | string | null | undefined} kind the enum's number, or its name as the REST API writes it
+ */
+export function eventName(kind) {
+  const n = typeof kind === 'string' ? kKindByName[kind] : kind;
+  const slug = kEventSlugs.get(Number(n));
+  if (!slug || n === EventKind.KIND_UNSPECIFIED) return 'Note';
+  const words = slug.replace(/_/g, ' ');
+  return words[0].toUpperCase() + words.slice(1);
+}
+
+/** What an event's count means, in words ('' when it has none). @param {number} kind @param {number} count */
+function countWords(kind, count) {
+  if (!(count > 0)) return '';
+  if (kind === EventKind.KIND_FORCE_LIMIT) return `${count} ${count === 1 ? 'tick' : 'ticks'} clamped`;
+  if (kind === EventKind.KIND_WARNING) return `${count} ${count === 1 ? 'warning' : 'warnings'}`;
+  if (kind === EventKind.KIND_SAMPLES_DROPPED) return `${count} samples lost`;
+  return '';
+}
+
+/** The agent's commands as the buttons name them (a relayed command's event names its enum). */
+const kCommandWords = new Map([['KIND_TWEEZERS_CLOSE', 'Close tweezers'], ['KIND_TWEEZERS_OPEN', 'Open tweezers'],
+  ['KIND_RESET', 'Reset model'], ['KIND_KEYFRAME_REQUEST', 'Request keyframe']]);
+
+/**
+ * An event's message with the enum names the server writes into some ("command KIND_RESET relayed
+ * to the agent") as words: a command as its button says it, anything else in lower case.
+ * @param {number} kind @param {string} message
+ */
+export function messageWords(kind, message) {
+  // "Command: command reset ..." says it twice.
+  if (kind === EventKind.KIND_COMMAND) message = message.replace(/^command /, '');
+  return message.replace(/\bKIND_[A-Z_]+\b/g, (name) => (kind === EventKind.KIND_COMMAND && kCommandWords.get(name))
+    || `"${name.slice(5).toLowerCase().replace(/_/g, ' ')}"`);
+}
+
+/**
+ * An event as the REST API lists it ({kind: "KIND_RESET", time_s, tick, count, message, peer}), as
+ * the stream carries it.
+ * @param {any} e @returns {idms.v1.ISessionEvent}
+ */
+export function eventFromRecord(e) {
+  return { kind: kKindByName[e.kind] ?? 0, timeS: e.time_s, tick: e.tick, count: e.count,
+    message: e.message, peer: e.peer };
+}
+
+/**
+ * The line under the title: model, device, identity, state and duration, and the trainee (an
+ * admin can correct it: PATCH /api/sessions/{id}). A live session's duration follows the session's
+ * time as samples arrive; a replay's is the recording's.
  */
 export class SessionHeader {
-  /** @param {'live' | 'replay'} mode @param {{timeS: number}} st @param {FrameLoop} loop */
-  constructor(mode, st, loop) {
+  /**
+   * @param {string} id @param {'live' | 'replay'} mode @param {string} role
+   * @param {{timeS: number}} st @param {FrameLoop} loop
+   */
+  constructor(id, mode, role, st, loop) {
+    this.id = id;
     this.mode = mode;
+    this.role = role;
     this.st = st;
     this.loop = loop;
     this.text = h('span', { id: 'meta-text', text: 'Loading…' });
     this.duration = h('span', { id: 'duration' });
-    this.el = h('p', { class: 'meta', id: 'meta' }, [this.text, this.duration]);
+    this.trainee = h('span', { id: 'trainee' });
+    this.el = h('div', { class: 'meta', id: 'meta' }, [h('p', {}, [this.text, this.duration]), this.trainee]);
     /** The record's duration when the page asked, s; NaN until it answers. */
     this.recordS = NaN;
     this.lastDraw = -1e9;
@@ -33,11 +94,41 @@ export class SessionHeader {
     loop.add(this);
   }
 
-  /** @param {{model: string, device: string, identity: string, state: string, duration_s: number}} s */
+  /** @param {{model: string, device: string, identity: string, state: string, duration_s: number, trainee?: string}} s */
   setRecord(s) {
     this.text.textContent = `${s.model} · ${s.device} · ${s.identity} · ${s.state} · `;
     this.recordS = s.duration_s;
+    this.showTrainee(String(s.trainee || ''));
     this.invalidate();
+  }
+
+  /** The trainee, a link to their page; for an admin an Edit button that opens a field in place. @param {string} name */
+  showTrainee(name) {
+    const edit = this.role === 'admin' ? h('button', { type: 'button', class: 'small', id: 'trainee-edit', text: 'Edit',
+      'aria-label': 'Edit the trainee', onclick: () => this.editTrainee(name) }) : null;
+    this.trainee.replaceChildren('Trainee: ', name ? h('a', { href: traineeHref(name), id: 'trainee-name', text: name })
+      : h('span', { class: 'muted', id: 'trainee-name', text: 'not named' }), ' ', edit ?? '');
+  }
+
+  /** @param {string} name the trainee now */
+  editTrainee(name) {
+    const input = h('input', { id: 'trainee-input', value: name, maxlength: 256, 'aria-label': 'Trainee', autocomplete: 'off' });
+    const said = h('span', { class: 'error', role: 'alert', id: 'trainee-error' });
+    const form = h('form', { class: 'inline trainee-form', id: 'trainee-form' }, [h('label', { for: 'trainee-input', text: 'Trainee' }), input,
+      h('button', { type: 'submit', class: 'small', text: 'Save' }),
+      h('button', { type: 'button', class: 'small', text: 'Cancel', onclick: () => this.showTrainee(name) }), said]);
+    form.addEventListener('submit', async (ev) => {
+      ev.preventDefault();
+      try {
+        const row = await api(`/api/sessions/${encodeURIComponent(this.id)}`, { method: 'PATCH',
+          headers: { 'Content-Type': 'application/json' }, body: JSON.stringify({ trainee: input.value.trim() }) });
+        this.showTrainee(String(row.trainee ?? ''));
+      } catch (e) {
+        said.textContent = `Not saved: ${e instanceof Error ? e.message : String(e)}`;
+      }
+    });
+    this.trainee.replaceChildren(form);
+    input.focus();
   }
 
   /** @param {string} text why the record cannot be shown */
@@ -54,7 +145,8 @@ export class SessionHeader {
   draw(now) {
     if (Number.isNaN(this.recordS)) return false;
     const s = this.mode === 'live' ? Math.max(this.recordS, this.st.timeS) : this.recordS;
-    const text = `${fixed(s, 1)} s`;
+    // Whole tenths of a second in the page's one time format (a 1 kHz millisecond would churn).
+    const text = formatTime(Math.floor(10 * s) / 10);
     if (text === this.shown) return false;
     if (!isDue(this.lastDraw, now, kPanelHz)) return true;
     this.lastDraw = now;
@@ -82,6 +174,9 @@ export class HealthPanel {
     this.stats = {};
     /** Samples the agent's backlog lost. */
     this.dropped = 0;
+    /** Whether the loop keeps up, in words (loop_verdict.js says the rule). */
+    this.watch = new LoopWatch();
+    this.verdict = h('p', { id: 'loop-verdict', class: 'verdict unknown', role: 'status', text: 'No loop figures yet.' });
     this.dirty = true;
     this.lastDraw = -1e9;
     const labels = ['Session time', 'Tick compute p99', 'Period p99', 'Overruns', 'Real-time', 'Warnings',
@@ -90,9 +185,15 @@ export class HealthPanel {
     this.values = labels.map(() => document.createTextNode(''));
     // A pair per div (as HTML allows in a dl), so that the pairs flow into as many columns as the
     // width holds: a strip under the view, one column on a phone.
-    this.el = h('dl', { class: 'health', id: 'health' },
+    this.list = h('dl', { class: 'health', id: 'health' },
       labels.map((label, i) => h('div', {}, [h('dt', { text: label }), h('dd', {}, [this.values[i]])])));
+    this.el = h('div', {}, [this.verdict, this.list]);
     loop.add(this);
+  }
+
+  /** @param {number} hz the loop's rate (the scene's DeviceMapping.max_rate_hz) */
+  setRate(hz) {
+    if (hz > 0) this.watch.nominalUs = Math.round(1e6 / hz);
   }
 
   /**
@@ -101,7 +202,12 @@ export class HealthPanel {
    * @param {number} dropped
    */
   setStats(stats, dropped) {
-    if (stats) this.stats = stats;
+    if (stats) {
+      this.stats = stats;
+      const v = this.watch.update(stats);
+      if (this.verdict.textContent !== v.text) this.verdict.textContent = v.text;
+      this.verdict.className = `verdict ${v.state}`;
+    }
     this.dropped = dropped;
     this.invalidate();
   }
@@ -120,7 +226,7 @@ export class HealthPanel {
     const st = this.st, s = this.stats;
     this.set(0, formatTime(this.sessionTimeS()));
     this.set(1, `${s.computeP99Us ?? 0} µs`);
-    this.set(2, `${s.periodP99Us ?? 0} µs`);
+    this.set(2, `${s.periodP99Us ?? 0} µs (of ${this.watch.nominalUs} µs)`);
     this.set(3, `${s.overruns ?? 0} of ${s.ticks ?? 0} ticks`);
     this.set(4, s.realtime ? 'yes' : 'no');
     this.set(5, String(st.warnings));
@@ -136,22 +242,38 @@ export class HealthPanel {
   }
 }
 
-/** The session's events, newest first, the last 200. */
+/**
+ * The session's events, newest first by session time, each once: a replay played again, sought
+ * back or reconnected sends them again, and the record lists those from before the page opened.
+ * The last 200.
+ */
 export class EventList {
   /** @param {{fallbacks: number}} st */
   constructor(st) {
     this.st = st;
     this.el = h('ol', { class: 'events', id: 'events', 'aria-live': 'polite' });
+    /** @type {Set<string>} */
+    this.keys = new Set();
   }
 
-  /** @param {idms.v1.ISessionEvent} e @returns {string} its kind's name */
+  /** @param {idms.v1.ISessionEvent} e @returns {boolean} it was new */
   add(e) {
-    const kind = e.kind ? kEventNames.get(e.kind) || String(e.kind) : 'NOTE';
-    if (e.kind === v1.SessionEvent.Kind.KIND_STABILITY_FALLBACK) this.st.fallbacks++;
-    this.el.prepend(h('li', { class: `event ${kind.toLowerCase()}` }, [
-      h('span', { class: 'time', text: formatTime(e.timeS || 0) }), ' ', h('strong', { text: kind }), ' ', e.message || '']));
+    const kind = Number(e.kind || 0), t = Number(e.timeS || 0);
+    const key = `${kind}|${e.tick ?? 0}|${t.toFixed(6)}|${e.message || ''}|${e.peer || ''}`;
+    if (this.keys.has(key)) return false;
+    this.keys.add(key);
+    if (kind === EventKind.KIND_STABILITY_FALLBACK) this.st.fallbacks++;
+    const counted = countWords(kind, Number(e.count || 0));
+    const li = h('li', { class: `event ${kEventSlugs.get(kind) || 'note'}`, 'data-time': String(t) }, [
+      h('span', { class: 'time', text: formatTime(t) }), ' ', h('strong', { text: eventName(kind) }),
+      counted ? ` (${counted})` : '', ' ', messageWords(kind, e.message || ''),
+      e.peer && kind === EventKind.KIND_COMMAND ? h('span', { class: 'muted', text: ` — ${e.peer}` }) : null]);
+    // Newest first: before the first one that is not later (a live event is at the top at once).
+    let next = this.el.firstElementChild;
+    while (next && Number(/** @type {HTMLElement} */ (next).dataset.time) > t) next = next.nextElementSibling;
+    this.el.insertBefore(li, next);
     while (this.el.childElementCount > 200) this.el.lastElementChild?.remove();
-    return kind;
+    return true;
   }
 }
 
@@ -201,18 +323,41 @@ export function annotationForm(send, st) {
 }
 
 /**
- * The admin's commands to the agent (relayed by the server; an observer's would be refused).
+ * The admin's commands to the agent (relayed by the server; an observer's would be refused): only
+ * those that apply to the session's tools (the tweezers' for tweezers, said by the scene in the
+ * Welcome), and Reset model only once confirmed (it puts the tissue back to rest under the
+ * trainee's hand).
  * @param {Send} send
+ * @param {{commandsSent: number}} st counted into
  */
-export function commandPanel(send) {
+export function commandPanel(send, st) {
   let next = 1;
-  /** @param {string} label @param {number} kind */
-  const button = (label, kind) => h('button', { type: 'button', text: label,
-    onclick: () => send({ command: { kind, tool: 0, id: next++ } }) });
   const K = idms.v1.Command.Kind;
-  return h('section', { 'aria-labelledby': 'commands-title', id: 'commands' }, [
-    h('h2', { id: 'commands-title', text: 'Commands (admin)' }),
-    h('div', { class: 'buttons' }, [button('Close tweezers', K.KIND_TWEEZERS_CLOSE), button('Open tweezers', K.KIND_TWEEZERS_OPEN),
-      button('Reset model', K.KIND_RESET), button('Request keyframe', K.KIND_KEYFRAME_REQUEST)]),
-  ]);
+  /** @param {number} kind @param {number} tool */
+  const sendCommand = (kind, tool) => {
+    if (send({ command: { kind, tool, id: next++ } })) st.commandsSent++;
+  };
+  /** @param {string} label @param {number} kind @param {number} [tool] @param {string} [ask] a question to confirm first */
+  const button = (label, kind, tool = 0, ask = '') => h('button', { type: 'button', text: label, class: ask ? 'danger-fill' : undefined,
+    onclick: () => {
+      if (ask && !confirm(ask)) return;
+      sendCommand(kind, tool);
+    } });
+  const reset = button('Reset model', K.KIND_RESET, 0,
+    'Reset the model to rest? The tissue under the trainee\'s tool returns to its rest shape at once.');
+  const buttons = h('div', { class: 'buttons' }, [reset, button('Request keyframe', K.KIND_KEYFRAME_REQUEST)]);
+  const el = h('section', { 'aria-labelledby': 'commands-title', id: 'commands' }, [h('h2', { id: 'commands-title', text: 'Commands (admin)' }), buttons]);
+  /** The scene's tools: a pair of tweezers buttons per tweezers tool, named when there are several. @param {idms.v1.ITool[]} tools */
+  const setTools = (tools) => {
+    for (const b of buttons.querySelectorAll('.tweezers')) b.remove();
+    const tweezers = tools.map((t, i) => ({ t, i })).filter(({ t }) => t.kind === idms.v1.Tool.Kind.KIND_TWEEZERS);
+    for (const { t, i } of tweezers.reverse()) {
+      const name = tweezers.length > 1 ? ` ${t.name || i}` : '';
+      const close = button(`Close tweezers${name}`, K.KIND_TWEEZERS_CLOSE, i), open = button(`Open tweezers${name}`, K.KIND_TWEEZERS_OPEN, i);
+      close.classList.add('tweezers');
+      open.classList.add('tweezers');
+      buttons.prepend(close, open);
+    }
+  };
+  return { el, setTools };
 }

@@ -1,124 +1,90 @@
-// /sessions: live and recorded sessions with their summary figures; the list refreshes itself
-// every 2 s while the page is visible, each row updated in place (SessionRow), so that a link or
-// button with the keyboard's focus keeps it and a thumbnail is not fetched again.
+// /sessions?trainee=NAME&model=NAME&from=YYYY-MM-DD&to=YYYY-MM-DD: live and recorded sessions with
+// their summary figures, filtered by the server (GET /api/sessions takes the same parameters),
+// the filters kept in the page's URL so that a reload or a shared link shows the same list. The
+// list refreshes itself every 2 s while the page is visible (session_table.js keeps the rows).
 import { api } from '../net/api.js';
-import { h, page, fixed, formatDate } from './dom.js';
+import { h, page } from './dom.js';
+import { sessionTable, sortSessions } from './session_table.js';
 
-// The start under the session's id and the duration under its state, the identity under the
-// device: the summary figures stay within a 1280 px window.
-const kColumns = ['Preview', 'Session, started', 'State, duration', 'Model', 'Device', 'Peak force', 'Contact', 'Path',
-  'Tick p99', 'Warnings', ''];
+/** The filters, in the order of the form; each is a query parameter of the page and of the API. */
+const kFilters = /** @type {const} */ (['trainee', 'model', 'from', 'to']);
 
-/** One session's row, kept from one refresh to the next; only what changed is rewritten. */
-class SessionRow {
-  /** @param {string} id @param {string} role @param {() => void} refresh */
-  constructor(id, role, refresh) {
-    this.id = id;
-    this.role = role;
-    this.refresh = refresh;
-    // The model wraps (a path); the summary figures are numbers, right-aligned.
-    this.cells = kColumns.map((_, i) => h('td', { class: i === 3 ? 'model' : i >= 5 && i <= 9 ? 'num' : undefined }));
-    this.tr = h('tr', { 'data-id': id }, this.cells);
-    /** What each cell shows, as a key: rewritten only when it differs. @type {string[]} */
-    this.shown = kColumns.map(() => '\u0000');
+/** @param {URLSearchParams} params @returns {string} the API's query ('' or '?...'), known filters only, empty ones left out */
+export function filterQuery(params) {
+  const q = new URLSearchParams();
+  for (const k of kFilters) {
+    const v = (params.get(k) || '').trim();
+    if (v) q.set(k, v);
   }
-
-  /**
-   * @param {number} i the column
-   * @param {string} key what the cell shows
-   * @param {() => (Node | string | null)[]} make its content, called only when the key changed
-   */
-  set(i, key, make) {
-    if (this.shown[i] === key) return;
-    this.shown[i] = key;
-    this.cells[i].replaceChildren(...make().filter((x) => x !== null));
-  }
-
-  /** @param {number} i @param {string} text */
-  text(i, text) {
-    this.set(i, text, () => [text]);
-  }
-
-  /** @param {any} s the session, as /api/sessions lists it */
-  update(s) {
-    const live = s.state === 'live';
-    const id = this.id;
-    this.tr.dataset.state = s.state;
-    // A recorded session's thumbnail: the server renders its surface halfway through (idms-render,
-    // cached by content), so the list shows what each session looked like.
-    const mid = fixed(s.duration_s / 2, 2);
-    this.set(0, live || !(s.duration_s > 0) ? '' : mid, () => [live || !(s.duration_s > 0) ? null
-      : h('img', { class: 'thumb', width: 160, height: 90, loading: 'lazy', alt: `The surface at ${mid} s`,
-        src: `/api/sessions/${encodeURIComponent(id)}/screenshot.png?t=${mid}&size=160x90` })]);
-    const href = live ? `/session/${id}` : `/replay/${id}`;
-    const started = formatDate(s.started);
-    this.set(1, `${href}|${started}`, () => [h('a', { href, text: id }), h('div', { class: 'under', text: started })]);
-    const under = `${fixed(s.duration_s, 1)} s` + (live ? ` · ${s.viewers} watching` : '');
-    this.set(2, `${s.state}|${under}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
-      h('div', { class: 'under', text: under })]);
-    this.text(3, s.model);
-    // The device (Hello.device), and the agent's identity (its host and pid) under it when it says more.
-    const identity = s.identity && s.identity !== s.device ? s.identity : '';
-    this.set(4, `${s.device}|${identity}`, () => [s.device, identity ? h('div', { class: 'under identity', text: identity }) : null]);
-    const sum = s.summary || {};
-    const figures = [fixed(sum.peak_force ?? NaN), `${fixed(sum.contact_time_s ?? NaN, 1)} s`, fixed(sum.path_length ?? NaN),
-      sum.tick_p99_us !== undefined ? `${sum.tick_p99_us} µs` : '–', String(sum.warnings ?? '–')];
-    for (let k = 0; k < figures.length; k++) this.text(5 + k, figures[k]);
-    const deletable = this.role === 'admin' && !live;
-    this.set(10, String(deletable), () => [deletable
-      ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
-        if (!confirm(`Delete session ${id} and its recording?`)) return;
-        await api(`/api/sessions/${encodeURIComponent(id)}`, { method: 'DELETE' });
-        this.refresh();
-      } }) : null]);
-  }
+  const s = q.toString();
+  return s ? `?${s}` : '';
 }
 
 /** @param {string} role */
 export function sessionsPage(role) {
-  const body = h('tbody');
   const status = h('p', { class: 'muted', role: 'status' });
-  const table = h('table', { class: 'list', id: 'sessions' }, [
-    h('caption', { text: 'Live sessions first; a live session opens its live view, an ended one its replay.' }),
-    h('thead', {}, [h('tr', {}, kColumns.map((t) => h('th', { scope: 'col', text: t })))]),
-    body,
-  ]);
-  page('Sessions', [h('h1', { text: 'Sessions' }), status, h('div', { class: 'scroll' }, [table])]);
-  /** @type {Map<string, SessionRow>} */
-  const rows = new Map();
-
-  /**
-   * The rows in the list's order: new ones inserted, gone ones removed, a kept one moved only when
-   * it is out of place (moving a node takes the focus from what is in it).
-   * @param {any[]} sessions sorted
-   */
-  const show = (sessions) => {
-    const ids = new Set(sessions.map((s) => String(s.id)));
-    for (const [id, row] of rows) {
-      if (ids.has(id)) continue;
-      row.tr.remove();
-      rows.delete(id);
-    }
-    sessions.forEach((s, i) => {
-      const id = String(s.id);
-      let row = rows.get(id);
-      if (!row) rows.set(id, row = new SessionRow(id, role, refresh));
-      row.update(s);
-      if (body.children[i] !== row.tr) body.insertBefore(row.tr, body.children[i] ?? null);
-    });
+  const { el: tableBox, show } = sessionTable('sessions',
+    'Live sessions first; a live session opens its live view, an ended one its replay; a trainee, their page.', role, () => refresh());
+  // The filters: free text with the names seen so far offered; dates as the server reads them (UTC).
+  const input = {
+    trainee: h('input', { id: 'f-trainee', name: 'trainee', list: 'f-trainees', autocomplete: 'off', placeholder: 'any' }),
+    model: h('input', { id: 'f-model', name: 'model', list: 'f-models', autocomplete: 'off', placeholder: 'any' }),
+    from: h('input', { id: 'f-from', name: 'from', type: 'date' }),
+    to: h('input', { id: 'f-to', name: 'to', type: 'date' }),
   };
+  const trainees = h('datalist', { id: 'f-trainees' });
+  const models = h('datalist', { id: 'f-models' });
+  const clear = h('button', { type: 'button', class: 'small', id: 'f-clear', text: 'Clear filters' });
+  const form = h('form', { class: 'filters', id: 'filters', role: 'search', 'aria-label': 'Filter the sessions' }, [
+    h('label', {}, ['Trainee ', input.trainee]), h('label', {}, ['Model ', input.model]),
+    h('label', {}, ['Started from ', input.from]), h('label', {}, ['to ', input.to, ' (UTC dates)']),
+    h('button', { type: 'submit', class: 'small', text: 'Apply' }), clear, trainees, models,
+  ]);
+  page('Sessions', [h('h1', { text: 'Sessions' }), form, status, tableBox]);
+
+  // The URL says what is filtered: the fields from it at load, it from the fields on each change.
+  const fromUrl = () => {
+    const params = new URLSearchParams(location.search);
+    for (const k of kFilters) input[k].value = params.get(k) || '';
+  };
+  const apply = () => {
+    const params = new URLSearchParams();
+    for (const k of kFilters) if (input[k].value.trim()) params.set(k, input[k].value.trim());
+    const search = params.toString();
+    history.replaceState(null, '', `${location.pathname}${search ? `?${search}` : ''}`);
+    refresh();
+  };
+  fromUrl();
+  form.addEventListener('submit', (ev) => { ev.preventDefault(); apply(); });
+  for (const k of kFilters) input[k].addEventListener('change', apply);
+  clear.addEventListener('click', () => {
+    for (const k of kFilters) input[k].value = '';
+    apply();
+  });
+
+  // The names offered: every trainee and model the unfiltered list has, asked once.
+  api('/api/sessions').then(({ sessions }) => {
+    const names = (/** @type {string} */ key) => [...new Set(sessions.map((/** @type {any} */ s) => String(s[key] || '')))].filter(Boolean).sort();
+    trainees.replaceChildren(...names('trainee').map((n) => h('option', { value: n })));
+    models.replaceChildren(...names('model').map((n) => h('option', { value: n })));
+  }).catch(() => {});
 
   let timer = 0;
+  let asked = 0;
   async function refresh() {
     clearTimeout(timer);
+    const query = filterQuery(new URLSearchParams(location.search));
+    const mine = ++asked;
     try {
-      const { sessions } = await api('/api/sessions');
-      sessions.sort((/** @type {any} */ a, /** @type {any} */ b) =>
-        Number(b.state === 'live') - Number(a.state === 'live') || String(b.started).localeCompare(String(a.started)));
-      show(sessions);
-      status.textContent = sessions.length ? `${sessions.length} sessions, updated ${new Date().toLocaleTimeString()}`
-        : 'No sessions yet: start an idms-agent against this server.';
+      const { sessions } = await api(`/api/sessions${query}`);
+      // A slower answer to an older filter does not replace a newer one's.
+      if (mine !== asked) return;
+      show(sortSessions(sessions));
+      const filtered = query ? ' matching the filters' : '';
+      status.textContent = sessions.length ? `${sessions.length} sessions${filtered}, updated ${new Date().toLocaleTimeString()}`
+        : query ? 'No sessions match the filters.' : 'No sessions yet: start an idms-agent against this server.';
     } catch (e) {
+      if (mine !== asked) return;
       status.textContent = `Cannot load the sessions: ${e instanceof Error ? e.message : String(e)}; retrying…`;
     }
     timer = window.setTimeout(refresh, document.hidden ? 10000 : 2000);

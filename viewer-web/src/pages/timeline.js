@@ -1,11 +1,33 @@
 // The replay's timeline: a slider to seek by click, drag or keys, play/pause, speed 0.1x-10x,
 // events and annotations marked on it, and the URL's ?t= following the time so that a link opens
-// at the moment it names.
+// at the moment it names. Keys: arrows step 0.1 s (with Shift 1 s), Page Up/Down 10 s, Home/End
+// the ends, Space plays or pauses (anywhere on the page but in a field or on a button).
 import { idms } from '../codec/proto.js';
 import { h, formatTime } from './dom.js';
 
 const Action = idms.v1.PlaybackControl.Action;
 const kSpeeds = [0.1, 0.25, 0.5, 1, 2, 4, 10];
+/** What an arrow key moves the time by, s; with Shift; Page Up/Down. */
+export const kStepS = 0.1, kShiftStepS = 1, kPageStepS = 10;
+
+/**
+ * The time a key moves to, or null for a key that does not move it.
+ * @param {string} key KeyboardEvent.key @param {boolean} shift @param {number} t now, s @param {number} duration s
+ * @returns {number | null}
+ */
+export function keyTarget(key, shift, t, duration) {
+  const step = shift ? kShiftStepS : kStepS;
+  let to = null;
+  if (key === 'ArrowRight' || key === 'ArrowUp') to = t + step;
+  else if (key === 'ArrowLeft' || key === 'ArrowDown') to = t - step;
+  else if (key === 'PageUp') to = t + kPageStepS;
+  else if (key === 'PageDown') to = t - kPageStepS;
+  else if (key === 'Home') to = 0;
+  else if (key === 'End') to = duration;
+  if (to === null) return null;
+  // On the 1 ms grid, within the recording.
+  return Math.round(1000 * Math.min(Math.max(0, to), duration > 0 ? duration : Infinity)) / 1000;
+}
 
 export class Timeline {
   /**
@@ -43,8 +65,43 @@ export class Timeline {
       this.dragging = false;
       this.seek(Number(this.slider.value));
     });
-    this.playButton.addEventListener('click', () => this.send({ action: this.playing ? Action.ACTION_PAUSE : Action.ACTION_PLAY }));
+    this.playButton.addEventListener('click', () => this.toggle());
+    this.slider.addEventListener('keydown', (ev) => this.onKey(ev));
+    // Space and the arrows anywhere but where they already mean something (fields, buttons, links).
+    document.addEventListener('keydown', (ev) => {
+      if (ev.defaultPrevented || ev.target === this.slider) return;
+      const el = /** @type {HTMLElement | null} */ (ev.target instanceof HTMLElement ? ev.target : null);
+      if (el && el.closest('input, select, textarea, button, a, [contenteditable]')) return;
+      this.onKey(ev);
+    });
     this.speedSelect.addEventListener('change', () => this.send({ action: Action.ACTION_SET_SPEED, speed: Number(this.speedSelect.value) }));
+  }
+
+  /** Play, or pause; at the end, play again from the start. */
+  toggle() {
+    if (this.playing) {
+      this.send({ action: Action.ACTION_PAUSE });
+      return;
+    }
+    // From the start, as a seek the page makes itself: its confirmation restarts the plots and
+    // the 3D view together (the server's own rewind on Play said nothing, and the plots kept the
+    // last pass's samples, ahead of the view).
+    if (this.duration > 0 && this.time >= this.duration - 0.01) this.seek(0);
+    this.send({ action: Action.ACTION_PLAY });
+  }
+
+  /** @param {KeyboardEvent} ev */
+  onKey(ev) {
+    if (ev.altKey || ev.ctrlKey || ev.metaKey) return;
+    if (ev.key === ' ') {
+      ev.preventDefault();
+      if (!ev.repeat) this.toggle();
+      return;
+    }
+    const to = keyTarget(ev.key, ev.shiftKey, Number.isNaN(this.seekTarget) ? this.time : this.seekTarget, this.duration);
+    if (to === null) return;
+    ev.preventDefault();
+    this.seek(to);
   }
 
   /** @param {number} t session time, s */
@@ -73,9 +130,14 @@ export class Timeline {
     this.layoutMarks();
   }
 
-  /** The time of the samples being shown. @param {number} t */
+  /**
+   * The time of the samples being shown, while playing. Paused, the time is the server's (its
+   * PlaybackState): a seek's catch-up samples end just before the time sought, and a key's step
+   * from there would land a sample short (0.1 s on from 0.6 s made 0.699 s).
+   * @param {number} t
+   */
   setTime(t) {
-    if (!Number.isNaN(this.seekTarget)) return;
+    if (!Number.isNaN(this.seekTarget) || !this.playing) return;
     this.time = t;
     this.showTime();
   }

@@ -1,25 +1,34 @@
 // Force against depth while pressing (thesis fig. 6-3): for the current or last press, |F|
 // against how far the tool has gone along the force's line since contact began. A plain canvas
 // over preallocated arrays, redrawn in the page's frame (FrameLoop) as often as the time plots,
-// only when it changed and only while it is on screen.
+// only when it changed and only while it is on screen; axes with round ticks and units, the
+// line clipped to its frame.
 import { FrameLoop, Visibility, isDue } from '../view/frame_loop.js';
 import { kPlotRedrawHz } from './rolling.js';
 import { length3 } from '../length3.js';
+import { niceTicks, tickLabel } from './ticks.js';
+
+/** The canvas's height, CSS pixels (as the time plots'). */
+const kHeight = 170;
 
 export class DepthPlot {
   /**
    * @param {HTMLElement} host
    * @param {number} capacity samples kept per press
    * @param {FrameLoop} [loop] the page's frame loop
+   * @param {{force: string, length: string}} [units] the axes' units
    */
-  constructor(host, capacity, loop = new FrameLoop()) {
+  constructor(host, capacity, loop = new FrameLoop(), units = { force: 'force', length: 'length' }) {
     this.loop = loop;
+    this.units = units;
+    /** The last picture's axes (the tests read them): tick labels and the frame, CSS pixels. */
+    this.axes = { x: /** @type {string[]} */ ([]), y: /** @type {string[]} */ ([]), frame: { left: 0, top: 0, right: 0, bottom: 0 } };
     this.canvas = document.createElement('canvas');
     this.canvas.setAttribute('role', 'img');
     this.canvas.setAttribute('aria-label', 'Force magnitude against pressing depth for the current press');
-    this.canvas.height = 160;
+    this.canvas.height = kHeight;
     this.canvas.style.width = '100%';
-    this.canvas.style.height = '160px';
+    this.canvas.style.height = `${kHeight}px`;
     host.append(this.canvas);
     // Redrawn at its box's width whenever that changes (kept here: no layout read per frame); the
     // box's width now, so that a plot below the fold is not left drawn at a placeholder's width,
@@ -116,32 +125,72 @@ export class DepthPlot {
     if (this.canvas.width !== w) this.canvas.width = w;
     const h = this.canvas.height;
     c.clearRect(0, 0, w, h);
+    c.fillStyle = '#1d232b';
+    c.font = 'bold 12px system-ui, sans-serif';
+    c.textAlign = 'center';
+    c.fillText('|F| against depth (current press)', w / 2, 14);
+    c.font = '11px system-ui, sans-serif';
     c.fillStyle = '#5b6673';
-    c.font = '12px system-ui, sans-serif';
-    c.fillText('|F| against depth (current press)', 8, 14);
     if (this.count < 2) {
-      c.fillText('no contact yet', 8, 34);
+      c.fillText('no contact yet', w / 2, h / 2);
+      this.axes = { x: [], y: [], frame: { left: 0, top: 0, right: 0, bottom: 0 } };
       return;
     }
-    let dMax = 1e-9, fMax = 1e-9;
+    let dMin = 0, dMax = 1e-9, fMax = 1e-9;
     for (let i = 0; i < this.count; i++) {
+      if (this.depth[i] < dMin) dMin = this.depth[i];
       if (this.depth[i] > dMax) dMax = this.depth[i];
       if (this.force[i] > fMax) fMax = this.force[i];
     }
-    const left = 44, bottom = h - 22, right = w - 10, top = 24;
-    c.strokeStyle = '#d5dbe2';
-    c.strokeRect(left, top, right - left, bottom - top);
-    c.fillText(fMax.toPrecision(3), 4, top + 10);
-    c.fillText('0', 30, bottom);
-    c.fillText(`depth ${dMax.toPrecision(3)}`, right - 90, h - 6);
+    // A press that has not moved yet (the tool held still, as after a reset) still gets an axis
+    // of readable ticks: a thousandth of a model unit at least (ten of the default quantum).
+    if (dMax - dMin < 1e-3) dMax = dMin + 1e-3;
+    // The frame, with room for the ticks' labels and the axes' titles.
+    const left = 58, right = w - 12, top = 24, bottom = h - 40;
+    const xs = niceTicks(dMin, dMax, Math.max(3, Math.min(6, Math.floor((right - left) / 70))));
+    const ys = niceTicks(0, fMax, 4);
+    const px = (/** @type {number} */ d) => left + ((d - xs.bottom) / (xs.top - xs.bottom)) * (right - left);
+    const py = (/** @type {number} */ f) => bottom - ((f - ys.bottom) / (ys.top - ys.bottom)) * (bottom - top);
+    // Grid and ticks, then their labels.
+    c.strokeStyle = '#e3e7ec';
+    c.lineWidth = 1;
+    c.beginPath();
+    for (const t of xs.ticks) { c.moveTo(Math.round(px(t)) + 0.5, top); c.lineTo(Math.round(px(t)) + 0.5, bottom + 4); }
+    for (const t of ys.ticks) { c.moveTo(left - 4, Math.round(py(t)) + 0.5); c.lineTo(right, Math.round(py(t)) + 0.5); }
+    c.stroke();
+    c.strokeStyle = '#8795a1';
+    c.strokeRect(left + 0.5, top + 0.5, right - left - 1, bottom - top - 1);
+    const xLabels = xs.ticks.map((t) => tickLabel(t, xs.step)), yLabels = ys.ticks.map((t) => tickLabel(t, ys.step));
+    c.textAlign = 'center';
+    c.textBaseline = 'top';
+    xs.ticks.forEach((t, i) => c.fillText(xLabels[i], px(t), bottom + 6));
+    c.textAlign = 'right';
+    c.textBaseline = 'middle';
+    ys.ticks.forEach((t, i) => c.fillText(yLabels[i], left - 6, py(t)));
+    c.textAlign = 'center';
+    c.textBaseline = 'alphabetic';
+    c.fillText(`depth along the force (${this.units.length})`, (left + right) / 2, h - 6);
+    c.save();
+    c.translate(12, (top + bottom) / 2);
+    c.rotate(-Math.PI / 2);
+    c.fillText(`|F| (${this.units.force})`, 0, 0);
+    c.restore();
+    // The press, clipped to the frame.
+    c.save();
+    c.beginPath();
+    c.rect(left, top, right - left, bottom - top);
+    c.clip();
     c.strokeStyle = '#c0392b';
+    c.lineWidth = 1.5;
     c.beginPath();
     for (let i = 0; i < this.count; i++) {
-      const px = left + (Math.max(0, this.depth[i]) / dMax) * (right - left);
-      const py = bottom - (this.force[i] / fMax) * (bottom - top);
-      if (i === 0) c.moveTo(px, py);
-      else c.lineTo(px, py);
+      const x = px(this.depth[i]), y = py(this.force[i]);
+      if (i === 0) c.moveTo(x, y);
+      else c.lineTo(x, y);
     }
     c.stroke();
+    c.restore();
+    c.textAlign = 'start';
+    this.axes = { x: xLabels, y: yLabels, frame: { left, top, right, bottom } };
   }
 }

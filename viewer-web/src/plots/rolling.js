@@ -41,7 +41,8 @@ export function withCpuCanvases(make) {
 export class RollingPlot {
   /**
    * @param {HTMLElement} host
-   * @param {{title: string, unit: string, series: {label: string, color: string}[], capacity: number}} spec
+   * @param {{title: string, unit: string, axis: string, series: {label: string, color: string}[], capacity: number}} spec
+   *   axis: the value axis's short name (the unit is in the title)
    * @param {FrameLoop} [loop] the page's frame loop
    */
   constructor(host, spec, loop = new FrameLoop()) {
@@ -75,7 +76,8 @@ export class RollingPlot {
     this.viewsLength = -1;
     const width = Math.max(200, host.clientWidth || 400);
     this.plot = withCpuCanvases(() => new uPlot({
-      title: spec.title,
+      // The unit in the title: a vertical axis label 170 px tall cuts "model force units" short.
+      title: `${spec.title} (${spec.unit})`,
       width,
       height: 170,
       // A flat series (no force yet) spans +-1 around its value, where uPlot's default made 0 to
@@ -84,7 +86,7 @@ export class RollingPlot {
       legend: { live: false },
       cursor: { show: false },
       series: [{ label: 't (s)' }, ...spec.series.map((s) => ({ label: s.label, stroke: s.color, width: 1, points: { show: false } }))],
-      axes: [{ label: 'session time (s)' }, { label: spec.unit, size: 60 }],
+      axes: [{ label: 'session time (s)' }, { label: spec.axis, size: 60 }],
     }, [[], ...spec.series.map(() => [])], host));
     this.visibility = new Visibility(host, () => loop.request());
     loop.add(this);
