@@ -257,6 +257,9 @@ bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolComman
   }
   if (!a.model.empty()) scene->set_model(a.model), scene->clear_model_file();
   if (!a.model_file.empty()) scene->set_model_file(a.model_file), scene->clear_model();
+  // The clamp overridden in the scene itself: the step clamps there, and the session's recorded
+  // scene (and the force-limit events quoting it) say the limit in force.
+  if (a.max_force > 0) scene->mutable_device()->set_max_force(a.max_force);
   if (!SceneToLoop(*scene, step, tool, registration, error)) return false;
   if (a.scale > 0) registration->scale = a.scale;
   if (!a.rotation.empty() && !ParseRotation(a.rotation, registration->rot, error)) {
@@ -267,7 +270,6 @@ bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolComman
     *error = "--offset " + *error;
     return false;
   }
-  if (a.max_force > 0) registration->max_force = a.max_force;
   return true;
 }
 

@@ -22,3 +22,6 @@ set(IDMS_FUZZ_LIBS_replay_fuzz idms_server)
 # idms-render's and the render endpoints' parameters (size, camera, seconds).
 list(APPEND IDMS_FUZZ_TARGETS render_params_fuzz)
 set(IDMS_FUZZ_LIBS_render_params_fuzz idms_render_params)
+# The tools' --server URLs (idms_cli: idms-agent, idms-render).
+list(APPEND IDMS_FUZZ_TARGETS cli_fuzz)
+set(IDMS_FUZZ_LIBS_cli_fuzz idms_cli)
