@@ -48,6 +48,12 @@ std::string UtcDate() {
   return buf;
 }
 
+// A new session opened by `agent`: its id, empty when no Welcome came.
+std::string NewSession(FakeAgent& agent) {
+  const auto welcome = agent.Hello();
+  return welcome && welcome->has_welcome() ? welcome->welcome().session_id() : std::string();
+}
+
 json Row(uint16_t port, const std::string& token, const std::string& id) {
   for (const json& s : Sessions(port, token)) {
     if (s["id"] == id) return s;
@@ -235,9 +241,8 @@ TEST(Figures, AViewerWhoJoinsLateSeesTheEarlierEventsAndNotes) {
   ServerProcess server(dir + "/data");
   ASSERT_TRUE(server.ready()) << server.Log();
   FakeAgent agent(server.port(), server.Token("agent"));
-  const auto welcome = agent.Hello();
-  ASSERT_TRUE(welcome && welcome->has_welcome());
-  const std::string id = welcome->welcome().session_id();
+  const std::string id = NewSession(agent);
+  ASSERT_FALSE(id.empty());
   ASSERT_TRUE(SendPress(agent, 0, 500, 1.0));
   v1::Envelope warning;
   warning.mutable_session_event()->set_kind(v1::SessionEvent::KIND_WARNING);
@@ -286,9 +291,8 @@ TEST(Figures, ALiveSessionCanBeRewound) {
   ServerProcess server(dir + "/data");
   ASSERT_TRUE(server.ready()) << server.Log();
   FakeAgent agent(server.port(), server.Token("agent"));
-  const auto welcome = agent.Hello();
-  ASSERT_TRUE(welcome && welcome->has_welcome());
-  const std::string id = welcome->welcome().session_id();
+  const std::string id = NewSession(agent);
+  ASSERT_FALSE(id.empty());
   for (uint64_t t = 0; t < 2000; t += 100) ASSERT_TRUE(SendPress(agent, t, 100, 1.0));
   ASSERT_TRUE(
       agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().next_tick() == 2000; }, seconds(20)));
