@@ -417,20 +417,27 @@ void LiveSession::ViewerDrained(uint64_t viewer) {
   }
 }
 
-void LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
+std::optional<v1::Annotation> LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
   AssertOnStrand();
-  if (!live_) return;
+  if (!live_) return std::nullopt;
   // Stamped here: who, which, and when (now, in session time, unless the viewer named a time).
+  // The id counter is the summary's, so that it carries on across restarts and after the end.
   auto e = std::make_shared<v1::Envelope>();
   v1::Annotation* a = e->mutable_annotation();
   *a = note;
   a->set_author(peer);
-  a->set_id(++annotations_);
+  a->set_id(++summary_.notes);
   if (!(note.time_s() > 0)) a->set_time_s(summary_.last_time_s);
+  {
+    std::lock_guard lock(row_mu_);
+    row_.summary_json = summary_.Json();
+  }
+  v1::Annotation stamped = *a;
   const auto bytes = Serialized(*e);
   Broadcast(bytes, false, false);
   Remember(bytes);
   Record(std::move(e));
+  return stamped;
 }
 
 void LiveSession::ViewerCommand(const v1::Command& command, const std::string& peer) {

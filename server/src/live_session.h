@@ -54,7 +54,9 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void ViewerDetached(uint64_t viewer);
   void ViewerDrained(uint64_t viewer);  // its queue emptied: a keyframe if it was skipping
   void ViewerCommand(const v1::Command& command, const std::string& peer);
-  void ViewerAnnotation(const v1::Annotation& note, const std::string& peer);
+  // A note from a viewer or the notes API, stamped (id, author, time) and recorded; the stamped
+  // note, or nothing once the session is no longer live.
+  std::optional<v1::Annotation> ViewerAnnotation(const v1::Annotation& note, const std::string& peer);
   void Stop(const std::string& why);  // server shutdown: tell everyone, finish the recording
 
   // Any thread.
@@ -112,7 +114,6 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void Remember(const std::shared_ptr<const std::string>& bytes);
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
-  uint64_t annotations_ = 0;
   // Recordings are on the session's clock: log time = epoch + the frame's simulation time, so the
   // replay's timeline, seek times, annotations and ?t= links all speak session time, however late
   // frames arrived. The epoch is the session's start (second precision), stable across restarts.

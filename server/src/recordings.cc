@@ -1,6 +1,7 @@
 // A live session's recording on the recorder thread, and recordings copied into a writer.
 #include "recordings.h"
 
+#include <algorithm>
 #include <boost/asio/post.hpp>
 #include <filesystem>
 
@@ -26,6 +27,8 @@ bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* 
       }
       stats->summary.Add(ds);
     }
+    if (m.envelope.has_annotation())
+      stats->summary.notes = std::max(stats->summary.notes, m.envelope.annotation().id());
     if (writer != nullptr && !writer->Write(m.envelope, m.log_time_ns, m.publish_time_ns, error)) return false;
   }
   return error->empty();

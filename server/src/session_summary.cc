@@ -49,7 +49,8 @@ std::string SessionSummary::Json() const {
                    {"last_limited", last_limited},
                    {"contact_samples", contact_samples},
                    {"first_time_s", first_time_s},
-                   {"last_time_s", last_time_s}};
+                   {"last_time_s", last_time_s},
+                   {"notes", notes}};
   if (have_last) j["last_tool_pos"] = {last_pos[0], last_pos[1], last_pos[2]};
   return j.dump();
 }
@@ -76,6 +77,7 @@ SessionSummary SessionSummary::FromJson(const std::string& text) {
   if (const auto it = j.find("last_limited"); it != j.end() && it->is_boolean()) s.last_limited = it->get<bool>();
   s.first_time_s = number("first_time_s", -1.0);
   s.last_time_s = number("last_time_s", 0.0);
+  s.notes = number("notes", uint64_t{0});
   if (const auto it = j.find("last_tool_pos"); it != j.end() && it->is_array() && it->size() == 3) {
     for (int c = 0; c < 3; ++c) s.last_pos[c] = (*it)[c].is_number() ? (*it)[c].get<double>() : 0.0;
     s.have_last = true;

@@ -26,6 +26,7 @@ struct SessionSummary {
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
   double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample
+  uint64_t notes = 0;  // the last note id given (notes made live and added in replay share the count)
 
   void Add(const v1::DeviceSamples& batch);
   // Every field, so that FromJson(Json()) carries on exactly where the summary was.

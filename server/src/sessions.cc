@@ -7,6 +7,7 @@
 
 #include <boost/asio/post.hpp>
 #include <filesystem>
+#include <future>
 
 #include "frame_checks.h"
 #include "idms/protocol/digest.h"
@@ -240,10 +241,44 @@ bool SessionHub::SetTrainee(const std::string& id, const std::string& trainee, s
     s->SetTrainee(trainee);
     return true;
   }
+  std::lock_guard lock(ended_rows_mu_);
   std::optional<SessionRow> row = index_->Get(id);
   if (!row) return *error = "no session " + id, false;
   row->trainee = trainee;
   return index_->Put(*row, error);
+}
+
+std::optional<SessionNote> SessionHub::AddNote(const std::string& id, double time_s, const std::string& text,
+                                               const std::string& author, std::string* error, bool* not_found) {
+  *not_found = false;
+  if (const auto s = FindLive(id)) {
+    v1::Annotation note;
+    note.set_time_s(time_s);
+    note.set_text(text);
+    // The promise is shared: a server stopping under the wait never runs the handler.
+    auto stamped = std::make_shared<std::promise<std::optional<v1::Annotation>>>();
+    auto done = stamped->get_future();
+    asio::post(s->strand(), [stamped, note, author, s] { stamped->set_value(s->ViewerAnnotation(note, author)); });
+    if (done.wait_for(std::chrono::seconds(5)) != std::future_status::ready) {
+      return *error = "session " + id + " did not take the note in 5 s (the server is stopping?)", std::nullopt;
+    }
+    const std::optional<v1::Annotation> a = done.get();
+    if (!a) return *error = "session " + id + " is ending; add the note once it has ended", std::nullopt;
+    return SessionNote{a->id(), a->time_s(), a->text(), a->author(), ""};
+  }
+  std::lock_guard lock(ended_rows_mu_);
+  std::optional<SessionRow> row = index_->Get(id);
+  if (!row) return *not_found = true, *error = "no session " + id, std::nullopt;
+  if (index_->Notes(id).size() >= kMaxAddedNotes) {
+    return *error = "session " + id + " has " + std::to_string(kMaxAddedNotes) +
+                    " notes added since it ended, the most it keeps",
+           std::nullopt;
+  }
+  SessionSummary summary = SessionSummary::FromJson(row->summary_json);
+  const SessionNote note{++summary.notes, time_s, text, author, UtcNow()};
+  row->summary_json = summary.Json();
+  if (!index_->PutWithNote(*row, note, error)) return std::nullopt;
+  return note;
 }
 
 bool SessionHub::Delete(const std::string& id, std::string* error) {

@@ -56,6 +56,13 @@ class SessionHub {
   bool Delete(const std::string& id, std::string* error);  // not while live
   // An admin's correction of who was at the device. False with *error for an unknown session.
   bool SetTrainee(const std::string& id, const std::string& trainee, std::string* error);
+  // A note at session time `time_s` (0 on a live session: now) by `author`: a live session records
+  // and broadcasts it; an ended one keeps it in the index beside its recording (at most
+  // kMaxAddedNotes). The stamped note, or nullopt with *error and *not_found for an unknown
+  // session. Waits for a live session's strand: call it from a worker, never a network thread.
+  std::optional<SessionNote> AddNote(const std::string& id, double time_s, const std::string& text,
+                                     const std::string& author, std::string* error, bool* not_found);
+  static constexpr size_t kMaxAddedNotes = 1000;
   void StopAll();
   // Stores a row on the index's strand (a worker, never a network thread); `then` runs there after.
   void StoreRow(SessionRow row, std::function<void()> then = nullptr);
@@ -82,6 +89,7 @@ class SessionHub {
   boost::asio::strand<boost::asio::thread_pool::executor_type> index_strand_;
   std::mutex mu_;
   std::map<std::string, std::shared_ptr<LiveSession>> live_;
+  std::mutex ended_rows_mu_;  // an ended session's row is read, changed and stored under it
 };
 
 }  // namespace idms::server

@@ -8,7 +8,9 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "frame_checks.h"
 #include "idms/protocol/recording.h"
+#include "idms/server/auth.h"
 #include "idms/server/http_parse.h"
 #include "sessions.h"
 
@@ -150,6 +152,13 @@ HandlerResponse GetSamplesCsv(SessionHub& hub, ApiRequest& req) {
   return res;
 }
 
+// A note as the API gives it; "added" only for a note added after the session ended.
+json NoteJson(const SessionNote& n) {
+  json j{{"id", n.id}, {"time_s", n.time_s}, {"text", n.text}, {"author", n.author}};
+  if (!n.created.empty()) j["added"] = n.created;
+  return j;
+}
+
 }  // namespace
 
 void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
@@ -195,8 +204,7 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                          while (reader.Next(&m, &error)) {
                            if (m.envelope.has_annotation()) {
                              const v1::Annotation& a = m.envelope.annotation();
-                             annotations.push_back(
-                                 {{"id", a.id()}, {"time_s", a.time_s()}, {"text", a.text()}, {"author", a.author()}});
+                             annotations.push_back(NoteJson({a.id(), a.time_s(), a.text(), a.author(), ""}));
                              continue;
                            }
                            if (!m.envelope.has_session_event()) continue;
@@ -209,9 +217,41 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                                              {"peer", e.peer()}});
                          }
                        }
+                       // And the notes added since it ended, by time with the recorded ones.
+                       for (const SessionNote& n : hub->index().Notes(r->id)) {
+                         annotations.push_back(NoteJson(n));
+                       }
+                       std::stable_sort(annotations.begin(), annotations.end(), [](const json& a, const json& b) {
+                         return a["time_s"].get<double>() < b["time_s"].get<double>();
+                       });
                        out["events"] = events;
                        out["annotations"] = annotations;
                        return JsonResponse(req, http::status::ok, JsonText(out));
+                     },
+                     true});
+  // {"time_s": S, "text": "..."}: a note on the session at session time S (0 on a live session:
+  // now); any role that may watch may add one, as on the live view. A live session records and
+  // broadcasts it; an ended one keeps it beside its recording. 201 with the stamped note.
+  routes->push_back({V::post, "/api/sessions/{id}/notes", P::kRead, false, false,
+                     [hub](ApiContext&, ApiRequest& req) {
+                       const json body = json::parse(req.message.body(), nullptr, false);
+                       if (!body.is_object() || !body.contains("text") || !body["text"].is_string() ||
+                           (body.contains("time_s") && !body["time_s"].is_number())) {
+                         return JsonError(req, http::status::bad_request,
+                                          "expected a JSON object {\"time_s\": SECONDS, \"text\": \"NOTE\"}");
+                       }
+                       v1::Annotation check;
+                       check.set_text(body["text"].get<std::string>());
+                       check.set_time_s(body.value("time_s", 0.0));
+                       std::string error;
+                       if (!CheckAnnotation(check, &error)) return JsonError(req, http::status::bad_request, error);
+                       bool not_found = false;
+                       const std::optional<SessionNote> note =
+                           hub->AddNote(req.params[0], check.time_s(), check.text(),
+                                        std::string(RoleName(req.role)) + " " + req.peer, &error, &not_found);
+                       if (!note)
+                         return JsonError(req, not_found ? http::status::not_found : http::status::conflict, error);
+                       return JsonResponse(req, http::status::created, JsonText(NoteJson(*note)));
                      },
                      true});
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,

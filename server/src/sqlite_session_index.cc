@@ -28,6 +28,15 @@ CREATE TABLE IF NOT EXISTS sessions (
   scene_text TEXT NOT NULL,
   trainee TEXT NOT NULL DEFAULT ''
 );
+CREATE TABLE IF NOT EXISTS session_notes (
+  session_id TEXT NOT NULL,
+  id INTEGER NOT NULL,
+  time_s REAL NOT NULL,
+  text TEXT NOT NULL,
+  author TEXT NOT NULL,
+  created TEXT NOT NULL,
+  PRIMARY KEY (session_id, id)
+);
 )sql";
 
 // Columns added since the first schema, each with what brings an older table up to date.
@@ -46,7 +55,9 @@ constexpr const char* kColumns =
 class SqliteSessionIndex final : public SessionIndex {
  public:
   ~SqliteSessionIndex() override {
-    for (sqlite3_stmt* s : {put_, get_, list_, delete_}) sqlite3_finalize(s);
+    for (sqlite3_stmt* s : {put_, get_, list_, delete_, delete_notes_, put_note_, notes_, begin_, commit_, rollback_}) {
+      sqlite3_finalize(s);
+    }
     sqlite3_close_v2(db_);
   }
 
@@ -71,23 +82,48 @@ class SqliteSessionIndex final : public SessionIndex {
                    &put_, error) &&
            Prepare("SELECT " + cols + " FROM sessions WHERE id = ?1", &get_, error) &&
            Prepare("SELECT " + cols + " FROM sessions ORDER BY started DESC, id DESC", &list_, error) &&
-           Prepare("DELETE FROM sessions WHERE id = ?1", &delete_, error);
+           Prepare("DELETE FROM sessions WHERE id = ?1", &delete_, error) &&
+           Prepare("DELETE FROM session_notes WHERE session_id = ?1", &delete_notes_, error) &&
+           Prepare(
+               "INSERT INTO session_notes(session_id, id, time_s, text, author, created) "
+               "VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+               &put_note_, error) &&
+           Prepare("SELECT id, time_s, text, author, created FROM session_notes WHERE session_id = ?1 ORDER BY id",
+                   &notes_, error) &&
+           Prepare("BEGIN IMMEDIATE", &begin_, error) && Prepare("COMMIT", &commit_, error) &&
+           Prepare("ROLLBACK", &rollback_, error);
   }
 
   bool Put(const SessionRow& r, std::string* error) override {
     std::lock_guard lock(mu_);
-    int i = 1;
-    for (const std::string* t : {&r.id, &r.state, &r.model, &r.device, &r.identity, &r.started}) Text(put_, i++, *t);
-    sqlite3_bind_double(put_, i++, r.duration_s);
-    sqlite3_bind_int64(put_, i++, r.samples);
-    sqlite3_bind_int64(put_, i++, static_cast<int64_t>(r.next_tick));
-    for (const std::string* t : {&r.resume_sha256, &r.recording, &r.summary_json, &r.scene_text, &r.trainee}) {
-      Text(put_, i++, *t);
+    return PutLocked(r, error);
+  }
+
+  bool PutWithNote(const SessionRow& r, const SessionNote& note, std::string* error) override {
+    std::lock_guard lock(mu_);
+    if (!Run(begin_, error)) return false;
+    Text(put_note_, 1, r.id);
+    sqlite3_bind_int64(put_note_, 2, static_cast<int64_t>(note.id));
+    sqlite3_bind_double(put_note_, 3, note.time_s);
+    Text(put_note_, 4, note.text);
+    Text(put_note_, 5, note.author);
+    Text(put_note_, 6, note.created);
+    if (PutLocked(r, error) && Run(put_note_, error) && Run(commit_, error)) return true;
+    std::string ignored;
+    Run(rollback_, &ignored);
+    return false;
+  }
+
+  std::vector<SessionNote> Notes(const std::string& id) override {
+    std::lock_guard lock(mu_);
+    Text(notes_, 1, id);
+    std::vector<SessionNote> out;
+    while (sqlite3_step(notes_) == SQLITE_ROW) {
+      out.push_back({static_cast<uint64_t>(sqlite3_column_int64(notes_, 0)), sqlite3_column_double(notes_, 1),
+                     Col(notes_, 2), Col(notes_, 3), Col(notes_, 4)});
     }
-    const bool ok = sqlite3_step(put_) == SQLITE_DONE;
-    if (!ok) *error = std::string("SQLite: ") + sqlite3_errmsg(db_);
-    sqlite3_reset(put_);
-    return ok;
+    sqlite3_reset(notes_);
+    return out;
   }
 
   std::optional<SessionRow> Get(const std::string& id) override {
@@ -112,10 +148,33 @@ class SqliteSessionIndex final : public SessionIndex {
     Text(delete_, 1, id);
     const bool ok = sqlite3_step(delete_) == SQLITE_DONE && sqlite3_changes(db_) > 0;
     sqlite3_reset(delete_);
+    Text(delete_notes_, 1, id);
+    std::string ignored;
+    Run(delete_notes_, &ignored);
     return ok;
   }
 
  private:
+  // One statement to its end; false with *error (SQLite's message).
+  bool Run(sqlite3_stmt* s, std::string* error) {
+    const bool ok = sqlite3_step(s) == SQLITE_DONE;
+    if (!ok) *error = std::string("SQLite: ") + sqlite3_errmsg(db_);
+    sqlite3_reset(s);
+    return ok;
+  }
+
+  bool PutLocked(const SessionRow& r, std::string* error) {
+    int i = 1;
+    for (const std::string* t : {&r.id, &r.state, &r.model, &r.device, &r.identity, &r.started}) Text(put_, i++, *t);
+    sqlite3_bind_double(put_, i++, r.duration_s);
+    sqlite3_bind_int64(put_, i++, r.samples);
+    sqlite3_bind_int64(put_, i++, static_cast<int64_t>(r.next_tick));
+    for (const std::string* t : {&r.resume_sha256, &r.recording, &r.summary_json, &r.scene_text, &r.trainee}) {
+      Text(put_, i++, *t);
+    }
+    return Run(put_, error);
+  }
+
   // A database from before a column existed gets it (with its default), once, at open.
   bool AddMissingColumns(std::string* error) {
     sqlite3_stmt* info = nullptr;
@@ -163,7 +222,8 @@ class SqliteSessionIndex final : public SessionIndex {
 
   std::mutex mu_;
   sqlite3* db_ = nullptr;
-  sqlite3_stmt *put_ = nullptr, *get_ = nullptr, *list_ = nullptr, *delete_ = nullptr;
+  sqlite3_stmt *put_ = nullptr, *get_ = nullptr, *list_ = nullptr, *delete_ = nullptr, *delete_notes_ = nullptr;
+  sqlite3_stmt *put_note_ = nullptr, *notes_ = nullptr, *begin_ = nullptr, *commit_ = nullptr, *rollback_ = nullptr;
 };
 
 }  // namespace

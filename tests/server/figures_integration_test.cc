@@ -317,4 +317,77 @@ TEST(Figures, ALiveSessionCanBeRewound) {
 }
 
 }  // namespace
+
+HttpReply PostNote(uint16_t port, const std::string& token, const std::string& id, const std::string& body) {
+  return Http(port, HttpCall{"POST",
+                             "/api/sessions/" + id + "/notes",
+                             {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}},
+                             body});
+}
+
+// The notes an instructor adds during a replay (issue 28: "the notes as a list that jumps to their
+// time, addable during replay"): a live session takes them as it takes a viewer's, an ended one
+// keeps them beside its recording, ids carry on across a restart, and the session's page lists
+// them all by time.
+TEST(Figures, NotesAreAddedLiveAndInReplayAndListedByTimeAcrossARestart) {
+  const std::string dir = TempDir("figures-notes");
+  auto server = std::make_unique<ServerProcess>(dir + "/data");
+  ASSERT_TRUE(server->ready()) << server->Log();
+  const std::string port = server->port_string(), observer = server->Token("observer"), admin = server->Token("admin");
+  std::string id;
+  {
+    FakeAgent agent(server->port(), server->Token("agent"));
+    id = NewSession(agent);
+    ASSERT_FALSE(id.empty());
+    ASSERT_TRUE(SendPress(agent, 0, 1000, 1.0));
+    // Live, through the API (a rewound replay's page adds them so): recorded and broadcast.
+    TestViewer viewer(server->port(), id, observer);
+    const HttpReply live = PostNote(server->port(), observer, id, R"({"time_s": 0.8, "text": "live, at 0.8 s"})");
+    ASSERT_EQ(live.status, 201) << live.body;
+    EXPECT_EQ(json::parse(live.body)["id"], 1);
+    ASSERT_TRUE(Eventually([&] {
+      for (const v1::Envelope& f : viewer.Frames()) {
+        if (f.has_annotation() && f.annotation().text() == "live, at 0.8 s") return true;
+      }
+      return false;
+    }));
+    ASSERT_TRUE(agent.End(999));
+  }
+  ASSERT_TRUE(Eventually([&] { return Row(server->port(), observer, id)["state"] == "ended"; })) << server->Log();
+  // Ended: kept in the index, with the next id.
+  const HttpReply replay = PostNote(server->port(), admin, id, R"({"time_s": 0.25, "text": "replay, at 0.25 s"})");
+  ASSERT_EQ(replay.status, 201) << replay.body;
+  EXPECT_EQ(json::parse(replay.body)["id"], 2);
+  EXPECT_EQ(json::parse(replay.body)["author"].get<std::string>().rfind("admin ", 0), 0u) << replay.body;
+  // Bad notes change nothing and say what is wrong.
+  EXPECT_EQ(PostNote(server->port(), admin, id, R"({"time_s": 1})").status, 400);
+  EXPECT_EQ(PostNote(server->port(), admin, id, R"({"text": 7})").status, 400);
+  EXPECT_EQ(PostNote(server->port(), admin, id, "not json").status, 400);
+  EXPECT_EQ(PostNote(server->port(), admin, id, json{{"text", std::string(1001, 'x')}}.dump()).status, 400);
+  EXPECT_EQ(PostNote(server->port(), admin, id, R"({"time_s": -1, "text": "before the start"})").status, 400);
+  EXPECT_EQ(PostNote(server->port(), admin, "no-such-session", R"({"text": "x"})").status, 404);
+  EXPECT_EQ(PostNote(server->port(), "wrong-token", id, R"({"text": "x"})").status, 401);
+
+  // After a restart: both, by time, and the next note gets the next id.
+  server.reset();
+  server = std::make_unique<ServerProcess>(dir + "/data", std::vector<std::string>{"--listen", "127.0.0.1:" + port});
+  ASSERT_TRUE(server->ready()) << server->Log();
+  const HttpReply third = PostNote(server->port(), observer, id, R"({"time_s": 0.5, "text": "after the restart"})");
+  ASSERT_EQ(third.status, 201) << third.body;
+  EXPECT_EQ(json::parse(third.body)["id"], 3);
+  const HttpReply detail = Get(server->port(), "/api/sessions/" + id, observer);
+  ASSERT_EQ(detail.status, 200);
+  std::vector<std::string> listed;
+  const json session = json::parse(detail.body);
+  for (const json& n : session["annotations"]) {
+    listed.push_back(std::to_string(n["id"].get<int>()) + " " + n["text"].get<std::string>());
+  }
+  EXPECT_EQ(listed, (std::vector<std::string>{"2 replay, at 0.25 s", "3 after the restart", "1 live, at 0.8 s"}));
+  // A deleted session takes its notes with it.
+  ASSERT_EQ(
+      Http(server->port(), HttpCall{"DELETE", "/api/sessions/" + id, {{"Authorization", "Bearer " + admin}}}).status,
+      200);
+  EXPECT_EQ(PostNote(server->port(), admin, id, R"({"text": "x"})").status, 404);
+}
+
 }  // namespace idms::test

@@ -143,6 +143,35 @@ TEST(SqliteSessionIndex, SessionsStartedWithinOneSecondAreListedNewestFirst) {
   EXPECT_LT(list[1].started, list[0].started);
 }
 
+// A note added after the end is stored with its row (the notes counter in its summary) or not at
+// all: a note whose id is taken leaves the row as it was.
+TEST(SqliteSessionIndex, ANoteIsStoredWithItsRowOrNotAtAll) {
+  const std::string dir = test::TempDir("sqlite-notes");
+  std::string error;
+  auto index = OpenSqliteSessionIndex(dir + "/idms.db", &error);
+  ASSERT_TRUE(index) << error;
+  SessionRow row;
+  row.id = "s1";
+  row.state = "ended";
+  row.summary_json = R"({"notes":1})";
+  ASSERT_TRUE(
+      index->PutWithNote(row, SessionNote{1, 0.5, "first", "admin 127.0.0.1:1", "2026-11-28T01:00:00Z"}, &error))
+      << error;
+  row.summary_json = R"({"notes":2})";
+  EXPECT_FALSE(index->PutWithNote(row, SessionNote{1, 0.7, "same id", "admin", "x"}, &error));
+  EXPECT_NE(error.find("UNIQUE"), std::string::npos) << error;
+  EXPECT_EQ(index->Get("s1")->summary_json, R"({"notes":1})") << "the row rolled back with the note";
+  ASSERT_TRUE(index->PutWithNote(row, SessionNote{2, 0.25, "second", "observer", "y"}, &error)) << error;
+  const std::vector<SessionNote> notes = index->Notes("s1");
+  ASSERT_EQ(notes.size(), 2u);
+  EXPECT_EQ(notes[0].text, "first");
+  EXPECT_EQ(notes[1].time_s, 0.25);
+  EXPECT_EQ(notes[0].author, "admin 127.0.0.1:1");
+  EXPECT_TRUE(index->Notes("other").empty());
+  ASSERT_TRUE(index->Delete("s1"));
+  EXPECT_TRUE(index->Notes("s1").empty());
+}
+
 // A database written before sessions had a trainee opens with the column added, its rows kept.
 TEST(SqliteSessionIndex, ADatabaseFromBeforeTheTraineeColumnIsBroughtUpToDate) {
   const std::string dir = test::TempDir("sqlite-old-sessions");

@@ -81,14 +81,27 @@ struct SessionRow {
   std::string trainee;        // who was at the device (Hello.trainee; an admin may correct it)
 };
 
+// A note added to a session once its recording was finished (during a replay): the notes made
+// while it was live are in the recording itself. Ids continue the session's own (1, 2, ...).
+struct SessionNote {
+  uint64_t id = 0;
+  double time_s = 0;    // the session time it refers to, s
+  std::string text;     // 1 to 1000 bytes of UTF-8
+  std::string author;   // the role and address that added it
+  std::string created;  // UTC, ISO 8601
+};
+
 // The session index. Thread-safe.
 class SessionIndex {
  public:
   virtual ~SessionIndex() = default;
   virtual bool Put(const SessionRow& row, std::string* error) = 0;  // insert or replace by id
   virtual std::optional<SessionRow> Get(const std::string& id) = 0;
-  virtual std::vector<SessionRow> List() = 0;  // newest first
-  virtual bool Delete(const std::string& id) = 0;
+  virtual std::vector<SessionRow> List() = 0;      // newest first
+  virtual bool Delete(const std::string& id) = 0;  // the row and its notes
+  // Stores `row` (its summary carries the notes counter) and `note` together, or neither.
+  virtual bool PutWithNote(const SessionRow& row, const SessionNote& note, std::string* error) = 0;
+  virtual std::vector<SessionNote> Notes(const std::string& id) = 0;  // by id
 };
 
 // Where the sessions' recordings are kept: each session's MCAP file is written live under one
