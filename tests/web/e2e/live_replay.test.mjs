@@ -207,6 +207,34 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await page.focus('#seek');
   await page.keyboard.press('Home');
   await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '0.00');
+
+  // A note added in the replay, at the replay's time: listed by time with the live one, kept.
+  const replayNote = 'in the replay: lighter here';
+  await page.evaluate(() => {
+    const slider = /** @type {HTMLInputElement} */ (document.getElementById('seek'));
+    slider.value = '2';
+    slider.dispatchEvent(new Event('change'));
+  });
+  await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '2.00');
+  await page.fill('#note', replayNote);
+  await page.click('#annotate button[type=submit]');
+  await page.waitForSelector(`#annotations li:has-text("${replayNote}")`);
+  assert.equal(await page.inputValue('#note'), '', 'the field is emptied once the note is taken');
+  const listed = async () => page.$$eval('#annotations li', (lis) => lis.map((li) => Number(li.getAttribute('data-time'))));
+  const times = await listed();
+  assert.equal(times.length, 2, `notes listed: ${times}`);
+  assert.deepEqual(times, [...times].sort((a, b) => a - b), 'the notes run in session-time order');
+  assert.ok(times.some((t) => Math.abs(t - 2) < 0.01), `the replay's note at 2 s: ${times}`);
+  // Its time jumps there from elsewhere.
+  await page.focus('#seek');
+  await page.keyboard.press('End');
+  await page.waitForFunction(() => Number(new URL(location.href).searchParams.get('t')) > 10);
+  await page.click(`#annotations li:has-text("${replayNote}") button.jump`);
+  await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '2.00');
+  // Kept: a new visit lists it from the server.
+  await page.reload();
+  await page.waitForSelector(`#annotations li:has-text("${replayNote}")`);
+  await shot(page, 'replay-notes.png');
   assert.deepEqual(errors, []);
 });
 

@@ -195,10 +195,26 @@ export function sessionPage(id, role, mode) {
   // after a seek, the samples stop short of the time sought.
   const health = new HealthPanel(st, loop, timeline ? () => timeline.time : undefined);
   const events = new EventList(st);
-  const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''));
+  const notes = new AnnotationList(st, (a) => timeline?.addMark(a.timeS || 0, 'annotation', a.text || ''),
+    (t) => (timeline ? timeline.seek(t) : window.location.assign(`/replay/${encodeURIComponent(id)}?t=${t.toFixed(3)}`)));
   const commands = mode === 'live' && role === 'admin' ? commandPanel(send, st) : null;
+  // Live, a note goes over the session's socket at its current time; in a replay it is added to
+  // the session at the timeline's time (kept beside its recording once it has ended).
+  const annotate = mode === 'live'
+    ? annotationForm('Note at the current time', async (text) => (send({ annotation: { text } }) ? ''
+      : st.ended ? 'The session has ended: add notes in its replay.' : 'Not connected: the note was not sent.'))
+    : annotationForm('Note at the replay\'s time', async (text) => {
+      try {
+        const n = await api(`/api/sessions/${encodeURIComponent(id)}/notes`, { method: 'POST',
+          headers: { 'Content-Type': 'application/json' }, body: JSON.stringify({ time_s: timeline?.time ?? 0, text }) });
+        notes.add({ id: n.id, timeS: n.time_s, text: n.text, author: n.author });
+        return '';
+      } catch (e) {
+        return `The note was not added: ${e instanceof Error ? e.message : String(e)}`;
+      }
+    });
   const { hosts, wire, colour, scale } = layout(id, mode, { meta: header.el, timeline: timelineHost, health: health.el, notes: notes.el,
-    annotate: mode === 'live' ? annotationForm(send, st) : null, events: events.el, commands: commands?.el ?? null });
+    annotate, events: events.el, commands: commands?.el ?? null });
   const view = new LiveView(st, hosts, kWindowS, loop);
   wire.addEventListener('change', () => view.view.setWireframe(wire.checked));
   colour.addEventListener('change', () => view.view.setColourBy(/** @type {'displacement' | 'plain'} */ (colour.value)));

@@ -277,12 +277,20 @@ export class EventList {
   }
 }
 
-/** The session's annotations, each once (they come from the record and from the stream). */
+/**
+ * The notes, in session-time order whenever they came (recorded, live, added in replay), each time
+ * a button that jumps there (a replay seeks; a live view opens the replay at that time).
+ */
 export class AnnotationList {
-  /** @param {{annotations: number}} st @param {((a: idms.v1.IAnnotation) => void) | null} onNew */
-  constructor(st, onNew) {
+  /**
+   * @param {{annotations: number}} st
+   * @param {((a: idms.v1.IAnnotation) => void) | null} onNew
+   * @param {(t: number) => void} onJump
+   */
+  constructor(st, onNew, onJump) {
     this.st = st;
     this.onNew = onNew;
+    this.onJump = onJump;
     /** @type {Set<string>} */
     this.ids = new Set();
     this.el = h('ol', { class: 'notes', id: 'annotations' });
@@ -294,30 +302,36 @@ export class AnnotationList {
     if (this.ids.has(id)) return;
     this.ids.add(id);
     this.st.annotations++;
-    this.el.append(h('li', { 'data-id': id, 'data-time': String(a.timeS ?? 0) }, [
-      h('span', { class: 'time', text: formatTime(a.timeS || 0) }), ' ', a.text || '', ' ',
-      h('span', { class: 'muted', text: `— ${a.author || ''}` })]));
+    const t = Number(a.timeS || 0);
+    const jump = h('button', { type: 'button', class: 'time jump', title: 'Go to this time', text: formatTime(t) });
+    jump.addEventListener('click', () => this.onJump(t));
+    const li = h('li', { 'data-id': id, 'data-time': String(t) }, [jump, ' ', a.text || '', ' ',
+      h('span', { class: 'muted', text: `— ${a.author || ''}` })]);
+    const later = [...this.el.children].find((c) => Number(/** @type {HTMLElement} */ (c).dataset.time) > t);
+    this.el.insertBefore(li, later ?? null);
     this.onNew?.(a);
   }
 }
 
 /**
- * A note at the current session time, for every viewer and the recording.
- * @param {Send} send
- * @param {{ended: boolean}} st
+ * A note at the current session time: `submit` sends it and resolves to '' once taken, else to
+ * what went wrong (said beside the field; the text stays to try again).
+ * @param {string} label
+ * @param {(text: string) => Promise<string>} submit
  */
-export function annotationForm(send, st) {
+export function annotationForm(label, submit) {
   const input = h('input', { id: 'note', type: 'text', maxlength: 1000, required: true, placeholder: 'e.g. too much force here' });
   const said = h('span', { class: 'error', role: 'alert' });
   const form = h('form', { class: 'inline', id: 'annotate' }, [
-    h('label', { for: 'note', text: 'Note at the current time' }), input, h('button', { type: 'submit', text: 'Add note' }), said]);
+    h('label', { for: 'note', text: label }), input, h('button', { type: 'submit', text: 'Add note' }), said]);
   form.addEventListener('submit', (ev) => {
     ev.preventDefault();
     const text = input.value.trim();
     if (!text) return;
-    const sent = send({ annotation: { text } });
-    if (sent) input.value = '';
-    said.textContent = sent ? '' : st.ended ? 'The session has ended: notes go on live sessions.' : 'Not connected: the note was not sent.';
+    submit(text).then((error) => {
+      if (!error) input.value = '';
+      said.textContent = error;
+    });
   });
   return form;
 }
