@@ -5,13 +5,16 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
 
 #include "frame_checks.h"
 #include "idms/protocol/recording.h"
 #include "idms/server/auth.h"
 #include "idms/server/http_parse.h"
+#include "session_summary.h"
 #include "sessions.h"
 
 namespace idms::server {
@@ -152,6 +155,51 @@ HandlerResponse GetSamplesCsv(SessionHub& hub, ApiRequest& req) {
   return res;
 }
 
+// The device force over the whole session, peak-preserving: ?points=N (10 to 10000, default 1000)
+// equal slices of session time, each given by its largest |F| and that sample's time; empty
+// slices are left out. What a plot of a whole session, or two overlaid, needs.
+HandlerResponse GetForceProfile(SessionHub& hub, ApiRequest& req) {
+  const std::optional<SessionRow> r = hub.Get(req.params[0]);
+  if (!r) return JsonError(req, http::status::not_found, "no session " + req.params[0]);
+  int points = 1000;
+  if (const auto it = req.query.find("points"); it != req.query.end()) {
+    char* end = nullptr;
+    const long n = std::strtol(it->second.c_str(), &end, 10);
+    if (it->second.empty() || *end != '\0' || n < 10 || n > 10000) {
+      return JsonError(req, http::status::bad_request, "points: a whole number from 10 to 10000");
+    }
+    points = static_cast<int>(n);
+  }
+  const SessionSummary summary = SessionSummary::FromJson(r->summary_json);
+  const double t0 = std::max(summary.first_time_s, 0.0), span = std::max(summary.last_time_s - t0, 1e-9);
+  RecordingReader reader;
+  RecordingReaderOptions options;
+  options.mesh = options.events = options.annotations = false;
+  std::string error;
+  if (!reader.Open(hub.RecordingPath(*r), options, &error)) {
+    return JsonError(req, http::status::not_found, "session " + r->id + " has no readable recording: " + error);
+  }
+  std::vector<double> peak(static_cast<size_t>(points), -1), at(static_cast<size_t>(points), 0);
+  RecordedMessage m;
+  while (reader.Next(&m, &error)) {
+    if (!m.envelope.has_device_samples()) continue;
+    for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) {
+      const double f = std::hypot(s.force().x(), s.force().y(), s.force().z());
+      const double x = (s.time_s() - t0) / span * points;
+      const size_t i = static_cast<size_t>(std::clamp(x, 0.0, points - 1.0));
+      if (f > peak[i]) peak[i] = f, at[i] = s.time_s();
+    }
+  }
+  json times = json::array(), forces = json::array();
+  for (size_t i = 0; i < peak.size(); ++i) {
+    if (peak[i] < 0) continue;
+    times.push_back(at[i]);
+    forces.push_back(peak[i]);
+  }
+  return JsonResponse(req, http::status::ok,
+                      JsonText(json{{"id", r->id}, {"points", points}, {"time_s", times}, {"force", forces}}));
+}
+
 // A note as the API gives it; "added" only for a note added after the session ended.
 json NoteJson(const SessionNote& n) {
   json j{{"id", n.id}, {"time_s", n.time_s}, {"text", n.text}, {"author", n.author}};
@@ -256,6 +304,8 @@ void AppendSessionRoutes(ServerCore& core, std::vector<Route>* routes) {
                      true});
   routes->push_back({V::get, "/api/sessions/{id}/recording.mcap", P::kRead, false, false,
                      [hub](ApiContext&, ApiRequest& req) { return GetRecording(*hub, req); }, true});
+  routes->push_back({V::get, "/api/sessions/{id}/force", P::kRead, false, false,
+                     [hub](ApiContext&, ApiRequest& req) { return GetForceProfile(*hub, req); }, true});
   routes->push_back({V::get, "/api/sessions/{id}/samples.csv", P::kRead, false, false,
                      [hub](ApiContext&, ApiRequest& req) { return GetSamplesCsv(*hub, req); }, true});
   // {"trainee": "NAME"}: who was at the device, corrected by an admin.

@@ -123,6 +123,24 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
             "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings");
   EXPECT_NE(csv.body.find("\n500,0.501,0,0,1.4,0,0,8,1,1,0,1\n"), std::string::npos);
 
+  // The force over the whole session in 100 slices (a plot's): the peak kept where it was.
+  const HttpReply profile = Get(server->port(), "/api/sessions/" + id + "/force?points=100", observer);
+  ASSERT_EQ(profile.status, 200) << profile.body;
+  const json force = json::parse(profile.body);
+  ASSERT_EQ(force["time_s"].size(), force["force"].size());
+  EXPECT_GE(force["time_s"].size(), 95u);
+  EXPECT_LE(force["time_s"].size(), 100u);
+  const std::vector<double> times = force["time_s"], forces = force["force"];
+  EXPECT_TRUE(std::is_sorted(times.begin(), times.end()));
+  const size_t peak_at = std::max_element(forces.begin(), forces.end()) - forces.begin();
+  EXPECT_DOUBLE_EQ(forces[peak_at], 8.0);
+  EXPECT_DOUBLE_EQ(times[peak_at], 0.501);
+  EXPECT_DOUBLE_EQ(forces.front(), 1.0);
+  for (const char* bad : {"?points=9", "?points=10001", "?points=x", "?points="}) {
+    EXPECT_EQ(Get(server->port(), "/api/sessions/" + id + "/force" + bad, observer).status, 400) << bad;
+  }
+  EXPECT_EQ(Get(server->port(), "/api/sessions/none/force", observer).status, 404);
+
   // Every event at its session time: started at 0, resumed at 1 s, ended at 2 s.
   const HttpReply detail = Get(server->port(), "/api/sessions/" + id, observer);
   ASSERT_EQ(detail.status, 200);
