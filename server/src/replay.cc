@@ -151,9 +151,26 @@ class ReplayEndpoint : public WsEndpoint, public std::enable_shared_from_this<Re
       } else {
         Error("recording: " + mesh_error);
       }
+    } else {
+      SendFirstKeyframe();
     }
     Anchor();
     return true;
+  }
+
+  // A time before the recording's first keyframe (a replay opens at 0, and the agent's first
+  // frame comes some milliseconds in) has no surface of its own: the viewer gets that first
+  // keyframe now rather than an empty view until Play. (Play sends it again, in its place.)
+  void SendFirstKeyframe() {
+    RecordingReader first;
+    RecordingReaderOptions options;
+    options.device = options.events = options.annotations = false;
+    std::string error;
+    if (!first.Open(path_, options, &error)) return;
+    RecordedMessage m;
+    while (first.Next(&m, &error)) {
+      if (m.envelope.has_mesh_keyframe()) return Send(m.envelope);
+    }
   }
 
   // Appends a recorded batch to the catch-up's history: one message per kHistoryBatch samples,

@@ -318,6 +318,11 @@ TEST(Sessions, ReplayPlaysSeeksAndChangesSpeed) {
   EXPECT_FALSE(e.playback_state().playing());
   // On the session's clock: 7 s of simulation is 7 s of replay, however late frames arrived.
   EXPECT_NEAR(e.playback_state().duration_s(), 7.0, 0.01);
+  // Paused at 0, before the agent's first frame: its first keyframe comes at once (the viewer once
+  // had an empty view until Play).
+  e = read();
+  ASSERT_TRUE(e.has_mesh_keyframe()) << e.DebugString().substr(0, 300);
+  EXPECT_GT(e.mesh_keyframe().num_vertices(), 0u);
   // At 10x the whole recording plays in about a tenth of its length, every tick in order.
   send(v1::PlaybackControl::ACTION_SET_SPEED, 10);
   send(v1::PlaybackControl::ACTION_PLAY, 0);

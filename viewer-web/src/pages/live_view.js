@@ -8,6 +8,7 @@ import { RollingPlot } from '../plots/rolling.js';
 import { DepthPlot } from '../plots/depth.js';
 import { length3 } from '../length3.js';
 import { display } from '../view/display.js';
+import { parseObj } from '../codec/obj.js';
 
 /**
  * What the view has seen (a part of the page's state object, window.__idms).
@@ -172,4 +173,29 @@ export class LiveView {
     this.posPlot.dispose();
     this.depthPlot.dispose();
   }
+}
+
+/**
+ * The displacement's rest: the library model the scene names ("NAME" or "NAME@VERSION") at rest,
+ * its positions on the session's quantisation grid as its first keyframe had them; without it
+ * (a model from a file, a library that lost it) rest is the first surface the page gets, which in
+ * a replay opened or a live session joined after the start is not the model at rest (the legend
+ * then says from when).
+ * @param {SurfaceView} view @param {string} model @param {number} quantStep
+ */
+export function loadModelRest(view, model, quantStep) {
+  const [name, version] = model.split('@');
+  const query = version ? `?version=${encodeURIComponent(version)}` : '';
+  fetch(`/api/models/${encodeURIComponent(name)}/obj${query}`, { credentials: 'same-origin' })
+    .then((res) => (res.ok ? res.text() : Promise.reject(new Error(`HTTP ${res.status}`))))
+    .then((text) => {
+      // Quantised as protocol/'s encoder does (half away from zero), dequantised as its mirror.
+      const rest = parseObj(text).positions, inv = 1 / quantStep;
+      for (let i = 0; i < rest.length; i++) {
+        const v = rest[i] * inv;
+        rest[i] = Math.trunc(v + (v >= 0 ? 0.5 : -0.5)) * quantStep;
+      }
+      view.setModelRest(rest);
+    })
+    .catch(() => {});  // rest stays the first surface
 }

@@ -8,9 +8,8 @@ import { FrameLoop } from '../view/frame_loop.js';
 import { api } from '../net/api.js';
 import { h, page } from './dom.js';
 import { display } from '../view/display.js';
-import { parseObj } from '../codec/obj.js';
 import { Timeline } from './timeline.js';
-import { LiveView } from './live_view.js';
+import { LiveView, loadModelRest } from './live_view.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName,
   messageWords } from './session_panels.js';
 
@@ -109,35 +108,11 @@ function dispatch(p, env) {
     p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
     p.commands?.setTools(tools);
     p.health.setRate(env.welcome.scene?.device?.maxRateHz || 1000);
-    if (env.welcome.scene?.model) loadModelRest(p, env.welcome.scene.model, env.welcome.scene.quantStep || 1e-4);
+    if (env.welcome.scene?.model) loadModelRest(p.view.view, env.welcome.scene.model, env.welcome.scene.quantStep || 1e-4);
   }
   p.health.invalidate();
 }
 
-/**
- * The displacement's rest: the library model the scene names ("NAME" or "NAME@VERSION") at rest,
- * its positions on the session's quantisation grid as its first keyframe had them; without it
- * (a model from a file, a library that lost it) rest is the first surface the page gets, which in
- * a replay opened or a live session joined after the start is not the model at rest (the legend
- * then says from when).
- * @param {Parts} p @param {string} model @param {number} quantStep
- */
-function loadModelRest(p, model, quantStep) {
-  const [name, version] = model.split('@');
-  const query = version ? `?version=${encodeURIComponent(version)}` : '';
-  fetch(`/api/models/${encodeURIComponent(name)}/obj${query}`, { credentials: 'same-origin' })
-    .then((res) => (res.ok ? res.text() : Promise.reject(new Error(`HTTP ${res.status}`))))
-    .then((text) => {
-      // Quantised as protocol/'s encoder does (half away from zero), dequantised as its mirror.
-      const rest = parseObj(text).positions, inv = 1 / quantStep;
-      for (let i = 0; i < rest.length; i++) {
-        const v = rest[i] * inv;
-        rest[i] = Math.trunc(v + (v >= 0 ? 0.5 : -0.5)) * quantStep;
-      }
-      p.view.view.setModelRest(rest);
-    })
-    .catch(() => {});  // rest stays the first surface
-}
 
 /** The connection's state in the top bar (nothing while connected). @param {string} state @param {string} text */
 function showConnection(state, text) {

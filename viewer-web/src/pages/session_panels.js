@@ -7,6 +7,7 @@ import { api } from '../net/api.js';
 import { h, formatTime } from './dom.js';
 import { LoopWatch } from './loop_verdict.js';
 import { traineeHref } from './session_table.js';
+import { gradeList } from './grade.js';
 
 /** @typedef {(env: idms.v1.IEnvelope) => boolean} Send  sends a frame; false when not connected */
 
@@ -86,7 +87,8 @@ export class SessionHeader {
     this.text = h('span', { id: 'meta-text', text: 'Loading…' });
     this.duration = h('span', { id: 'duration' });
     this.trainee = h('span', { id: 'trainee' });
-    this.el = h('div', { class: 'meta', id: 'meta' }, [h('p', {}, [this.text, this.duration]), this.trainee]);
+    this.grade = h('div', { id: 'grade' });
+    this.el = h('div', { class: 'meta', id: 'meta' }, [h('p', {}, [this.text, this.duration]), this.trainee, this.grade]);
     /** The record's duration when the page asked, s; NaN until it answers. */
     this.recordS = NaN;
     this.lastDraw = -1e9;
@@ -94,11 +96,15 @@ export class SessionHeader {
     loop.add(this);
   }
 
-  /** @param {{model: string, device: string, identity: string, state: string, duration_s: number, trainee?: string}} s */
+  /**
+   * @param {{model: string, device: string, identity: string, state: string, duration_s: number, trainee?: string,
+   *   grade?: import('./grade.js').Grade}} s
+   */
   setRecord(s) {
     this.text.textContent = `${s.model} · ${s.device} · ${s.identity} · ${s.state} · `;
     this.recordS = s.duration_s;
     this.showTrainee(String(s.trainee || ''));
+    this.grade.replaceChildren(gradeList(s.grade));
     this.invalidate();
   }
 

@@ -5,6 +5,7 @@
 import { api } from '../net/api.js';
 import { display } from '../view/display.js';
 import { h, fixed, formatDate } from './dom.js';
+import { gradeBadge, gradeWords } from './grade.js';
 
 const kForceUnit = display.unit.force;
 
@@ -16,7 +17,7 @@ const kForceUnit = display.unit.force;
 export const kColumns = [
   { head: 'Preview', unit: '', label: '', cls: 'thumb-cell' },
   { head: 'Session', unit: 'started', label: 'Session', cls: 'id-cell' },
-  { head: 'State', unit: 'duration', label: 'State', cls: undefined },
+  { head: 'State', unit: 'grade · duration', label: 'State', cls: undefined },
   { head: 'Trainee', unit: '', label: 'Trainee', cls: 'trainee' },
   { head: 'Model', unit: '', label: 'Model', cls: 'model' },
   { head: 'Device', unit: '', label: 'Device', cls: 'device' },
@@ -33,13 +34,57 @@ const kPeak = 6, kLimit = 8, kActions = 12;
 /** A trainee's page. @param {string} name */
 export const traineeHref = (name) => `/trainee/${encodeURIComponent(name)}`;
 
+/**
+ * The two recorded sessions picked for a comparison (a third pick lets go of the first), and the
+ * bar that links to /compare/{a}/{b} once there are two.
+ */
+class Picker {
+  constructor() {
+    /** @type {string[]} */
+    this.ids = [];
+    this.link = h('a', { id: 'compare-link', class: 'button-link' });
+    this.said = h('span', { class: 'muted', id: 'compare-said' });
+    this.bar = h('div', { class: 'compare-bar', id: 'compare-bar' }, [this.said, this.link]);
+    this.show();
+  }
+
+  /** @param {string} id */
+  has(id) {
+    return this.ids.includes(id);
+  }
+
+  /** @param {string} id @param {boolean} on */
+  pick(id, on) {
+    this.ids = this.ids.filter((x) => x !== id);
+    if (on) this.ids.push(id);
+    if (this.ids.length > 2) {
+      const dropped = /** @type {string} */ (this.ids.shift());
+      const box = /** @type {HTMLInputElement | null} */ (document.querySelector(`input[data-compare="${CSS.escape(dropped)}"]`));
+      if (box) box.checked = false;
+    }
+    this.show();
+  }
+
+  show() {
+    const [a, b] = this.ids;
+    this.said.textContent = this.ids.length === 0 ? 'Tick two recorded sessions to compare them side by side.'
+      : this.ids.length === 1 ? `Picked ${a}; tick one more to compare.` : '';
+    if (b) {
+      this.link.href = `/compare/${encodeURIComponent(a)}/${encodeURIComponent(b)}`;
+      this.link.textContent = `Compare ${a} and ${b}`;
+      this.link.hidden = false;
+    } else this.link.hidden = true;
+  }
+}
+
 /** One session's row; only what changed is rewritten. */
 class SessionRow {
-  /** @param {string} id @param {string} role @param {() => void} refresh */
-  constructor(id, role, refresh) {
+  /** @param {string} id @param {string} role @param {() => void} refresh @param {Picker} picker */
+  constructor(id, role, refresh, picker) {
     this.id = id;
     this.role = role;
     this.refresh = refresh;
+    this.picker = picker;
     this.cells = kColumns.map((c) => h('td', { class: c.cls, 'data-label': c.label || undefined }));
     this.tr = h('tr', { 'data-id': id }, this.cells);
     /** What each cell shows, as a key: rewritten only when it differs. @type {string[]} */
@@ -78,8 +123,10 @@ class SessionRow {
     const started = formatDate(s.started);
     this.set(1, `${href}|${started}`, () => [h('a', { href, text: id }), h('div', { class: 'under', text: started })]);
     const under = `${fixed(s.duration_s, 1)} s` + (live ? ` · ${s.viewers} watching` : '');
-    this.set(2, `${s.state}|${under}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
-      h('div', { class: 'under', text: under })]);
+    // The grade against the scene's limits beside the state (a live session's so far).
+    const grade = gradeWords(s.grade);
+    this.set(2, `${s.state}|${under}|${grade.detail}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
+      gradeBadge(s.grade), h('div', { class: 'under', text: under })]);
     const trainee = String(s.trainee || '');
     this.set(3, trainee, () => [trainee ? h('a', { href: traineeHref(trainee), text: trainee }) : h('span', { class: 'muted', text: 'not named' })]);
     this.text(4, s.model);
@@ -98,13 +145,19 @@ class SessionRow {
     this.text(9, fixed(sum.path_length ?? NaN));
     this.text(10, sum.tick_p99_us !== undefined ? `${sum.tick_p99_us} µs` : '–');
     this.text(11, String(sum.warnings ?? '–'));
+    // A recorded session: its one-page report, a box to pick it for a comparison, and (admin) Delete.
     const deletable = this.role === 'admin' && !live;
-    this.set(kActions, String(deletable), () => [deletable
-      ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
-        if (!confirm(`Delete session ${id} and its recording?`)) return;
-        await api(`/api/sessions/${encodeURIComponent(id)}`, { method: 'DELETE' });
-        this.refresh();
-      } }) : null]);
+    this.set(kActions, `${live}|${deletable}`, () => [
+      live ? null : h('a', { class: 'small report-link', href: `/report/${encodeURIComponent(id)}`, text: 'Report' }),
+      live ? null : h('label', { class: 'compare-pick' }, [h('input', { type: 'checkbox', 'data-compare': id,
+        'aria-label': `Pick session ${id} to compare`, checked: this.picker.has(id),
+        onchange: (/** @type {Event} */ ev) => this.picker.pick(id, /** @type {HTMLInputElement} */ (ev.target).checked) }), ' compare']),
+      deletable
+        ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
+          if (!confirm(`Delete session ${id} and its recording?`)) return;
+          await api(`/api/sessions/${encodeURIComponent(id)}`, { method: 'DELETE' });
+          this.refresh();
+        } }) : null]);
   }
 }
 
@@ -117,6 +170,7 @@ class SessionRow {
  */
 export function sessionTable(id, caption, role, refresh) {
   const body = h('tbody');
+  const picker = new Picker();
   const table = h('table', { class: 'list cards', id }, [
     h('caption', { text: caption }),
     // Each header with its unit (or what the cell's second line says) under it.
@@ -142,12 +196,12 @@ export function sessionTable(id, caption, role, refresh) {
     sessions.forEach((s, i) => {
       const key = String(s.id);
       let row = rows.get(key);
-      if (!row) rows.set(key, row = new SessionRow(key, role, refresh));
+      if (!row) rows.set(key, row = new SessionRow(key, role, refresh, picker));
       row.update(s);
       if (body.children[i] !== row.tr) body.insertBefore(row.tr, body.children[i] ?? null);
     });
   };
-  return { el: h('div', { class: 'scroll' }, [table]), show };
+  return { el: h('div', {}, [picker.bar, h('div', { class: 'scroll' }, [table])]), show };
 }
 
 /** Live sessions first, then the newest. @param {any[]} sessions sorted in place */
