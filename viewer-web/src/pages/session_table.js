@@ -17,7 +17,7 @@ const kForceUnit = display.unit.force;
 export const kColumns = [
   { head: 'Preview', unit: '', label: '', cls: 'thumb-cell' },
   { head: 'Session', unit: 'started', label: 'Session', cls: 'id-cell' },
-  { head: 'State', unit: 'grade · duration', label: 'State', cls: undefined },
+  { head: 'State', unit: 'duration', label: 'State', cls: undefined },
   { head: 'Trainee', unit: '', label: 'Trainee', cls: 'trainee' },
   { head: 'Model', unit: '', label: 'Model', cls: 'model' },
   { head: 'Device', unit: '', label: 'Device', cls: 'device' },
@@ -67,7 +67,7 @@ class Picker {
 
   show() {
     const [a, b] = this.ids;
-    this.said.textContent = this.ids.length === 0 ? 'Tick two recorded sessions to compare them side by side.'
+    this.said.textContent = this.ids.length === 0 ? 'Tick two recorded sessions\u2019 \u201ccompare\u201d boxes to see them side by side.'
       : this.ids.length === 1 ? `Picked ${a}; tick one more to compare.` : '';
     if (b) {
       this.link.href = `/compare/${encodeURIComponent(a)}/${encodeURIComponent(b)}`;
@@ -121,7 +121,14 @@ class SessionRow {
         src: `/api/sessions/${encodeURIComponent(id)}/screenshot.png?t=${mid}&size=160x90` })]);
     const href = live ? `/session/${id}` : `/replay/${id}`;
     const started = formatDate(s.started);
-    this.set(1, `${href}|${started}`, () => [h('a', { href, text: id }), h('div', { class: 'under', text: started })]);
+    // Under a recorded session's id: its one-page report and a box to pick it for a comparison
+    // (here, not in the last column, so that they stay in sight whatever the table's width).
+    this.set(1, `${href}|${started}`, () => [h('a', { href, text: id }), h('div', { class: 'under', text: started }),
+      live ? null : h('div', { class: 'row-tools' }, [
+        h('a', { class: 'report-link', href: `/report/${encodeURIComponent(id)}`, text: 'Report' }), ' ',
+        h('label', { class: 'compare-pick', title: 'Pick to compare side by side' }, [h('input', { type: 'checkbox', 'data-compare': id,
+          'aria-label': `Pick session ${id} to compare`, checked: this.picker.has(id),
+          onchange: (/** @type {Event} */ ev) => this.picker.pick(id, /** @type {HTMLInputElement} */ (ev.target).checked) }), ' compare'])])]);
     const under = `${fixed(s.duration_s, 1)} s` + (live ? ` · ${s.viewers} watching` : '');
     // The grade against the scene's limits beside the state (a live session's so far).
     const grade = gradeWords(s.grade);
@@ -145,19 +152,13 @@ class SessionRow {
     this.text(9, fixed(sum.path_length ?? NaN));
     this.text(10, sum.tick_p99_us !== undefined ? `${sum.tick_p99_us} µs` : '–');
     this.text(11, String(sum.warnings ?? '–'));
-    // A recorded session: its one-page report, a box to pick it for a comparison, and (admin) Delete.
     const deletable = this.role === 'admin' && !live;
-    this.set(kActions, `${live}|${deletable}`, () => [
-      live ? null : h('a', { class: 'small report-link', href: `/report/${encodeURIComponent(id)}`, text: 'Report' }),
-      live ? null : h('label', { class: 'compare-pick' }, [h('input', { type: 'checkbox', 'data-compare': id,
-        'aria-label': `Pick session ${id} to compare`, checked: this.picker.has(id),
-        onchange: (/** @type {Event} */ ev) => this.picker.pick(id, /** @type {HTMLInputElement} */ (ev.target).checked) }), ' compare']),
-      deletable
-        ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
-          if (!confirm(`Delete session ${id} and its recording?`)) return;
-          await api(`/api/sessions/${encodeURIComponent(id)}`, { method: 'DELETE' });
-          this.refresh();
-        } }) : null]);
+    this.set(kActions, String(deletable), () => [deletable
+      ? h('button', { class: 'small danger', 'aria-label': `Delete session ${id}`, text: 'Delete', onclick: async () => {
+        if (!confirm(`Delete session ${id} and its recording?`)) return;
+        await api(`/api/sessions/${encodeURIComponent(id)}`, { method: 'DELETE' });
+        this.refresh();
+      } }) : null]);
   }
 }
 
