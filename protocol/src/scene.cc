@@ -207,6 +207,12 @@ Checker CheckScene(const v1::Scene& scene) {
     if (g.has_max_contact_time_s()) c.Range(at("max_contact_time_s"), g.max_contact_time_s(), 0, kInf, false);
     if (g.has_max_path_length()) c.Range(at("max_path_length"), g.max_path_length(), 0, kInf, false);
   }
+  if (scene.has_units()) {
+    const v1::Units& u = scene.units();
+    const auto at = [](const char* field) { return Path{{"units", -1}, {field, -1}}; };
+    if (u.has_mm_per_unit()) c.Range(at("mm_per_unit"), u.mm_per_unit(), 0, 1e9, true);
+    if (u.has_newtons_per_force_unit()) c.Range(at("newtons_per_force_unit"), u.newtons_per_force_unit(), 0, 1e9, true);
+  }
   return c;
 }
 

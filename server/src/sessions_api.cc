@@ -24,10 +24,8 @@ using json = nlohmann::json;
 
 // The session's figures against its scene's limits (Scene.grading): {"passed", "checks": [{"figure",
 // "limit", "value", "passed"}]}; null when the scene sets none.
-json GradeJson(const SessionRow& r, const json& summary) {
-  if (r.scene_text.find("grading") == std::string::npos || !summary.is_object()) return nullptr;
-  v1::Scene scene;
-  if (!google::protobuf::TextFormat::ParseFromString(r.scene_text, &scene) || !scene.has_grading()) return nullptr;
+json GradeJson(const v1::Scene& scene, const json& summary) {
+  if (!scene.has_grading() || !summary.is_object()) return nullptr;
   const v1::Grading& g = scene.grading();
   json checks = json::array();
   bool passed = true;
@@ -46,13 +44,37 @@ json GradeJson(const SessionRow& r, const json& summary) {
   return json{{"passed", passed}, {"checks", checks}};
 }
 
+// The scene's units (Scene.units), for the pages to convert and label: {} when it names none.
+json UnitsJson(const v1::Scene& scene) {
+  json units = json::object();
+  if (scene.units().has_mm_per_unit()) units["mm_per_unit"] = scene.units().mm_per_unit();
+  if (scene.units().has_newtons_per_force_unit()) {
+    units["newtons_per_force_unit"] = scene.units().newtons_per_force_unit();
+  }
+  return units;
+}
+
 json RowJson(const SessionRow& r, int viewers) {
   json summary = json::object();
   if (!r.summary_json.empty()) summary = json::parse(r.summary_json, nullptr, false);
-  return json{{"id", r.id},           {"state", r.state},           {"model", r.model},
-              {"device", r.device},   {"identity", r.identity},     {"trainee", r.trainee},
-              {"started", r.started}, {"duration_s", r.duration_s}, {"samples", r.samples},
-              {"viewers", viewers},   {"summary", summary},         {"grade", GradeJson(r, summary)}};
+  // Grading and units come from the scene, parsed only when it has either.
+  v1::Scene scene;
+  if (r.scene_text.find("grading") != std::string::npos || r.scene_text.find("units") != std::string::npos) {
+    if (!google::protobuf::TextFormat::ParseFromString(r.scene_text, &scene)) scene.Clear();
+  }
+  return json{{"id", r.id},
+              {"state", r.state},
+              {"model", r.model},
+              {"device", r.device},
+              {"identity", r.identity},
+              {"trainee", r.trainee},
+              {"started", r.started},
+              {"duration_s", r.duration_s},
+              {"samples", r.samples},
+              {"viewers", viewers},
+              {"summary", summary},
+              {"grade", GradeJson(scene, summary)},
+              {"units", UnitsJson(scene)}};
 }
 
 // GET /api/sessions/{id}/recording.mcap: streamed from the file (FileRangeBody), with one byte

@@ -108,6 +108,16 @@ TEST(Scene, BadValuesNameTheFieldAndWhere) {
   EXPECT_EQ(LoadError(std::string(kMinimal) + "stream_rate_hz: 5000\n"),
             "test.scene:7:1: stream_rate_hz: must be in (0, 1000], got 5000");
   EXPECT_EQ(LoadError(std::string(kMinimal) + "gravity { z: nan }\n"), "test.scene:7:1: gravity: must be finite");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "units {\n  mm_per_unit: 0\n}\n"),
+            "test.scene:8:3: units.mm_per_unit: must be in (0, 1e+09], got 0");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "units {\n  newtons_per_force_unit: -1\n}\n"),
+            "test.scene:8:3: units.newtons_per_force_unit: must be in (0, 1e+09], got -1");
+  v1::Scene good;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(std::string(kMinimal) + "units {\n  mm_per_unit: 25.4\n}\n", "test.scene", &good, &error))
+      << error;
+  EXPECT_EQ(good.units().mm_per_unit(), 25.4);
+  EXPECT_FALSE(good.units().has_newtons_per_force_unit());
   // A missing field is located at its parent.
   EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n}\n"),
             "test.scene:2:1: tools[0].stiffness: required (force / length, > 0)");

@@ -228,6 +228,7 @@ TEST(Figures, ASessionIsGradedAgainstItsScenesLimits) {
       g->set_max_peak_force(5);
       g->set_max_contact_time_s(10);
       g->set_max_force_limit_hits(0);
+      h->mutable_scene()->mutable_units()->set_mm_per_unit(25.4);
     }
     EXPECT_TRUE(agent.Send(hello));
     const auto welcome = agent.ReadUntil([](const v1::Envelope& e) { return e.has_welcome(); });
@@ -246,6 +247,9 @@ TEST(Figures, ASessionIsGradedAgainstItsScenesLimits) {
   EXPECT_EQ(passed, (std::map<std::string, bool>{
                         {"contact_time_s", true}, {"force_limit_hits", false}, {"peak_force", false}}));
   EXPECT_TRUE(Row(server.port(), observer, plain)["grade"].is_null());
+  // The units the scene declares, for the pages to convert (none: an empty object).
+  EXPECT_EQ(row["units"], json({{"mm_per_unit", 25.4}}));
+  EXPECT_EQ(Row(server.port(), observer, plain)["units"], json::object());
   // The session's own page says the same.
   const HttpReply detail = Get(server.port(), "/api/sessions/" + graded, observer);
   ASSERT_EQ(detail.status, 200);
