@@ -361,6 +361,21 @@ TEST_F(RecordingRenderTest, TheDeformationScaleExaggeratesTheDentNotItsColours) 
       differ += std::memcmp(legend1.Pixel(x, y), legend10.Pixel(x, y), 3) != 0;
   }
   EXPECT_GT(differ, 20) << "the legend's corner does not name the scale";
+  // A scene that declares its units (Scene.units) gets its legend in mm: the corner differs, the
+  // surface does not.
+  ViewerState& in_mm = const_cast<ViewerState&>(state);  // the player's own; put back below
+  in_mm.mm_per_unit = 25.4;
+  const Image mm = Draw(in_mm, above);
+  in_mm.mm_per_unit = 0;
+  int64_t corner = 0, elsewhere = 0;
+  for (int y = 0; y < above.height; ++y) {
+    for (int x = 0; x < above.width; ++x) {
+      const bool differs = std::memcmp(mm.Pixel(x, y), legend10.Pixel(x, y), 3) != 0;
+      (x >= above.width - 250 && y < 300 ? corner : elsewhere) += differs;
+    }
+  }
+  EXPECT_GT(corner, 20) << "the legend does not say mm";
+  EXPECT_EQ(elsewhere, 0);
 }
 
 // The tumour model coloured by stiffness differs from the plain slab where its inclusion is, and

@@ -428,16 +428,23 @@ struct Renderer::Impl {
     LegendSpec spec;
     const Display& d = TheDisplay();
     spec.lo = lo, spec.hi = hi;
+    // In mm (N/mm) when the scene declares its units, as the web viewer's legend.
+    const bool mm = scene.mm_per_unit > 0, newtons = scene.newtons_per_force_unit > 0;
     if (o.colour_by == ColourBy::kDisplacement) {
       spec.title = "displacement";
-      spec.unit = d.length_unit;
+      spec.unit = mm ? "mm" : d.length_unit;
+      if (mm) spec.lo *= scene.mm_per_unit, spec.hi *= scene.mm_per_unit;
       spec.saturates = true;
       if (o.deformation_scale != 1) spec.notes.push_back("deformation \x02" + TickText(o.deformation_scale));
       if (scene.rest_time_s > d.rest_note_after_s)
         spec.notes.push_back("from t = " + TickText(scene.rest_time_s) + " s");
     } else {
       spec.title = "stiffness k";
-      spec.unit = d.stiffness_unit;
+      spec.unit = mm && newtons ? "N/mm" : d.stiffness_unit;
+      if (mm && newtons) {
+        const double k = scene.newtons_per_force_unit / scene.mm_per_unit;
+        spec.lo *= k, spec.hi *= k;
+      }
     }
     DrawLegend(spec, out);
   }

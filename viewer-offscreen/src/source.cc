@@ -18,6 +18,8 @@ SceneView ViewerState::View() const {
   v.triangles = mirror.triangles();
   v.has_tool = has_sample;
   v.tool_radius = tool_radius;
+  v.mm_per_unit = mm_per_unit;
+  v.newtons_per_force_unit = newtons_per_force_unit;
   if (has_sample) {
     v.tool_pos = {sample.tool_pos().x(), sample.tool_pos().y(), sample.tool_pos().z()};
     v.force = {sample.force().x(), sample.force().y(), sample.force().z()};
@@ -31,6 +33,8 @@ SceneView ViewerState::View() const {
 
 void ViewerState::SetScene(const v1::Scene& scene) {
   tool_radius = scene.tools_size() > 0 && scene.tools(0).has_radius() ? scene.tools(0).radius() : 0;
+  mm_per_unit = scene.units().mm_per_unit();
+  newtons_per_force_unit = scene.units().newtons_per_force_unit();
 }
 
 bool ViewerState::Apply(const v1::Envelope& e, std::string* error) {

@@ -51,8 +51,11 @@ struct SceneView {
   bool has_tool = false;
   std::array<double, 3> tool_pos{0, 0, 0};  // model frame, model units
   double tool_radius = 0;                   // model units; 0 = unknown (drawn as 5 % of the view)
-  std::array<double, 3> force{0, 0, 0};     // force on the device, model frame, force units
-  bool contact = false, grasp = false;      // the device's last sample's flags
+  // The scene's units (Scene.units), > 0 when declared: the legend then reads in mm (and N/mm).
+  double mm_per_unit = 0;
+  double newtons_per_force_unit = 0;
+  std::array<double, 3> force{0, 0, 0};  // force on the device, model frame, force units
+  bool contact = false, grasp = false;   // the device's last sample's flags
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)

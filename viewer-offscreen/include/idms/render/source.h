@@ -24,6 +24,8 @@ struct ViewerState {
   bool has_sample = false;
   v1::DeviceSample sample;  // the last one received
   double tool_radius = 0;   // from the scene (0 = unknown)
+  double mm_per_unit = 0;   // from the scene's units (0 = not declared)
+  double newtons_per_force_unit = 0;
   // The surface at rest (display.json's rule, as the browser's): the first keyframe applied, or
   // the first of another number of vertices; a model's own rest; a recording's first keyframe.
   std::vector<float> rest;        // (num_vertices x 3), model units
