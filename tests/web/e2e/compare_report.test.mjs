@@ -25,9 +25,13 @@ async function docShot(page, name) {
   copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
 }
 
-/** The palpation scene with a grading block. @param {string} dir @param {string} name @param {string} grading */
-function gradedScene(dir, name, grading) {
-  const text = readFileSync(join(sourceDir(), 'models', 'palpate.scene'), 'utf8').replace(/^recording: true$/m, `recording: true\ngrading { ${grading} }`);
+/**
+ * The palpation scene with a grading block (and more lines).
+ * @param {string} dir @param {string} name @param {string} grading @param {string} [more]
+ */
+function gradedScene(dir, name, grading, more = '') {
+  const text = readFileSync(join(sourceDir(), 'models', 'palpate.scene'), 'utf8')
+    .replace(/^recording: true$/m, `recording: true\ngrading { ${grading} }\n${more}`);
   assert.match(text, /grading/);
   const file = join(dir, `${name}.scene`);
   writeFileSync(file, text);
@@ -40,7 +44,10 @@ before(async () => {
   browser = await launchBrowser();
   // The palpation's peak is about 1.7 force units: a 1.0 limit fails it, 5.0 passes it.
   const tight = gradedScene(dir, 'tight', 'max_peak_force: 1.0 max_force_limit_hits: 0');
-  const loose = gradedScene(dir, 'loose', 'max_peak_force: 5.0 max_contact_time_s: 60');
+  // The loose scene also says what its units are (the thesis's model is in inches; a PHANToM's
+  // forces are in N): its pages show mm and N.
+  const loose = gradedScene(dir, 'loose', 'max_peak_force: 5.0 max_contact_time_s: 60',
+    'units { mm_per_unit: 25.4 newtons_per_force_unit: 1 }');
   const runs = [
     startAgent(server, 3, 'scripted:palpate', { args: ['--scene', tight, '--trainee', 'carol'] }),
     startAgent(server, 2.5, 'scripted:palpate', { args: ['--scene', loose, '--trainee', 'dan'] }),
@@ -70,12 +77,30 @@ test('grading: each session\'s mark in the list and its checks on its page', asy
   assert.equal(await failed.innerText(), 'failed');
   assert.match(await failed.getAttribute('title') ?? '', /peak force \d+\.\d+ > 1\.00/);
   assert.equal(await passed.innerText(), 'passed');
+  // The session that declares its units shows them; the other its model's.
+  const peak = (/** @type {string} */ id) => page.locator(`#sessions tr[data-id="${id}"] td[data-label^="Peak force"]`).innerText();
+  const path = (/** @type {string} */ id) => page.locator(`#sessions tr[data-id="${id}"] td[data-label^="Path"]`).innerText();
+  assert.match(await peak(ids.passed), /^1\.\d\d N$/);
+  assert.match(await peak(ids.failed), /^1\.\d\d$/);
+  assert.match(await path(ids.passed), /^2\d\.\d\d mm$/);  // about 1.06 inches
+  assert.match(await path(ids.failed), /^1\.\d\d$/);
   await docShot(page, 'sessions-graded.png');
   await page.goto(`${server.base}/replay/${ids.failed}`);
   await page.waitForSelector('#grade .grade-checks li.failed');
   const checks = await page.locator('#grade .grade-checks').innerText();
   assert.match(checks, /✗ beyond peak force \d+\.\d+ > 1\.00 model force units/);
   assert.match(checks, /✓ within force-limit hits 0 ≤ 0/);
+  // In the units its scene declares: the plots, the depth plot's axes, the legend and the grade.
+  await page.goto(`${server.base}/replay/${ids.passed}`);
+  await page.waitForSelector('#grade .grade-checks li.passed');
+  assert.match(await page.locator('#grade .grade-checks').innerText(), /✓ within peak force 1\.\d\d ≤ 5\.00 N/);
+  await page.waitForFunction(() => (document.querySelector('#force-plot .u-title')?.textContent ?? '').includes('(N)'));
+  assert.match(await page.locator('#position-plot .u-title').innerText(), /Tool position \(mm\)/);
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms?.keyframes >= 1);
+  const axes = await page.evaluate(() => /** @type {any} */ (window).__idmsDepthAxes());
+  assert.equal(axes.xUnit, 'mm');
+  assert.equal(axes.yUnit, 'N');
+  assert.match(await page.locator('#view3d').innerText(), /displacement\s+mm/);
   assert.deepEqual(errors, []);
 });
 
@@ -100,6 +125,8 @@ test('compare: two sessions picked in the list, side by side, one timeline plays
   const figures = await page.locator('#compare-figures').innerText();
   assert.match(figures, /Grade\s+failed\s+passed/);
   assert.match(figures, /Trainee\s+carol\s+dan/);
+  assert.match(figures, /Peak force\s+1\.\d\d model force units\s+1\.\d\d N/);
+  assert.match(figures, /Path length\s+1\.\d\d model units\s+2\d\.\d\d mm/);
   assert.equal((await seen()).lead, 0);
   // Played from 0.5 s: both replays advance together.
   await page.evaluate(() => {

@@ -10,6 +10,7 @@ import { api } from '../net/api.js';
 import { SurfaceView } from '../view/surface.js';
 import { FrameLoop } from '../view/frame_loop.js';
 import { display } from '../view/display.js';
+import { Units, kModelUnits } from '../view/units.js';
 import { ProfilePlot } from '../plots/profile.js';
 import { h, page, fixed, formatDate, formatTime } from './dom.js';
 import { Timeline } from './timeline.js';
@@ -20,19 +21,19 @@ import { traineeHref } from './session_table.js';
 const Action = idms.v1.PlaybackControl.Action;
 const kColours = ['#c0392b', '#2471a3'];
 
-/** The rows of the figures table: a label and how a session's record gives it. */
-const kRows = /** @type {[string, (s: any) => (Node | string | null)][]} */ ([
+/** The rows of the figures table: a label and how a session's record gives it, in its units. */
+const kRows = /** @type {[string, (s: any, u: Units) => (Node | string | null)][]} */ ([
   ['Trainee', (s) => (s.trainee ? h('a', { href: traineeHref(s.trainee), text: s.trainee }) : h('span', { class: 'muted', text: 'not named' }))],
   ['Model', (s) => s.model],
   ['Started', (s) => formatDate(s.started)],
   ['Duration', (s) => formatTime(s.duration_s)],
-  [`Peak force (${display.unit.force})`, (s) => fixed(s.summary?.peak_force ?? NaN)],
-  [`Mean contact force (${display.unit.force})`, (s) => fixed(s.summary?.mean_contact_force ?? NaN)],
-  ['Time in contact (s)', (s) => fixed(s.summary?.contact_time_s ?? NaN, 1)],
-  [`Path length (${display.unit.length})`, (s) => fixed(s.summary?.path_length ?? NaN)],
+  ['Peak force', (s, u) => `${fixed(u.frc(s.summary?.peak_force ?? NaN))} ${u.force}`],
+  ['Mean contact force', (s, u) => `${fixed(u.frc(s.summary?.mean_contact_force ?? NaN))} ${u.force}`],
+  ['Time in contact', (s) => `${fixed(s.summary?.contact_time_s ?? NaN, 1)} s`],
+  ['Path length', (s, u) => `${fixed(u.len(s.summary?.path_length ?? NaN))} ${u.length}`],
   ['Force-limit hits', (s) => String(s.summary?.force_limit_hits ?? '–')],
   ['Warnings', (s) => String(s.summary?.warnings ?? '–')],
-  ['Grade', (s) => gradeBadge(s.grade) ?? h('span', { class: 'muted', text: 'not graded' })],
+  ['Grade', (s, u) => gradeBadge(s.grade, u) ?? h('span', { class: 'muted', text: 'not graded' })],
 ]);
 
 /** One of the two sessions: its replay socket, surface and tool. */
@@ -124,6 +125,7 @@ export function comparePage(a, b, _role) {
   const table = h('table', { class: 'list compare-figures', id: 'compare-figures' });
   const timelineHost = h('section', { class: 'timeline-section', 'aria-label': 'Timeline of both replays' });
   const profileHost = h('div', { class: 'plot', id: 'profile-plot' });
+  const profileTitle = h('h2', { id: 'profile-title', text: 'Device force over each whole session' });
   /** @type {Side[]} */
   const sides = [];
   // Every control goes to both; the lead's states drive the timeline.
@@ -149,7 +151,7 @@ export function comparePage(a, b, _role) {
     timelineHost,
     h('div', { class: 'compare-grid' }, sides.map((s) => s.el)),
     h('section', { class: 'card wide', 'aria-labelledby': 'profile-title' }, [
-      h('h2', { id: 'profile-title', text: `Device force over each whole session (${display.unit.force}, the peak of each slice)` }), profileHost]),
+      profileTitle, profileHost]),
     h('section', { 'aria-labelledby': 'figures-title' }, [h('h2', { id: 'figures-title', text: 'Figures' }),
       h('div', { class: 'scroll' }, [table])]),
   ]);
@@ -177,12 +179,18 @@ export function comparePage(a, b, _role) {
     lead, time: timeline.time, profilePoints: profile.points, markS: profile.markS });
 
   // The records: the figures table, the timeline's length and lead, the notes as marks.
-  Promise.all(sides.map((s) => api(`/api/sessions/${encodeURIComponent(s.id)}`))).then((records) => {
+  // The force in one unit: N when both sessions declare it, else model force units (a plot cannot
+  // mix them).
+  /** @type {Units[]} */
+  let units = [kModelUnits, kModelUnits];
+  const records = Promise.all(sides.map((s) => api(`/api/sessions/${encodeURIComponent(s.id)}`)));
+  records.then((records) => {
+    units = records.map((r) => new Units(r.units));
     table.replaceChildren(
       h('thead', {}, [h('tr', {}, [h('th', { scope: 'col', text: 'Figure' }),
         ...sides.map((s, i) => h('th', { scope: 'col' }, [h('span', { class: 'swatch', style: `background: ${kColours[i]}` }), ` ${s.name}`]))])]),
       h('tbody', {}, kRows.map(([label, cell]) => h('tr', {}, [h('th', { scope: 'row', text: label }),
-        ...records.map((r) => h('td', {}, [cell(r)]))]))));
+        ...records.map((r, i) => h('td', {}, [cell(r, units[i])]))]))));
     durations = records.map((r) => Number(r.duration_s) || 0);
     lead = durations[1] > durations[0] ? 1 : 0;
     timeline.setDuration(Math.max(...durations));
@@ -193,8 +201,13 @@ export function comparePage(a, b, _role) {
     status.textContent = `A ${grades[0]}, B ${grades[1]}; one timeline plays both from the same session time`
       + (durations[0] !== durations[1] ? ` (the shorter, ${sides[1 - lead].name}, stops at its end).` : '.');
   }).catch((e) => { status.textContent = `Cannot load the sessions: ${e instanceof Error ? e.message : String(e)}`; });
-  Promise.all(sides.map((s) => api(`/api/sessions/${encodeURIComponent(s.id)}/force?points=2000`)))
-    .then((profiles) => profile.setData(profiles))
+  Promise.all([records, ...sides.map((s) => api(`/api/sessions/${encodeURIComponent(s.id)}/force?points=2000`))])
+    .then(([, ...profiles]) => {
+      const newtons = units.every((u) => u.force === 'N');
+      if (newtons) profile.scaleForce(...units.map((u) => u.forceScale));
+      profileTitle.textContent = `Device force over each whole session (${newtons ? 'N' : display.unit.force}, the peak of each slice)`;
+      profile.setData(profiles);
+    })
     .catch(() => {});
 
   return () => {

@@ -8,6 +8,7 @@ import { RollingPlot } from '../plots/rolling.js';
 import { DepthPlot } from '../plots/depth.js';
 import { length3 } from '../length3.js';
 import { display } from '../view/display.js';
+import { Units, kModelUnits } from '../view/units.js';
 import { parseObj } from '../codec/obj.js';
 
 /**
@@ -58,6 +59,26 @@ export class LiveView {
      */
     this.countLimitHits = true;
     this.shownLimit = '';
+    /** The session's units (its scene's, from the Welcome): the plots convert into them. */
+    this.units = kModelUnits;
+    this.ls = 1;
+    this.fs = 1;
+  }
+
+  /**
+   * The session's units, from its scene (sent before any sample): the plots and the legend say
+   * and show them from here on. @param {Units} units
+   */
+  setUnits(units) {
+    if (units.equals(this.units)) return;
+    this.units = units;
+    this.ls = units.lengthScale;
+    this.fs = units.forceScale;
+    this.forcePlot.setTitle(kForcePlot.title, units.force);
+    this.posPlot.setTitle(kPositionPlot.title, units.length);
+    this.depthPlot.units = { force: units.force, length: units.length };
+    this.depthPlot.invalidate();
+    this.view.setUnits(units);
   }
 
   /**
@@ -136,11 +157,12 @@ export class LiveView {
       const px = p?.x || 0, py = p?.y || 0, pz = p?.z || 0;
       const t = s.timeS || 0;
       const f2 = length3(fx, fy, fz);
-      this.forcePlot.push(t, fx, fy, fz, f2);
+      const fs = this.fs, ls = this.ls;  // into the session's units (1: model units)
+      this.forcePlot.push(t, fx * fs, fy * fs, fz * fs, f2 * fs);
       if (f2 > st.peakForce) st.peakForce = f2;
       if (s.contact) st.contactSamples++;
-      this.posPlot.push(t, px, py, pz);
-      this.depthPlot.push(px, py, pz, fx, fy, fz, !!s.contact);
+      this.posPlot.push(t, px * ls, py * ls, pz * ls);
+      this.depthPlot.push(px * ls, py * ls, pz * ls, fx * fs, fy * fs, fz * fs, !!s.contact);
       st.warnings += s.warnings || 0;
       // A hit: the force comes to the limit (the server's summary counts the same way).
       const limited = !!s.forceLimited;

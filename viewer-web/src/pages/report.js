@@ -5,6 +5,7 @@
 // print (every browser can save a page as PDF; style.css's print rules lay it out on one page).
 import { api } from '../net/api.js';
 import { display } from '../view/display.js';
+import { Units } from '../view/units.js';
 import { ProfilePlot } from '../plots/profile.js';
 import { h, page, fixed, formatDate, formatTime } from './dom.js';
 import { gradeList } from './grade.js';
@@ -21,6 +22,7 @@ export function reportPage(id, _role) {
   const picture = h('figure', { class: 'report-picture', id: 'report-picture' });
   const profileHost = h('div', { class: 'plot', id: 'report-profile' });
   const notes = h('ol', { class: 'report-notes', id: 'report-notes' });
+  const profileTitle = h('h2', { id: 'report-profile-title', text: `Device force over the session (${display.unit.force})` });
   const print = h('button', { type: 'button', id: 'report-print', text: 'Print or save as PDF', onclick: () => window.print() });
   const generated = h('p', { class: 'muted report-generated', text: `Report generated ${new Date().toLocaleString()}` });
   page(`Report ${id}`, [
@@ -40,7 +42,7 @@ export function reportPage(id, _role) {
         h('section', { 'aria-labelledby': 'report-picture-title' }, [h('h2', { id: 'report-picture-title', text: 'The tissue at the peak force' }), picture]),
         h('section', { 'aria-labelledby': 'report-notes-title' }, [h('h2', { id: 'report-notes-title', text: 'Notes' }), notes]),
       ]),
-      h('section', { 'aria-labelledby': 'report-profile-title' }, [h('h2', { id: 'report-profile-title', text: `Device force over the session (${display.unit.force}, the peak of each slice; the marker: the picture's time)` }), profileHost]),
+      h('section', { 'aria-labelledby': 'report-profile-title' }, [profileTitle, profileHost]),
       generated,
     ]),
   ]);
@@ -55,16 +57,19 @@ export function reportPage(id, _role) {
   Promise.all([api(`/api/sessions/${encodeURIComponent(id)}`), api(`/api/sessions/${encodeURIComponent(id)}/force?points=600`)])
     .then(([s, force]) => {
       const sum = s.summary || {};
+      const u = new Units(s.units);
+      profileTitle.textContent = `Device force over the session (${u.force}, the peak of each slice; the marker: the picture's time)`;
+      profile.scaleForce(u.forceScale);
       fill(who, [['Trainee', s.trainee || 'not named'], ['Model', s.model], ['Device', s.device], ['Started', formatDate(s.started)],
         ['Duration', formatTime(s.duration_s)], ['State', s.state]]);
-      fill(figures, [[`Peak force`, `${fixed(sum.peak_force ?? NaN)} ${display.unit.force}`],
-        ['Mean contact force', `${fixed(sum.mean_contact_force ?? NaN)} ${display.unit.force}`],
+      fill(figures, [[`Peak force`, `${fixed(u.frc(sum.peak_force ?? NaN))} ${u.force}`],
+        ['Mean contact force', `${fixed(u.frc(sum.mean_contact_force ?? NaN))} ${u.force}`],
         ['Time in contact', `${fixed(sum.contact_time_s ?? NaN, 1)} s`],
-        ['Path length', `${fixed(sum.path_length ?? NaN)} ${display.unit.length}`],
+        ['Path length', `${fixed(u.len(sum.path_length ?? NaN))} ${u.length}`],
         ['Force-limit hits', `${sum.force_limit_hits ?? '–'} (${fixed(sum.force_limited_s ?? NaN, 2)} s at the limit)`],
         ['Numerical warnings', String(sum.warnings ?? '–')],
         ['Loop', `tick p99 ${sum.tick_p99_us ?? '–'} µs, ${sum.overruns ?? '–'} overruns`]]);
-      grade.replaceChildren(gradeList(s.grade));
+      grade.replaceChildren(gradeList(s.grade, u));
       const all = /** @type {any[]} */ (s.annotations || []);
       notes.replaceChildren(...all.slice(0, kReportNotes).map((n) => h('li', {}, [h('span', { class: 'time', text: formatTime(n.time_s) }), ' ', n.text])));
       if (all.length === 0) notes.replaceChildren(h('li', { class: 'muted', text: 'No notes.' }));

@@ -10,6 +10,7 @@ import { h, page } from './dom.js';
 import { display } from '../view/display.js';
 import { Timeline } from './timeline.js';
 import { LiveView, loadModelRest } from './live_view.js';
+import { Units } from '../view/units.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName,
   messageWords } from './session_panels.js';
 
@@ -104,6 +105,7 @@ function dispatch(p, env) {
     // the surface there), so the plots restart here and are full at once, paused or not.
     if (p.timeline?.onState(env.playbackState)) p.view.clearPlots();
   } else if (env.welcome) {
+    p.view.setUnits(new Units(env.welcome.scene?.units));
     const tools = env.welcome.scene?.tools || [];
     p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
     p.commands?.setTools(tools);

@@ -8,6 +8,7 @@ import { h, formatTime } from './dom.js';
 import { LoopWatch } from './loop_verdict.js';
 import { traineeHref } from './session_table.js';
 import { gradeList } from './grade.js';
+import { Units } from '../view/units.js';
 
 /** @typedef {(env: idms.v1.IEnvelope) => boolean} Send  sends a frame; false when not connected */
 
@@ -98,13 +99,13 @@ export class SessionHeader {
 
   /**
    * @param {{model: string, device: string, identity: string, state: string, duration_s: number, trainee?: string,
-   *   grade?: import('./grade.js').Grade}} s
+   *   grade?: import('./grade.js').Grade, units?: any}} s
    */
   setRecord(s) {
     this.text.textContent = `${s.model} · ${s.device} · ${s.identity} · ${s.state} · `;
     this.recordS = s.duration_s;
     this.showTrainee(String(s.trainee || ''));
-    this.grade.replaceChildren(gradeList(s.grade));
+    this.grade.replaceChildren(gradeList(s.grade, new Units(s.units)));
     this.invalidate();
   }
 

@@ -6,6 +6,7 @@ import { api } from '../net/api.js';
 import { display } from '../view/display.js';
 import { h, fixed, formatDate } from './dom.js';
 import { gradeBadge, gradeWords } from './grade.js';
+import { Units } from '../view/units.js';
 
 const kForceUnit = display.unit.force;
 
@@ -24,7 +25,7 @@ export const kColumns = [
   { head: 'Peak force', unit: kForceUnit, label: `Peak force (${kForceUnit})`, cls: 'num' },
   { head: 'Contact', unit: 's', label: 'Contact', cls: 'num' },
   { head: 'Force-limit hits', unit: 'time at the limit', label: 'Force-limit hits', cls: 'num' },
-  { head: 'Path', unit: 'model units', label: 'Path (model units)', cls: 'num' },
+  { head: 'Path', unit: display.unit.length, label: `Path (${display.unit.length})`, cls: 'num' },
   { head: 'Tick p99', unit: '', label: 'Tick p99', cls: 'num' },
   { head: 'Warnings', unit: '', label: 'Warnings', cls: 'num' },
   { head: '', unit: '', label: '', cls: 'actions' },
@@ -131,9 +132,10 @@ class SessionRow {
           onchange: (/** @type {Event} */ ev) => this.picker.pick(id, /** @type {HTMLInputElement} */ (ev.target).checked) }), ' compare'])])]);
     const under = `${fixed(s.duration_s, 1)} s` + (live ? ` · ${s.viewers} watching` : '');
     // The grade against the scene's limits beside the state (a live session's so far).
-    const grade = gradeWords(s.grade);
+    const units = new Units(s.units);
+    const grade = gradeWords(s.grade, units);
     this.set(2, `${s.state}|${under}|${grade.detail}`, () => [h('span', { class: `badge ${s.state}`, text: s.state }),
-      gradeBadge(s.grade), h('div', { class: 'under', text: under })]);
+      gradeBadge(s.grade, units), h('div', { class: 'under', text: under })]);
     const trainee = String(s.trainee || '');
     this.set(3, trainee, () => [trainee ? h('a', { href: traineeHref(trainee), text: trainee }) : h('span', { class: 'muted', text: 'not named' })]);
     this.text(4, s.model);
@@ -141,15 +143,19 @@ class SessionRow {
     const identity = s.identity && s.identity !== s.device ? s.identity : '';
     this.set(5, `${s.device}|${identity}`, () => [s.device, identity ? h('div', { class: 'under identity', text: identity }) : null]);
     const sum = s.summary || {};
-    this.text(kPeak, fixed(sum.peak_force ?? NaN));
-    this.cells[kPeak].title = `${fixed(sum.peak_force ?? NaN)} ${kForceUnit}`;
+    // A session whose scene declares its units shows N and mm, said in the cell; others the
+    // model's units of the column's head.
+    const peak = Number(sum.peak_force ?? NaN);
+    this.text(kPeak, units.forceScale !== 1 || units.force !== kForceUnit ? `${fixed(units.frc(peak))} ${units.force}` : fixed(peak));
+    this.cells[kPeak].title = `${fixed(units.frc(peak))} ${units.force}`;
     this.text(7, `${fixed(sum.contact_time_s ?? NaN, 1)} s`);
     // Hits: how often the device force reached its limit; under it, for how long it stayed there.
     const hits = sum.force_limit_hits ?? NaN;
     const limited = `${fixed(sum.force_limited_s ?? NaN, 2)} s`;
     this.set(kLimit, `${hits}|${limited}`, () => [h('span', { class: hits > 0 ? 'limit-hits hit' : 'limit-hits', text: Number.isFinite(hits) ? String(hits) : '–' }),
       h('div', { class: 'under', text: limited })]);
-    this.text(9, fixed(sum.path_length ?? NaN));
+    const path = Number(sum.path_length ?? NaN);
+    this.text(9, units.length !== display.unit.length ? `${fixed(units.len(path))} ${units.length}` : fixed(path));
     this.text(10, sum.tick_p99_us !== undefined ? `${sum.tick_p99_us} µs` : '–');
     this.text(11, String(sum.warnings ?? '–'));
     const deletable = this.role === 'admin' && !live;

@@ -37,6 +37,8 @@ export class ProfilePlot {
     this.host = host;
     /** The session time marked, s; NaN = none. */
     this.markS = NaN;
+    /** Factors from model force units into what is shown, per series. @type {number[]} */
+    this.scales = [];
     /** Points per series as last given (the tests read it). @type {number[]} */
     this.points = spec.series.map(() => 0);
     const width = Math.max(280, host.clientWidth || 600);
@@ -57,10 +59,22 @@ export class ProfilePlot {
     this.resizeObserver.observe(host);
   }
 
-  /** @param {{time_s: number[], force: number[]}[]} profiles one per series */
+  /**
+   * The forces' factor into what the page shows (one per series: the sessions' units may differ),
+   * for data given after. @param {...number} scales
+   */
+  scaleForce(...scales) {
+    this.scales = scales;
+  }
+
+  /** @param {{time_s: number[], force: number[]}[]} profiles one per series, in model force units */
   setData(profiles) {
     this.points = profiles.map((p) => p.time_s.length);
-    this.plot.setData(/** @type {any} */ (joinProfiles(profiles)));
+    const scaled = profiles.map((p, i) => {
+      const k = this.scales[i] ?? 1;
+      return k === 1 ? p : { time_s: p.time_s, force: p.force.map((f) => f * k) };
+    });
+    this.plot.setData(/** @type {any} */ (joinProfiles(scaled)));
   }
 
   /** Marks session time t (a replay's), redrawing only when the marker moves a pixel. @param {number} t */

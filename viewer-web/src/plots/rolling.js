@@ -112,6 +112,15 @@ export class RollingPlot {
     this.loop.request();
   }
 
+  /**
+   * The title's unit, once the session says what its units are (the samples pushed after are in
+   * it: the caller converts). @param {string} title @param {string} unit
+   */
+  setTitle(title, unit) {
+    const el = this.plot.root.querySelector('.u-title');
+    if (el) el.textContent = `${title} (${unit})`;
+  }
+
   /** Forgets everything (a seek in a replay, a new session). */
   clear() {
     this.numPending = 0;

@@ -14,6 +14,7 @@ import { SurfaceGeometry } from './surface_geometry.js';
 import { surfaceMaterial } from './surface_material.js';
 import { Legend } from './legend.js';
 import { display, tickText } from './display.js';
+import { Units, kModelUnits } from './units.js';
 import { ToolMesh } from './tool.js';
 import { length3 } from '../length3.js';
 
@@ -202,6 +203,8 @@ export class SurfaceView {
     this.toolRadius = 1.5;
     this.tool.setRadius(this.toolRadius);
     this.forceScale = 0.1;  // model units of arrow per force unit, set from the model's size
+    /** What the legend says its values are in. */
+    this.units = kModelUnits;
     this.fitted = false;
     // The camera is fitted at the first surface, and again whenever the tool goes where it has
     // not been (its framed travel only grows: the view settles on the tool's travel rather than
@@ -285,6 +288,13 @@ export class SurfaceView {
     this.invalidate();
   }
 
+  /** What the legend's values are in (the session's scene may declare mm). @param {Units} units */
+  setUnits(units) {
+    if (units.equals(this.units)) return;
+    this.units = units;
+    this.showLegend();
+  }
+
   /** The legend for what the colours say now. */
   showLegend() {
     const g = this.surface;
@@ -294,9 +304,11 @@ export class SurfaceView {
     if (g.colourBy === 'displacement') {
       if (g.scale !== 1) notes.push(`deformation ×${tickText(g.scale)}`);
       if (g.restTimeS > display.displacement.rest_note_after_s) notes.push(`from t = ${tickText(g.restTimeS)} s`);
-      this.legend.show({ title: 'displacement', unit: display.unit.length, lo: g.lo, hi: g.hi, saturates: true, notes });
+      const u = this.units;
+      this.legend.show({ title: 'displacement', unit: u.length, lo: u.len(g.lo), hi: u.len(g.hi), saturates: true, notes });
     } else {
-      this.legend.show({ title: 'stiffness k', unit: display.unit.stiffness, lo: g.lo, hi: g.hi, saturates: false, notes });
+      const k = this.units.stiffnessScale;
+      this.legend.show({ title: 'stiffness k', unit: this.units.stiffness, lo: g.lo * k, hi: g.hi * k, saturates: false, notes });
     }
   }
 
