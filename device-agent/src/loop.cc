@@ -239,6 +239,8 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   // Clamped at the limit by the step (the scene's max_force) or by the guard (the device's).
   s.force_limited = state.warnings.device_force_clamped != clamped_before || asked > registration_.max_force;
   s.grasp = out.grasp_atom >= 0;
+  s.reset = reset_this_tick_;
+  reset_this_tick_ = false;
   s.overrun = MonotonicNs() > deadline_ns;
   compute_hist_.Add(s.compute_us);
   if (prev_wake_ns_ >= 0) period_hist_.Add(s.period_us);
@@ -319,6 +321,7 @@ void Loop::Reset() {
   reset_spent_.push(sim_.release());
   sim_.reset(rest);
   tweezers_override_ = -1;
+  reset_this_tick_ = true;
   counters_.resets.fetch_add(1, std::memory_order_relaxed);
 }
 

@@ -212,8 +212,30 @@ struct Uplink::Impl final : ConnectionHandler {
         has_limited_event = true;
       }
     }
+    // A reset (an admin's command, applied by the loop) and the tweezers taking and letting go of
+    // an atom are events at their tick, for the event list and the replay's timeline.
+    if (s.reset)
+      Event(s, v1::SessionEvent::KIND_RESET, "the model was reset to rest (the device force eases to the new contact)");
+    if (s.grasp != grasping) {
+      Event(s, s.grasp ? v1::SessionEvent::KIND_GRASP : v1::SessionEvent::KIND_RELEASE,
+            s.grasp ? "the tweezers took hold of an atom" : "the tweezers let go");
+      grasping = s.grasp;
+    }
     // Bounded: the oldest goes; one the server never got is a drop, counted and reported.
     backlog.Accept(s);
+  }
+
+  // An event from the loop's sample at its tick and time (the control queue is bounded: beyond 64
+  // waiting, it is dropped).
+  void Event(const TickSample& s, v1::SessionEvent::Kind kind, const char* message) {
+    if (control.size() >= 64) return;
+    v1::Envelope envelope;
+    v1::SessionEvent* event = envelope.mutable_session_event();
+    event->set_kind(kind);
+    event->set_tick(s.tick);
+    event->set_time_s(s.time_s);
+    event->set_message(message);
+    control.push_back(std::move(envelope));
   }
 
   // ------------------------------------------------------------------------------------------
@@ -615,6 +637,7 @@ struct Uplink::Impl final : ConnectionHandler {
   uint64_t limited_unreported = 0;  // clamped ticks since the last KIND_FORCE_LIMIT event
   double limited_event_time_s = 0;
   bool has_limited_event = false;
+  bool grasping = false;  // the tweezers held an atom in the last sample
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;

@@ -154,6 +154,9 @@ TEST(Loop, ResetReturnsToRestAndKeepsTicksConsecutive) {
   ASSERT_TRUE(f.loop->PushCommand(LoopCommand{LoopCommand::kReset, 0}));
   // The tick that applies the reset steps from rest, keeping tick and time.
   f.Run(1, &samples);
+  // Its sample says so (the agent's KIND_RESET event), and only its.
+  EXPECT_TRUE(samples.back().reset);
+  EXPECT_EQ(std::count_if(samples.begin(), samples.end(), [](const TickSample& s) { return s.reset; }), 1);
   EXPECT_EQ(f.loop->state().tick, 2801);
   EXPECT_NEAR(f.loop->state().time_s, 2.801, 1e-9);
   // ... from rest: the tissue is exactly where one step from the rest state puts it with the tool

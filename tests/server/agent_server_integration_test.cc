@@ -119,6 +119,18 @@ TEST(AgentAndServer, CommandsFromAnAdminReachTheLoopAndSigtermEndsWithEveryTickR
   const std::vector<v1::SessionEvent> events = RecordedSessionEvents(dir + "/rec.mcap");
   ASSERT_FALSE(events.empty());
   EXPECT_EQ(events.back().kind(), v1::SessionEvent::KIND_ENDED);
+  // The reset is an event at the tick the loop applied it (after the command was relayed).
+  int resets = 0;
+  double relayed_s = -1;
+  for (const v1::SessionEvent& e : events) {
+    if (e.kind() == v1::SessionEvent::KIND_COMMAND && relayed_s < 0) relayed_s = e.time_s();
+    if (e.kind() != v1::SessionEvent::KIND_RESET) continue;
+    ++resets;
+    EXPECT_GT(e.tick(), 0u);
+    EXPECT_NEAR(e.time_s(), (e.tick() + 1) * 0.001, 1e-9);
+    EXPECT_GE(e.time_s(), relayed_s - 0.5) << "the reset happens once the command came";
+  }
+  EXPECT_EQ(resets, 1);
 }
 
 // Issue 28: the hand held at the force limit is an event with its time, and the session's figures

@@ -37,6 +37,7 @@ struct TickSample {
   bool contact = false, grasp = false;
   bool overrun = false;        // the work ended after the next deadline
   bool force_limited = false;  // the device force was clamped at its limit this tick
+  bool reset = false;          // the model was put back to rest at the start of this tick (a command)
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.
@@ -190,6 +191,7 @@ class Loop {
   uint64_t published_topology_ = UINT64_MAX;
   bool has_pose_ = false;
   int8_t tweezers_override_ = -1;  // -1 = the device decides, 0 = held open, 1 = held closed
+  bool reset_this_tick_ = false;   // Reset() ran in this tick's commands: the sample says so
   bool override_button_ = false;   // the device's button when the override was commanded
   bool last_button_ = false;       // the device's button last tick
   LatencyHistogram period_hist_;
