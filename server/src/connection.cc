@@ -40,11 +40,14 @@ constexpr auto kCloseGrace = std::chrono::seconds(5);
 template <class Stream>
 constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
 
-// Errors that mean "the peer went away or we closed it": not worth a warning.
+// Errors that mean "the peer went away or we closed it": not worth a warning. A browser tab
+// closed while its socket reads ends with ENOTCONN (Beast's teardown after the peer's close frame
+// or FIN raced the read), which is as normal as an EOF.
 bool Quiet(const beast::error_code& ec) {
   return ec == asio::error::operation_aborted || ec == beast::error::timeout || ec == http::error::end_of_stream ||
          ec == asio::error::eof || ec == asio::error::connection_reset || ec == asio::error::broken_pipe ||
-         ec == websocket::error::closed || ec == asio::ssl::error::stream_truncated;
+         ec == asio::error::not_connected || ec == asio::error::connection_aborted || ec == websocket::error::closed ||
+         ec == asio::ssl::error::stream_truncated;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -148,6 +148,9 @@ test('live: list, surface that moves, tool and force, plots, late join, command,
   const idle = (await state(page)).renders;
   await page.waitForTimeout(1000);
   assert.equal((await state(page)).renders, idle, 'no renders without changes');
+  // A tab closed is a normal end of its WebSocket, not a warning in the server's log (it was:
+  // "read error=Transport endpoint is not connected").
+  assert.doesNotMatch(server.log, /warn websocket/, server.log);
   assert.deepEqual(errors, []);
 });
 
