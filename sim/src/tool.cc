@@ -81,6 +81,14 @@ bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3
 namespace internal {
 namespace {
 
+// Friction's parameters as the step takes them: finite, 0 <= mu_d <= mu_s, and a stiffness and
+// damping that are finite (their signs choose defaults). Anything else: no friction (validated at
+// the boundary; this is the last line of defence).
+bool FrictionValid(const ToolCommand& c) {
+  return std::isfinite(c.mu_s) && std::isfinite(c.mu_d) && c.mu_d >= 0 && c.mu_d <= c.mu_s &&
+         std::isfinite(c.friction_stiffness) && std::isfinite(c.friction_damping);
+}
+
 bool ValidCommand(const ToolCommand& c) {
   if (!Finite3(c.pos)) return false;
   if (c.kind == ToolKind::kScalpel) return Finite3(c.blade);
@@ -153,6 +161,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
     const double prev_base[3] = {ts.pos[0], ts.pos[1], ts.pos[2]};
     const double prev_tip[3] = {ts.blade_tip[0], ts.blade_tip[1], ts.blade_tip[2]};
     if (ValidCommand(*cmd)) {
+      for (int c = 0; c < 3; ++c) at.prev_pos[c] = ts.has_pos ? ts.pos[c] : cmd->pos[c];
       for (int c = 0; c < 3; ++c) ts.pos[c] = cmd->pos[c], ts.blade_tip[c] = cmd->pos[c] + cmd->blade[c];
       ts.radius = cmd->radius;
       ts.stiffness = cmd->stiffness;
@@ -163,6 +172,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       ++s.warnings.bad_tool_input;
       report->tools[t].input_held = true;
       if (!ts.has_pos || ts.kind != cmd->kind) continue;
+      std::copy(ts.pos, ts.pos + 3, at.prev_pos);
     }
     at.kind = cmd->kind;
     at.law = cmd->law;
@@ -173,6 +183,21 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
     at.grasp_atom = ts.grasp_atom;
     at.grasp_leq = ts.grasp_leq;
     at.grasp_k = ts.grasp_k;
+    // Friction: resolved coefficients (validated: a bad value is no friction) and the anchor.
+    if (IsContactTool(at.kind) && FrictionValid(*cmd) && cmd->mu_s > 0) {
+      at.mu_s = cmd->mu_s;
+      at.mu_d = cmd->mu_d;
+      at.k_t = cmd->friction_stiffness > 0 ? cmd->friction_stiffness : at.stiffness;
+      at.b_t = cmd->friction_damping >= 0 ? cmd->friction_damping : at.k_t * ws.options.dt_s;
+      std::copy(ts.anchor_atoms, ts.anchor_atoms + kAnchorAtoms, at.anchor_atoms);
+      std::copy(ts.anchor_w, ts.anchor_w + kAnchorAtoms, at.anchor_w);
+      std::copy(ts.anchor_offset, ts.anchor_offset + 3, at.anchor_offset);
+      std::copy(ts.friction_u, ts.friction_u + 3, at.friction_u);
+      at.friction = ts.friction;
+    } else if (ts.friction != FrictionState::kNone) {
+      ts.friction = FrictionState::kNone;  // friction switched off: forget the anchor
+      std::fill(ts.anchor_atoms, ts.anchor_atoms + kAnchorAtoms, -1);
+    }
     // Scalpel: the quad swept since the last tick (thesis 3.2.6: slicing removes elements).
     if (at.kind == ToolKind::kScalpel && had_scalpel) {
       report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.pos, at.blade_tip);

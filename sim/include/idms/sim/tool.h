@@ -25,6 +25,15 @@ struct ToolCommand {
   ContactLaw law = ContactLaw::kThesis;
   bool closed = false;           // tweezers: closed this tick
   double blade[3] = {0, 0, -1};  // scalpel: the blade runs from pos to pos + blade, model units
+  // Coulomb friction with stiction at this sphere/tweezers' contacts (friction.cc). mu_s = 0 is
+  // no friction (the thesis: frictionless, and it costs nothing). 0 <= mu_d <= mu_s. The
+  // tangential spring-damper to the anchor: stiffness k_t (force / length; <= 0 = the MIO's k)
+  // and damping b_t (force / (length / s); < 0 = k_t * dt, twice Colgate's passivity bound
+  // k_t dt / 2 for a sampled spring).
+  double mu_s = 0;
+  double mu_d = 0;
+  double friction_stiffness = 0;
+  double friction_damping = -1;
 };
 
 struct ToolInput {
