@@ -180,11 +180,21 @@ void CommitFriction(State& s, Workspace& ws, StepReport* report) {
     for (int c = 0; c < 3; ++c) contact[c] = -at.eval_fn * at.eval_normal[c];
     const FrictionEval fe = Evaluate(s, at, contact, dt);
     double anchor[3];
-    if (!fe.active || !Finite3(at.tick_friction) || !AnchorPoint(s, at.anchor_atoms, at.anchor_w, anchor)) {
-      ClearAnchor(ts);  // contact lost (or a non-finite anchor): the next contact anchors anew
-      continue;
+    const bool anchored = AnchorPoint(s, at.anchor_atoms, at.anchor_w, anchor);
+    // Friction's work this tick, the device moving at the tick's start under the tick's force (the
+    // energy check's convention); the change of its spring's energy is added below.
+    double work = 0;
+    for (int c = 0; c < 3; ++c) {
+      work += at.tick_friction[c] * ((anchor[c] - at.anchor_start[c]) - (at.pos[c] - at.prev_pos[c]));
     }
     const double u_old2 = Dot3(at.friction_u, at.friction_u);
+    if (!fe.active || !anchored || !std::isfinite(work)) {
+      // Contact lost (or a non-finite anchor): the spring lets go, its energy dissipated; the next
+      // contact anchors anew.
+      if (std::isfinite(work)) tr.friction_work = work - 0.5 * at.k_t * u_old2;
+      ClearAnchor(ts);
+      continue;
+    }
     double u_new[3];
     if (fe.fstar_mag <= fe.limit) {
       at.friction = FrictionState::kStick;
@@ -207,12 +217,6 @@ void CommitFriction(State& s, Workspace& ws, StepReport* report) {
       }
     }
     std::copy(u_new, u_new + 3, at.friction_u);
-    // Friction's work this tick, the device moving at the tick's start under the tick's force (the
-    // energy check's convention), plus the change of its spring's energy.
-    double work = 0;
-    for (int c = 0; c < 3; ++c) {
-      work += at.tick_friction[c] * ((anchor[c] - at.anchor_start[c]) - (at.pos[c] - at.prev_pos[c]));
-    }
     tr.friction_work = work + 0.5 * at.k_t * (Dot3(u_new, u_new) - u_old2);
     tr.normal_force = at.tick_fn;
     tr.friction = at.friction;
