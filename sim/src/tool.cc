@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include "idms/sim/model.h"
 #include "idms/sim/workspace.h"
@@ -76,6 +78,42 @@ bool SegmentCrossesTriangle(const double p[3], const double q[3], const double a
 bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3], const double b0[3],
                          const double a1[3], const double b1[3]) {
   return SegmentCrossesTriangle(p, q, a0, b0, b1) || SegmentCrossesTriangle(p, q, a0, b1, a1);
+}
+
+bool SetFrictionItem(std::string_view key, std::string_view value, ToolCommand* tool) {
+  double* field = key == "mu_s"   ? &tool->mu_s
+                  : key == "mu_d" ? &tool->mu_d
+                  : key == "k_t"  ? &tool->friction_stiffness
+                  : key == "b_t"  ? &tool->friction_damping
+                                  : nullptr;
+  const std::string text(value);
+  char* end = nullptr;
+  const double x = std::strtod(text.c_str(), &end);
+  if (field == nullptr || text.empty() || *end != '\0' || !std::isfinite(x)) return false;
+  *field = x;
+  return true;
+}
+
+bool ValidateFriction(const ToolCommand& t, std::string* error) {
+  auto num = [](double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%g", v);
+    return std::string(buf);
+  };
+  if (!(std::isfinite(t.mu_s) && t.mu_s >= 0)) {
+    *error = "mu_s must be a finite number >= 0, got " + num(t.mu_s);
+  } else if (!(std::isfinite(t.mu_d) && t.mu_d >= 0)) {
+    *error = "mu_d must be a finite number >= 0, got " + num(t.mu_d);
+  } else if (t.mu_d > t.mu_s) {
+    *error = "mu_d must be <= mu_s (" + num(t.mu_s) + "), got " + num(t.mu_d);
+  } else if (!(std::isfinite(t.friction_stiffness) && t.friction_stiffness >= 0)) {
+    *error = "k_t must be a finite number > 0 (0 = the tool's stiffness), got " + num(t.friction_stiffness);
+  } else if (!std::isfinite(t.friction_damping)) {
+    *error = "b_t must be a finite number >= 0 (< 0 = k_t dt), got " + num(t.friction_damping);
+  } else {
+    return true;
+  }
+  return false;
 }
 
 namespace internal {

@@ -111,6 +111,64 @@ TEST(Devices, TheBuiltInSceneTakesTheDefaultStepAndTheThesisStepByName) {
   EXPECT_EQ(tool.kind, ToolKind::kTweezers);
 }
 
+// Friction from the scene or --friction reaches the tool; bad coefficients are refused by name;
+// the scripted stroke's samples carry the tangential force and the stick/slip state.
+TEST(Devices, FrictionReachesTheToolAndTheSamples) {
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  std::string error;
+  v1::Scene scene = agent::DefaultScene("stroke-slow");
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.mu_s, 0.0) << "the built-in scene is frictionless";
+  scene.set_model("hex_4x5_home");  // as the agent's command line names it before --friction
+  ASSERT_TRUE(agent::ApplyFrictionSpec("mu_s=0.6,mu_d=0.4", &scene, &error)) << error;
+  EXPECT_EQ(scene.tools(0).static_friction(), 0.6);
+  EXPECT_EQ(scene.tools(0).friction_stiffness(), 400);
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.mu_s, 0.6);
+  EXPECT_EQ(tool.mu_d, 0.4);
+  EXPECT_DOUBLE_EQ(tool.friction_damping, 0.4);
+  v1::Scene bad = scene;
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=0.3,mu_d=0.5", &bad, &error));
+  EXPECT_EQ(error, "--friction: tools[0].kinetic_friction: must be <= static_friction (0.3), got 0.5");
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=nan", &bad, &error));
+  EXPECT_NE(error.find("bad item 'mu_s=nan'"), std::string::npos) << error;
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=-1", &bad, &error));
+  EXPECT_EQ(error, "--friction: tools[0].static_friction: must be in [0, inf), got -1");
+
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  context.registration = reg;
+  auto device = agent::MakeDevice("scripted:stroke-slow", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *device, options);
+  int64_t stick = 0, slip = 0;
+  double max_ft = 0;
+  for (int i = 0; i < 5800; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (loop.samples().pop(s)) {
+      stick += s.friction == FrictionState::kStick;
+      slip += s.friction == FrictionState::kSlip;
+      max_ft = std::max(max_ft, std::hypot(s.friction_force[0], s.friction_force[1], s.friction_force[2]));
+      if (s.friction != FrictionState::kNone) {
+        ASSERT_LE(std::hypot(s.friction_force[0], s.friction_force[1], s.friction_force[2]),
+                  0.6 * s.normal_force + 1e-9);
+      }
+    }
+    int32_t index;
+    while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_GT(stick, 100);
+  EXPECT_GT(slip, 100);
+  EXPECT_GT(max_ft, 0.1);
+}
+
 TEST(Devices, HumanHandIsStableInContact) {
   // Pressing with a soft hand: the tissue pushes it back (it lags the script), and nothing grows.
   const Model model = Hex();

@@ -37,6 +37,11 @@ struct TickSample {
   bool contact = false, grasp = false;
   bool overrun = false;        // the work ended after the next deadline
   bool force_limited = false;  // the device force was clamped at its limit this tick
+  // Friction (ToolReport): the tangential part of `force` (scaled as it was clamped), the normal
+  // force, the state.
+  double friction_force[3] = {0, 0, 0};
+  double normal_force = 0;
+  FrictionState friction = FrictionState::kNone;
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.

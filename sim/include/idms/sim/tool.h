@@ -4,6 +4,8 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
+#include <string_view>
 
 #include "idms/sim/state.h"
 
@@ -35,6 +37,14 @@ struct ToolCommand {
   double friction_stiffness = 0;
   double friction_damping = -1;
 };
+
+// One item of a friction spec on a command line ("mu_s=0.6", "mu_d", "k_t", "b_t") into the
+// tool; false when the key is not one of them or the value is not a finite number.
+bool SetFrictionItem(std::string_view key, std::string_view value, ToolCommand* tool);
+
+// The tool's friction as a boundary checks it: finite, mu_s >= 0, 0 <= mu_d <= mu_s, k_t finite,
+// b_t finite. False with *error naming the field ("mu_d must be <= mu_s (0.4), got 0.6").
+bool ValidateFriction(const ToolCommand& tool, std::string* error);
 
 struct ToolInput {
   std::array<ToolCommand, kMaxTools> tools{};
