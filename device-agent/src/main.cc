@@ -393,6 +393,7 @@ int Main(int argc, char** argv) {
   dc.model = &model;
   dc.registration = registration;
   dc.mio_radius = tool.radius;
+  dc.mu_s = tool.mu_s;
   dc.dt_s = step.dt_s;
   std::unique_ptr<Device> device = MakeDevice(a.device, dc, &error);
   if (!device) return Fail(error);

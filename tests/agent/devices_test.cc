@@ -30,7 +30,8 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos)
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or (scripted) drag"),
+            std::string::npos)
       << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
   EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
@@ -167,6 +168,51 @@ TEST(Devices, FrictionReachesTheToolAndTheSamples) {
   EXPECT_GT(stick, 100);
   EXPECT_GT(slip, 100);
   EXPECT_GT(max_ft, 0.1);
+}
+
+// scripted:drag holds a finger with friction under a sideways push at half of mu_s f_n: over the
+// script's last 10 s the device does not move (and without friction the device is refused).
+TEST(Devices, DragHoldsBelowTheStaticLimit) {
+  const Model model = Hex();
+  v1::Scene scene = agent::DefaultScene("drag");
+  scene.set_model("hex_4x5_home");
+  std::string error;
+  ASSERT_TRUE(agent::ApplyFrictionSpec("mu_s=0.6,mu_d=0.4", &scene, &error)) << error;
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  agent::DeviceContext context;
+  context.model = &model;
+  context.registration = reg;
+  EXPECT_FALSE(agent::MakeDevice("scripted:drag", context, &error));
+  EXPECT_NE(error.find("give the tool friction"), std::string::npos) << error;
+  context.mu_s = tool.mu_s;
+  EXPECT_FALSE(agent::MakeDevice("scripted:drag,fraction=-1", context, &error));
+  auto device = agent::MakeDevice("scripted:drag,fraction=0.5", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *device, options);
+  double x_at_5s = 0, x_last = 0;
+  int64_t slip = 0, stick = 0;
+  for (int i = 0; i < 15000; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (loop.samples().pop(s)) {
+      if (s.tick == 4999) x_at_5s = s.tool_pos[0];
+      x_last = s.tool_pos[0];
+      slip += s.friction == FrictionState::kSlip;
+      stick += s.friction == FrictionState::kStick;
+    }
+    int32_t index;
+    while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_EQ(slip, 0);
+  EXPECT_GT(stick, 13000);
+  EXPECT_LT(std::fabs(x_last - x_at_5s), 1e-6);
+  EXPECT_GT(x_last, MakeScriptGeometry(model, 1.5).center[0] + 1e-3) << "the push did not move the hand at all";
 }
 
 TEST(Devices, HumanHandIsStableInContact) {
