@@ -35,7 +35,7 @@ struct RenderOptions {
   Camera camera;
   bool wireframe = false;   // the triangles' edges instead of the shaded surface
   bool show_tool = false;   // the tool at the device position, with its radius (outlined, see-through)
-  bool show_force = false;  // the device force as an arrow from the tool
+  bool show_force = false;  // the device force as an arrow from the tool (and its friction part as a second one)
   ColourBy colour_by = ColourBy::kDisplacement;
   // Drawn position = rest + scale (p - rest): exaggerates the deformation; colours, contacts and
   // the tool stay true. In (0, kMaxDeformationScale].
@@ -49,10 +49,11 @@ struct SceneView {
   std::span<const float> positions;    // (num_vertices x 3), model units
   std::span<const int32_t> triangles;  // (num_triangles x 3), vertex ids, counter-clockwise from outside
   bool has_tool = false;
-  std::array<double, 3> tool_pos{0, 0, 0};  // model frame, model units
-  double tool_radius = 0;                   // model units; 0 = unknown (drawn as 5 % of the view)
-  std::array<double, 3> force{0, 0, 0};     // force on the device, model frame, force units
-  bool contact = false, grasp = false;      // the device's last sample's flags
+  std::array<double, 3> tool_pos{0, 0, 0};        // model frame, model units
+  double tool_radius = 0;                         // model units; 0 = unknown (drawn as 5 % of the view)
+  std::array<double, 3> force{0, 0, 0};           // force on the device, model frame, force units
+  std::array<double, 3> friction_force{0, 0, 0};  // its tangential (friction) part, the same frame and units
+  bool contact = false, grasp = false;            // the device's last sample's flags
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
@@ -63,6 +64,7 @@ struct SceneView {
 // protocol/display.json's (display.h), shared with the browser.
 inline constexpr std::array<float, 3> kBackground{0.93f, 0.94f, 0.96f};
 inline constexpr std::array<float, 3> kForceColour{0.95f, 0.80f, 0.10f};
+inline constexpr std::array<float, 3> kFrictionColour{0.80f, 0.15f, 0.75f};  // the force's tangential part
 inline constexpr std::array<float, 3> kWireColour{0.15f, 0.20f, 0.30f};
 // The force arrow is this many tool radii long per unit of force, at most kMaxArrowRadii radii.
 inline constexpr double kArrowRadiiPerForce = 1.0;
