@@ -417,5 +417,32 @@ TEST(Friction, TweezersHoldTissueWithFriction) {
   EXPECT_EQ(TotalWarnings(state.warnings), 0);
 }
 
+// Every integrator (and full mode's fused pass) holds below mu_s f_n and slides above it, with
+// no warning: the implicit fallback's Jacobian and RK4's stages see the same friction force.
+TEST(Friction, EveryIntegratorHoldsAndSlides) {
+  const Model model = Hex();
+  for (Integrator integrator :
+       {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4, Integrator::kImplicitEuler}) {
+    for (bool full : {false, true}) {
+      StepOptions options;
+      options.integrator = integrator;
+      options.full = full;
+      const DragRun held = RunDrag(model, Finger(0.6, 0.4), 0.5, options);
+      const DragTick& a = At(held, held.ticks.back().t - 10.0);
+      const DragTick& b = held.ticks.back();
+      EXPECT_EQ(b.state, FrictionState::kStick) << IntegratorName(integrator) << (full ? " full" : "");
+      EXPECT_LT(std::fabs(b.hand_x - a.hand_x), 1e-6) << IntegratorName(integrator) << (full ? " full" : "");
+      EXPECT_EQ(b.warnings, 0) << IntegratorName(integrator) << (full ? " full" : "");
+      const DragRun slid = RunDrag(model, Finger(0.6, 0.4), 1.3, options);
+      const DragTick& c = At(slid, slid.hold_start + 0.25);
+      const DragTick& d = At(slid, slid.hold_start + 1.5);
+      EXPECT_EQ(d.state, FrictionState::kSlip) << IntegratorName(integrator) << (full ? " full" : "");
+      EXPECT_GT(d.hand_x - c.hand_x, 0.02) << IntegratorName(integrator) << (full ? " full" : "");
+      EXPECT_NEAR(d.ft, 0.4 * d.fn, 0.02 * 0.4 * d.fn) << IntegratorName(integrator) << (full ? " full" : "");
+      EXPECT_EQ(slid.ticks.back().warnings, 0) << IntegratorName(integrator) << (full ? " full" : "");
+    }
+  }
+}
+
 }  // namespace
 }  // namespace idms
