@@ -168,6 +168,29 @@ TEST(Devices, FrictionReachesTheToolAndTheSamples) {
   EXPECT_GT(stick, 100);
   EXPECT_GT(slip, 100);
   EXPECT_GT(max_ft, 0.1);
+
+  // Closed loop: a simulated hand strokes with friction; the stick holds the hand back and nothing
+  // grows (no warning, the force stays under the thesis stroke's scale).
+  auto hand = agent::MakeDevice("human:stroke-slow", context, &error);
+  ASSERT_TRUE(hand) << error;
+  agent::Loop human_loop(model, step, tool, reg, *hand, options);
+  double max_force = 0;
+  int64_t human_stick = 0, warnings = 0;
+  for (int i = 0; i < 5800; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    human_loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (human_loop.samples().pop(s)) {
+      max_force = std::max(max_force, std::hypot(s.force[0], s.force[1], s.force[2]));
+      human_stick += s.friction == FrictionState::kStick;
+      warnings += s.warnings;
+    }
+    int32_t index;
+    while (human_loop.PopMeshSlot(&index)) human_loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_EQ(warnings, 0);
+  EXPECT_GT(human_stick, 100);
+  EXPECT_LT(max_force, 5.0);
 }
 
 // scripted:drag holds a finger with friction under a sideways push at half of mu_s f_n: over the

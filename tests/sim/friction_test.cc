@@ -413,6 +413,13 @@ TEST(Friction, TweezersHoldTissueWithFriction) {
   }
   EXPECT_TRUE(grasped);
   EXPECT_TRUE(stuck);
+  // Open tweezers pressed on the surface and pushed sideways hold as the finger does.
+  ToolCommand open = Finger(0.6, 0.4);
+  open.kind = ToolKind::kTweezers;
+  const DragRun held = RunDrag(model, open, 0.5);
+  EXPECT_EQ(held.ticks.back().state, FrictionState::kStick);
+  EXPECT_LT(std::fabs(held.ticks.back().hand_x - At(held, held.ticks.back().t - 10).hand_x), 1e-6);
+  EXPECT_NEAR(held.ticks.back().ft, held.ticks.back().push, 0.01 * held.ticks.back().push);
   EXPECT_GT(lift, 0.02) << "the grasped atom was not lifted";
   EXPECT_EQ(TotalWarnings(state.warnings), 0);
 }
