@@ -209,6 +209,9 @@ void CommitFriction(State& s, Workspace& ws, StepReport* report) {
         at.anchor_offset[c] += fe.u[c] - u_new[c];
       }
       if (at.strong_atoms[0] >= 0) {
+        // The stiffness BeginFriction gave the old anchor atoms goes now (ClearExtraK and
+        // ClearTickScratch clear the new ones, which may not include them).
+        for (int i = 0; i < kAnchorAtoms && at.anchor_atoms[i] >= 0; ++i) ws.atom_extra_k[at.anchor_atoms[i]] = 0;
         SpreadAnchor(at);
         double spread[3];
         if (AnchorPoint(s, at.anchor_atoms, at.anchor_w, spread)) {

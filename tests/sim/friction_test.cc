@@ -451,5 +451,32 @@ TEST(Friction, EveryIntegratorHoldsAndSlides) {
   }
 }
 
+// Between steps no atom keeps the stiffness the friction spring gave it (Workspace's invariant),
+// though a slipping anchor moves to other atoms: local mode and full mode's fused pass.
+TEST(Friction, AnchorStiffnessIsClearedBetweenSteps) {
+  const Model model = Hex();
+  for (bool full : {false, true}) {
+    StepOptions options;
+    options.full = full;
+    State state = MakeState(model);
+    Workspace ws = MakeWorkspace(model, options);
+    ToolCommand tool = Finger(0.6, 0.4);
+    const ScriptGeometry g = MakeScriptGeometry(model, tool.radius);
+    ToolInput input;
+    input.num_tools = 1;
+    int64_t slip = 0;
+    for (int n = 0; n < 4000; ++n) {
+      const ScriptSample sample = SampleScript(Script::kStrokeFast, g, (n + 1) * 1e-3);
+      for (int c = 0; c < 3; ++c) tool.pos[c] = sample.pos[c];
+      input.tools[0] = tool;
+      slip += Step(model, state, ws, input).tools[0].friction == FrictionState::kSlip;
+      for (int32_t a = 0; a < model.num_atoms; ++a) {
+        ASSERT_EQ(ws.atom_extra_k[a], 0.0) << "atom " << a << " after tick " << n << (full ? " (full)" : "");
+      }
+    }
+    EXPECT_GT(slip, 100);
+  }
+}
+
 }  // namespace
 }  // namespace idms
