@@ -23,6 +23,7 @@ using namespace idms;
 struct Parts {
   bool prediction = false, energy_check = false, fallback = false, settling = false;
   bool gravity = false, air = false, tweezers = false, scalpel = false;
+  bool friction = false;        // Coulomb friction with stiction at the sphere (mu_s 0.6, mu_d 0.4)
   bool undamped_model = false;  // every element b = 0: no eq. 4.6 filter at all
 };
 
@@ -75,6 +76,7 @@ StageMeans RunOnce(const Model& base, const Parts& parts, double duration_s) {
   pluck.center[0] += model.num_atoms > 1000 ? 6.0 : 1.0;
   ToolInput in;
   in.tools[0].kind = ToolKind::kSphere;
+  if (parts.friction) in.tools[0].mu_s = 0.6, in.tools[0].mu_d = 0.4;
   int32_t slot = 1;
   const int32_t tweezers = parts.tweezers ? slot++ : -1;
   const int32_t scalpel = parts.scalpel ? slot++ : -1;
@@ -151,7 +153,7 @@ int main(int argc, char** argv) {
   }
   Parts all;
   all.prediction = all.energy_check = all.fallback = all.settling = true;
-  all.gravity = all.air = all.tweezers = all.scalpel = true;
+  all.gravity = all.air = all.tweezers = all.scalpel = all.friction = true;
   auto with = [](auto set) {
     Parts p;
     set(p);
@@ -168,6 +170,7 @@ int main(int argc, char** argv) {
       {"+ air damping", with([](Parts& p) { p.air = true; })},
       {"+ tweezers (plucking)", with([](Parts& p) { p.tweezers = true; })},
       {"+ scalpel (hovering)", with([](Parts& p) { p.scalpel = true; })},
+      {"+ friction (mu_s 0.6)", with([](Parts& p) { p.friction = true; })},
       {"everything on", all},
   };
   struct Scene {

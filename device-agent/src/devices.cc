@@ -7,6 +7,7 @@
 
 #include "device_internal.h"
 #include "idms/agent/device.h"
+#include "idms/sim/drag.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model.h"
 #include "text_internal.h"
@@ -90,6 +91,31 @@ class HumanDevice final : public Device {
   double x_[3] = {0, 0, 0}, v_[3] = {0, 0, 0}, force_[3] = {0, 0, 0};
 };
 
+// scripted:drag — press, then push sideways with a constant force through a simulated hand
+// (sim/drag.h): the hand's x is free and the device force pushes it back, so a contact with
+// friction holds below mu_s f_n and slides above it. Played once; then it holds its last pose.
+class DragDevice final : public Device {
+ public:
+  DragDevice(const ScriptGeometry& geometry, const DragOptions& options, const Registration& registration, double dt_s)
+      : hand_(geometry, options), registration_(registration), dt_s_(dt_s) {}
+
+  void Read(int64_t, double t_s, DeviceReading* out) override {
+    const ScriptSample s = hand_.Next(std::min(t_s + dt_s_, hand_.Duration()), force_model_);
+    registration_.ModelToDevice(s.pos, out->pos);
+    out->closed = false;
+    out->valid = true;
+  }
+  void Write(int64_t, const double force[3]) override { registration_.ForceToModel(force, force_model_); }
+  void Release() override { force_model_[0] = force_model_[1] = force_model_[2] = 0; }
+  const char* name() const override { return "scripted:drag"; }
+
+ private:
+  DragHand hand_;
+  Registration registration_;
+  double dt_s_;
+  double force_model_[3] = {0, 0, 0};
+};
+
 // "key=value" options after the first comma of a spec.
 bool ParseOption(std::string_view item, std::string_view* key, double* value, std::string* error) {
   const size_t eq = item.find('=');
@@ -113,9 +139,26 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
   const size_t comma = args.find(',');
   const std::string_view script_name = args.substr(0, comma);
   ScriptTarget target;
+  if (!human && script_name == "drag") {
+    if (context.model == nullptr) {
+      *error = "a scripted device needs the model";
+      return nullptr;
+    }
+    if (!(context.mu_s > 0)) {
+      *error =
+          "drag pushes at a fraction of mu_s f_n: give the tool friction (--friction mu_s=S or the scene's "
+          "static_friction)";
+      return nullptr;
+    }
+    DragOptions options;
+    options.mu_s = context.mu_s;
+    if (comma != std::string_view::npos && !ParseDragSpec(args.substr(comma + 1), &options, error)) return nullptr;
+    return std::make_unique<DragDevice>(MakeScriptGeometry(*context.model, context.mio_radius), options,
+                                        context.registration, context.dt_s);
+  }
   if (!ParseScriptName(script_name, &target.script)) {
     *error = Cat({"unknown script '", script_name}) +
-             "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle";
+             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or (scripted) drag";
     return nullptr;
   }
   if (context.model == nullptr) {

@@ -241,6 +241,16 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.grasp = out.grasp_atom >= 0;
   s.reset = reset_this_tick_;
   reset_this_tick_ = false;
+  if (out.friction != FrictionState::kNone) {
+    // The tangential part as the device got it: scaled by what the clamps and the guard kept.
+    const double raw = std::sqrt(out.force_raw[0] * out.force_raw[0] + out.force_raw[1] * out.force_raw[1] +
+                                 out.force_raw[2] * out.force_raw[2]);
+    const double sent = std::sqrt(f_model[0] * f_model[0] + f_model[1] * f_model[1] + f_model[2] * f_model[2]);
+    const double keep = raw > sent && raw > 0 ? sent / raw : 1.0;
+    for (int i = 0; i < 3; ++i) s.friction_force[i] = std::isfinite(keep) ? keep * out.friction_force[i] : 0.0;
+    s.normal_force = std::isfinite(out.normal_force) ? out.normal_force : 0.0;
+    s.friction = out.friction;
+  }
   s.overrun = MonotonicNs() > deadline_ns;
   compute_hist_.Add(s.compute_us);
   if (prev_wake_ns_ >= 0) period_hist_.Add(s.period_us);

@@ -36,7 +36,7 @@ constexpr int kExitRefused = 2;  // the server refused the token or the session
 struct Args {
   std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json,
       dump_final, cache_dir;
-  std::string rotation, offset;
+  std::string rotation, offset, friction;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
   int cpu = -1;
@@ -230,6 +230,9 @@ void AddOptions(CLI::App& app, Args& a) {
   app.add_option("--offset", a.offset, "Registration: X,Y,Z model units (overrides the scene)");
   app.add_option("--max-force", a.max_force, "Device force clamp, device units (overrides the scene)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--friction", a.friction,
+                 "mu_s=S[,mu_d=D,k_t=K,b_t=B]: Coulomb friction with stiction at the tool's contacts (overrides "
+                 "the scene's; mu_d defaults to mu_s, k_t to the tool's k, b_t to k_t dt)");
   app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO, mlockall and cpu_dma_latency 0");
   app.add_option("--cpu", a.cpu, "Pin the loop thread to this CPU; the I/O thread keeps off it (default: not pinned)")
       ->check(CLI::Range(0, CPU_SETSIZE - 1));
@@ -260,6 +263,7 @@ bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolComman
   // The clamp overridden in the scene itself: the step clamps there, and the session's recorded
   // scene (and the force-limit events quoting it) say the limit in force.
   if (a.max_force > 0) scene->mutable_device()->set_max_force(a.max_force);
+  if (!a.friction.empty() && !ApplyFrictionSpec(a.friction, scene, error)) return false;
   if (!SceneToLoop(*scene, step, tool, registration, error)) return false;
   if (a.scale > 0) registration->scale = a.scale;
   if (!a.rotation.empty() && !ParseRotation(a.rotation, registration->rot, error)) {
@@ -389,6 +393,7 @@ int Main(int argc, char** argv) {
   dc.model = &model;
   dc.registration = registration;
   dc.mio_radius = tool.radius;
+  dc.mu_s = tool.mu_s;
   dc.dt_s = step.dt_s;
   std::unique_ptr<Device> device = MakeDevice(a.device, dc, &error);
   if (!device) return Fail(error);

@@ -1,6 +1,7 @@
 // Scene -> StepOptions, ToolCommand and Registration.
 #include "idms/agent/setup.h"
 
+#include <algorithm>
 #include <limits>
 
 #include "idms/protocol/scene.h"
@@ -19,6 +20,43 @@ v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
   scene.mutable_device()->set_max_force(8);
   ApplySceneDefaults(&scene);
   return scene;
+}
+
+bool ApplyFrictionSpec(const std::string& spec, v1::Scene* scene, std::string* error) {
+  ToolCommand parsed;
+  parsed.mu_s = -1;
+  bool has[4] = {false, false, false, false};  // mu_s, mu_d, k_t, b_t
+  size_t start = 0;
+  while (start <= spec.size()) {
+    const size_t comma = std::min(spec.find(',', start), spec.size());
+    const std::string item = spec.substr(start, comma - start);
+    start = comma + 1;
+    const size_t eq = item.find('=');
+    const std::string key = item.substr(0, eq);
+    if (eq == std::string::npos || !SetFrictionItem(key, item.substr(eq + 1), &parsed)) {
+      *error = "--friction: bad item '" + item + "' (expected mu_s=S[,mu_d=D,k_t=K,b_t=B], finite numbers)";
+      return false;
+    }
+    has[key == "mu_s" ? 0 : key == "mu_d" ? 1 : key == "k_t" ? 2 : 3] = true;
+  }
+  if (!has[0]) {
+    *error = "--friction: give mu_s=S (the static coefficient, >= 0)";
+    return false;
+  }
+  for (v1::Tool& t : *scene->mutable_tools()) {
+    if (t.kind() == v1::Tool::KIND_SCALPEL) continue;
+    t.clear_static_friction(), t.clear_kinetic_friction(), t.clear_friction_stiffness(), t.clear_friction_damping();
+    t.set_static_friction(parsed.mu_s);
+    if (has[1]) t.set_kinetic_friction(parsed.mu_d);
+    if (has[2]) t.set_friction_stiffness(parsed.friction_stiffness);
+    if (has[3]) t.set_friction_damping(parsed.friction_damping);
+  }
+  if (!ValidateScene(*scene, error)) {
+    *error = "--friction: " + *error;
+    return false;
+  }
+  ApplySceneDefaults(scene);
+  return true;
 }
 
 bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,
@@ -76,6 +114,11 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   c.radius = t.radius();
   c.stiffness = t.stiffness();
   c.law = t.force_law() == v1::FORCE_LAW_LINEAR ? ContactLaw::kLinear : ContactLaw::kThesis;  // unspecified = thesis
+  // Friction (unset: frictionless; ApplySceneDefaults filled the rest where mu_s > 0).
+  c.mu_s = t.static_friction();
+  c.mu_d = t.has_kinetic_friction() ? t.kinetic_friction() : t.static_friction();
+  c.friction_stiffness = t.friction_stiffness();                              // 0 = the tool's stiffness
+  c.friction_damping = t.has_friction_damping() ? t.friction_damping() : -1;  // < 0 = k_t dt
   *tool = c;
 
   // Registration: p_model = scale * Rz Ry Rx * p_device + offset.

@@ -547,6 +547,13 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_substeps(s.substeps);
     out->set_warnings(s.warnings);
     out->set_num_contacts(s.num_contacts);
+    if (s.friction != FrictionState::kNone) {
+      out->mutable_friction_force()->set_x(s.friction_force[0]);
+      out->mutable_friction_force()->set_y(s.friction_force[1]);
+      out->mutable_friction_force()->set_z(s.friction_force[2]);
+      out->set_normal_force(s.normal_force);
+      out->set_friction(s.friction == FrictionState::kStick ? v1::FRICTION_STICK : v1::FRICTION_SLIP);
+    }
   }
 
   void FillStats(v1::LoopStats* out) {

@@ -128,6 +128,25 @@ void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {
   c->Range(path("radius"), tool.radius(), 0, kInf, true);
   c->Range(path("stiffness"), tool.stiffness(), 0, kInf, true);
   if (!v1::ForceLaw_IsValid(tool.force_law())) c->Fail(path("force_law"), "unknown force law");
+  // Friction: finite coefficients, 0 <= mu_d <= mu_s, a spring and damper in range.
+  const bool friction = tool.has_static_friction() || tool.has_kinetic_friction() || tool.has_friction_stiffness() ||
+                        tool.has_friction_damping();
+  if (friction && tool.kind() == v1::Tool::KIND_SCALPEL) {
+    c->Fail(path(tool.has_static_friction() ? "static_friction" : "kinetic_friction"),
+            "friction applies to KIND_SPHERE and KIND_TWEEZERS only");
+  }
+  if (tool.has_static_friction()) c->Range(path("static_friction"), tool.static_friction(), 0, kInf, false);
+  if (tool.has_kinetic_friction()) {
+    c->Range(path("kinetic_friction"), tool.kinetic_friction(), 0, kInf, false);
+    if (!tool.has_static_friction()) {
+      c->Fail(path("kinetic_friction"), "needs static_friction (mu_s >= mu_d) set too");
+    } else if (tool.kinetic_friction() > tool.static_friction()) {
+      c->Fail(path("kinetic_friction"),
+              "must be <= static_friction (" + Num(tool.static_friction()) + "), got " + Num(tool.kinetic_friction()));
+    }
+  }
+  if (tool.has_friction_stiffness()) c->Range(path("friction_stiffness"), tool.friction_stiffness(), 0, kInf, true);
+  if (tool.has_friction_damping()) c->Range(path("friction_damping"), tool.friction_damping(), 0, kInf, false);
   if (tool.has_local_radius()) {
     c->Range(path("local_radius"), tool.local_radius(), 0, kInf, true);
     if (!full_simulation && tool.local_radius() < tool.radius()) {
@@ -363,6 +382,14 @@ void ApplySceneDefaults(v1::Scene* scene) {
   if (!d->has_max_force_rate()) d->set_max_force_rate(0);
   if (!d->has_max_rate_hz()) d->set_max_rate_hz(1000);
   if (!d->has_transition_force_rate()) d->set_transition_force_rate(10);
+  // Friction's defaults only where there is friction (a frictionless tool keeps no friction
+  // fields: the scalpel may not have them).
+  for (v1::Tool& tool : *scene->mutable_tools()) {
+    if (!(tool.static_friction() > 0)) continue;
+    if (!tool.has_kinetic_friction()) tool.set_kinetic_friction(tool.static_friction());
+    if (!tool.has_friction_stiffness()) tool.set_friction_stiffness(tool.stiffness());
+    if (!tool.has_friction_damping()) tool.set_friction_damping(tool.friction_stiffness() * scene->dt_s());
+  }
 }
 
 bool LoadSceneText(std::string_view text, std::string_view file, v1::Scene* scene, std::string* error) {

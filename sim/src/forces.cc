@@ -71,6 +71,8 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
         for (int c = 0; c < 3; ++c) force[stride * a + c] += static_cast<Real>(cf.f[c]);
       }
     }
+    // Friction (friction.cc) against this evaluation's contact force, before the grasp element.
+    if (at.friction != FrictionState::kNone) AddFriction(s, ws, at, force, stride);
     if (at.grasp_atom < 0) continue;
     // Grasp element atom -> centre: k (l - l_eq) along s^ (eq. 4.7 with the centre as atom 1).
     const Real* p = &s.atom_pos[3 * at.grasp_atom];
@@ -198,6 +200,7 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
     if (!IsContactTool(at.kind)) continue;
     const double dl = eps * (std::fabs(at.pos[0]) + std::fabs(at.pos[1]) + std::fabs(at.pos[2]) + 1);
     const AtomList atoms = ToolAtoms(ws);
+    double sum[3] = {0, 0, 0};  // the contact force, for friction's bound
     for (int32_t i = 0; i < atoms.n; ++i) {
       const int32_t a = atoms.ids[i];
       if (a == at.grasp_atom) continue;
@@ -207,7 +210,9 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
       const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
       *contact += cf.energy;
       *noise += (std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]) + cf.stiffness * dl) * dl;
+      for (int c = 0; c < 3; ++c) sum[c] += cf.f[c];
     }
+    if (at.friction != FrictionState::kNone) *contact += FrictionEnergy(s, at, sum, ws.options.dt_s);
     if (at.grasp_atom >= 0) {
       const Real* p = &s.atom_pos[3 * at.grasp_atom];
       const double dx = at.pos[0] - p[0], dy = at.pos[1] - p[1], dz = at.pos[2] - p[2];

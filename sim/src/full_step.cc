@@ -729,6 +729,7 @@ void ClearExtraK(Workspace& ws) {
     const ActiveTool& at = ws.tools[t];
     contact = contact || IsContactTool(at.kind);
     if (at.grasp_atom >= 0) ws.atom_extra_k[at.grasp_atom] = 0;
+    for (int i = 0; i < kAnchorAtoms && at.anchor_atoms[i] >= 0; ++i) ws.atom_extra_k[at.anchor_atoms[i]] = 0;
   }
   if (!contact) return;
   for (int32_t i = 0; i < ws.num_reach; ++i) ws.atom_extra_k[ws.reach[i]] = 0;
@@ -771,7 +772,11 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
   const Real T = static_cast<Real>(o.dt_s / substeps);
   const bool filter = m.has_damping && UsesFilter(o, integrator);
   const bool field = o.gravity || o.air_damping > 0;  // the external forces come in Integrate
-  for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+    std::fill(ws.tools[t].tick_friction, ws.tools[t].tick_friction + 3, 0.0);
+    ws.tools[t].tick_fn = 0;
+  }
   // T / m by slot: one division per atom when T changes rather than in every substep.
   if (ws.fused->t_over_m_of != T) {
     for (int32_t i = 0; i < ws.num_active; ++i) {
@@ -790,6 +795,8 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       ToolForces(s, ws, ws.fused->force.data(), 4);
       for (int32_t t = 0; t < ws.num_tools; ++t) {
         for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += 1.0 / substeps * ws.tools[t].eval_force[c];
+        for (int c = 0; c < 3; ++c) ws.tools[t].tick_friction[c] += 1.0 / substeps * ws.tools[t].eval_friction[c];
+        ws.tools[t].tick_fn += 1.0 / substeps * ws.tools[t].eval_fn;
       }
       ws.fused->force_zero = false;
       const Rate rate = !m.has_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;

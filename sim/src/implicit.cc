@@ -110,6 +110,20 @@ void PrefillDiagonal(const Model& m, const State& s, Workspace& ws, Real T) {
       SpringBlocks(&s.atom_pos[3 * at.grasp_atom], centre, at.grasp_k, at.grasp_leq, 0, K, B);
       add_block(at.grasp_atom, K);
     }
+    // Friction's tangential spring on each anchor atom, w^2 (k_t + b_t / T) (I - n n^T), as if it
+    // stuck (the slipping force's own stiffness is smaller: this errs on the damped side).
+    // Rejected: the anchor atoms' coupling blocks w_i w_j (a few entries outside the pattern).
+    if (at.friction == FrictionState::kNone || !(at.eval_fn > 0)) continue;
+    const double keff = at.k_t + at.b_t / ws.options.dt_s;
+    const double* n = at.eval_normal;
+    for (int i = 0; i < kAnchorAtoms && at.anchor_atoms[i] >= 0; ++i) {
+      Real K[9];
+      const double w2 = at.anchor_w[i] * at.anchor_w[i] * keff;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) K[3 * r + c] = static_cast<Real>(w2 * ((r == c ? 1.0 : 0.0) - n[r] * n[c]));
+      }
+      add_block(at.anchor_atoms[i], K);
+    }
   }
 }
 

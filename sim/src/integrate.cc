@@ -19,6 +19,8 @@ void Forces(const Model& m, State& s, Workspace& ws, bool filtered, Real T, doub
   EvaluateForces(m, s, ws, filtered, T);
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += weight * ws.tools[t].eval_force[c];
+    for (int c = 0; c < 3; ++c) ws.tools[t].tick_friction[c] += weight * ws.tools[t].eval_friction[c];
+    ws.tools[t].tick_fn += weight * ws.tools[t].eval_fn;
   }
 }
 
@@ -93,7 +95,11 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
                       StageTimes* times) {
   const Real T = static_cast<Real>(ws.options.dt_s / substeps);
   const bool filtered = UsesFilter(ws.options, integrator);
-  for (int32_t t = 0; t < ws.num_tools; ++t) std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    std::fill(ws.tools[t].tick_force, ws.tools[t].tick_force + 3, 0.0);
+    std::fill(ws.tools[t].tick_friction, ws.tools[t].tick_friction + 3, 0.0);
+    ws.tools[t].tick_fn = 0;
+  }
   ws.reach_slack = -1;  // these kernels do not measure how far they move atoms: every candidate
   int32_t cg_iterations = 0;
   for (int32_t k = 0; k < substeps; ++k) {
@@ -116,6 +122,8 @@ int32_t RunIntegrator(const Model& m, State& s, Workspace& ws, Integrator integr
         cg_iterations += ImplicitEulerSubstep(m, s, ws, T, times);
         for (int32_t t = 0; t < ws.num_tools; ++t) {
           for (int c = 0; c < 3; ++c) ws.tools[t].tick_force[c] += ws.tools[t].eval_force[c] / substeps;
+          for (int c = 0; c < 3; ++c) ws.tools[t].tick_friction[c] += ws.tools[t].eval_friction[c] / substeps;
+          ws.tools[t].tick_fn += ws.tools[t].eval_fn / substeps;
         }
         break;
       }

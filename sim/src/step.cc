@@ -57,13 +57,18 @@ struct Plan {
 // the atoms within the tools' reach (Workspace::reach), in one pass over the candidates: for each
 // atom the tools in order, as a pass per tool would add them.
 constexpr int32_t kToolPrefetch = 16;  // candidates ahead
-void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
+void ToolStiffness(State& s, Workspace& ws, StepReport* report) {
   ws.num_reach = 0;
   ws.reach_slack = -1;
   double slack = std::numeric_limits<double>::infinity();
   bool grasp_seen[kMaxTools] = {};
+  bool friction = false;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
-    if (IsContactTool(ws.tools[t].kind)) slack = std::min(slack, 0.5 * ws.tools[t].radius);
+    ActiveTool& at = ws.tools[t];
+    if (IsContactTool(at.kind)) slack = std::min(slack, 0.5 * at.radius);
+    std::fill(at.strong_atoms, at.strong_atoms + kAnchorAtoms, -1);
+    std::fill(at.strong_f, at.strong_f + kAnchorAtoms, 0.0);
+    friction = friction || at.mu_s > 0;
   }
   if (slack == std::numeric_limits<double>::infinity()) return;  // no contact tool
   const int32_t n = ws.num_candidates;
@@ -74,7 +79,7 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
     const Real* p = &s.atom_pos[3 * a];
     bool near = false;
     for (int32_t t = 0; t < ws.num_tools; ++t) {
-      const ActiveTool& at = ws.tools[t];
+      ActiveTool& at = ws.tools[t];
       if (!IsContactTool(at.kind)) continue;
       if (a == at.grasp_atom) {
         near = grasp_seen[t] = true;
@@ -88,6 +93,9 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
       if (!cf.touching) continue;
       ++report->tools[t].contacts;
       if (a != at.grasp_atom) ws.atom_extra_k[a] += cf.stiffness;
+      if (at.mu_s > 0 && a != at.grasp_atom) {
+        internal::RankContact(at, a, std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]));
+      }
     }
     if (near) ws.reach[ws.num_reach++] = a;
   }
@@ -97,6 +105,7 @@ void ToolStiffness(const State& s, Workspace& ws, StepReport* report) {
     if (IsContactTool(at.kind) && at.grasp_atom >= 0 && !grasp_seen[t]) ws.atom_extra_k[at.grasp_atom] += at.grasp_k;
   }
   ws.reach_slack = slack;
+  if (friction) internal::BeginFriction(s, ws);
 }
 
 // Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
@@ -414,7 +423,11 @@ class Dynamics {
       const int32_t a = ws_.active[i];
       s_.atom_vel[3 * a] = s_.atom_vel[3 * a + 1] = s_.atom_vel[3 * a + 2] = 0;
     }
-    for (int32_t t = 0; t < ws_.num_tools; ++t) std::fill(ws_.tools[t].tick_force, ws_.tools[t].tick_force + 3, 0.0);
+    for (int32_t t = 0; t < ws_.num_tools; ++t) {
+      std::fill(ws_.tools[t].tick_force, ws_.tools[t].tick_force + 3, 0.0);
+      std::fill(ws_.tools[t].tick_friction, ws_.tools[t].tick_friction + 3, 0.0);
+      ws_.tools[t].tick_fn = 0;
+    }
     ++s_.warnings.unrecovered;
     Keep(s_.energy_excess * decay_, std::max(Tolerance(), s_.energy_allowance * decay_));
     report_->unrecovered = true;
@@ -480,9 +493,10 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   report.forces_ns = times.forces_ns;
   report.integrate_ns = times.integrate_ns;
 
-  // 5. Device force.
+  // 5. Friction's anchors (stick or slip), then the device force.
   {
     StageTimer timer(&report.checks_ns);
+    CommitFriction(s, ws, &report);
     DeviceForces(s, ws, &report);
   }
 

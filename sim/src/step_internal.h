@@ -53,6 +53,22 @@ void ResolveTools(const Model& model, State& state, Workspace& ws, const ToolInp
 // Needs the contact candidates, so it runs after BuildActiveSet.
 void UpdateGrasps(const Model& model, State& state, Workspace& ws, StepReport* report);
 
+// friction.cc — Coulomb friction with stiction (thesis 7.2.4; the law is described there).
+// RankContact: keeps the tool's kAnchorAtoms strongest contacts of the tick (ToolStiffness).
+void RankContact(ActiveTool& tool, int32_t atom, double force);
+// At the tick's start, after the contacts were ranked: anchors a tool that touches and has none,
+// notes the anchor point, and adds the friction spring's stiffness to the anchor atoms'
+// atom_extra_k (active atoms only, so ClearExtraK's anchors and ClearTickScratch undo it).
+void BeginFriction(State& state, Workspace& ws);
+// In ToolForces, after the tool's contact loop (eval_force = the contact forces so far): adds the
+// friction force to the anchor atoms' accumulator and to eval_force.
+void AddFriction(const State& state, Workspace& ws, ActiveTool& tool, Real* force, int stride);
+// Friction's Huber potential at the State's positions for a tool whose contact force sum is `contact`.
+double FrictionEnergy(const State& state, const ActiveTool& tool, const double contact[3], double dt);
+// After the accepted attempt: stick or slip (the anchor dragged), re-spread, the report's
+// friction fields, the anchor back to State; contact lost clears it.
+void CommitFriction(State& state, Workspace& ws, StepReport* report);
+
 // active_set.cc — stage 2: active atoms (ws.active, copied to State), contact candidates, and
 // the active element list; immobilises atoms that left the window and settled.
 void BuildActiveSet(const Model& model, State& state, Workspace& ws);

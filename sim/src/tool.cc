@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include "idms/sim/model.h"
 #include "idms/sim/workspace.h"
@@ -78,8 +80,52 @@ bool SegmentCrossesSweep(const double p[3], const double q[3], const double a0[3
   return SegmentCrossesTriangle(p, q, a0, b0, b1) || SegmentCrossesTriangle(p, q, a0, b1, a1);
 }
 
+bool SetFrictionItem(std::string_view key, std::string_view value, ToolCommand* tool) {
+  double* field = key == "mu_s"   ? &tool->mu_s
+                  : key == "mu_d" ? &tool->mu_d
+                  : key == "k_t"  ? &tool->friction_stiffness
+                  : key == "b_t"  ? &tool->friction_damping
+                                  : nullptr;
+  const std::string text(value);
+  char* end = nullptr;
+  const double x = std::strtod(text.c_str(), &end);
+  if (field == nullptr || text.empty() || *end != '\0' || !std::isfinite(x)) return false;
+  *field = x;
+  return true;
+}
+
+bool ValidateFriction(const ToolCommand& t, std::string* error) {
+  auto num = [](double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%g", v);
+    return std::string(buf);
+  };
+  if (!(std::isfinite(t.mu_s) && t.mu_s >= 0)) {
+    *error = "mu_s must be a finite number >= 0, got " + num(t.mu_s);
+  } else if (!(std::isfinite(t.mu_d) && t.mu_d >= 0)) {
+    *error = "mu_d must be a finite number >= 0, got " + num(t.mu_d);
+  } else if (t.mu_d > t.mu_s) {
+    *error = "mu_d must be <= mu_s (" + num(t.mu_s) + "), got " + num(t.mu_d);
+  } else if (!(std::isfinite(t.friction_stiffness) && t.friction_stiffness >= 0)) {
+    *error = "k_t must be a finite number > 0 (0 = the tool's stiffness), got " + num(t.friction_stiffness);
+  } else if (!std::isfinite(t.friction_damping)) {
+    *error = "b_t must be a finite number >= 0 (< 0 = k_t dt), got " + num(t.friction_damping);
+  } else {
+    return true;
+  }
+  return false;
+}
+
 namespace internal {
 namespace {
+
+// Friction's parameters as the step takes them: finite, 0 <= mu_d <= mu_s, and a stiffness and
+// damping that are finite (their signs choose defaults). Anything else: no friction (validated at
+// the boundary; this is the last line of defence).
+bool FrictionValid(const ToolCommand& c) {
+  return std::isfinite(c.mu_s) && std::isfinite(c.mu_d) && c.mu_d >= 0 && c.mu_d <= c.mu_s &&
+         std::isfinite(c.friction_stiffness) && std::isfinite(c.friction_damping);
+}
 
 bool ValidCommand(const ToolCommand& c) {
   if (!Finite3(c.pos)) return false;
@@ -153,6 +199,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
     const double prev_base[3] = {ts.pos[0], ts.pos[1], ts.pos[2]};
     const double prev_tip[3] = {ts.blade_tip[0], ts.blade_tip[1], ts.blade_tip[2]};
     if (ValidCommand(*cmd)) {
+      for (int c = 0; c < 3; ++c) at.prev_pos[c] = ts.has_pos ? ts.pos[c] : cmd->pos[c];
       for (int c = 0; c < 3; ++c) ts.pos[c] = cmd->pos[c], ts.blade_tip[c] = cmd->pos[c] + cmd->blade[c];
       ts.radius = cmd->radius;
       ts.stiffness = cmd->stiffness;
@@ -163,6 +210,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       ++s.warnings.bad_tool_input;
       report->tools[t].input_held = true;
       if (!ts.has_pos || ts.kind != cmd->kind) continue;
+      std::copy(ts.pos, ts.pos + 3, at.prev_pos);
     }
     at.kind = cmd->kind;
     at.law = cmd->law;
@@ -173,6 +221,21 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
     at.grasp_atom = ts.grasp_atom;
     at.grasp_leq = ts.grasp_leq;
     at.grasp_k = ts.grasp_k;
+    // Friction: resolved coefficients (validated: a bad value is no friction) and the anchor.
+    if (IsContactTool(at.kind) && FrictionValid(*cmd) && cmd->mu_s > 0) {
+      at.mu_s = cmd->mu_s;
+      at.mu_d = cmd->mu_d;
+      at.k_t = cmd->friction_stiffness > 0 ? cmd->friction_stiffness : at.stiffness;
+      at.b_t = cmd->friction_damping >= 0 ? cmd->friction_damping : at.k_t * ws.options.dt_s;
+      std::copy(ts.anchor_atoms, ts.anchor_atoms + kAnchorAtoms, at.anchor_atoms);
+      std::copy(ts.anchor_w, ts.anchor_w + kAnchorAtoms, at.anchor_w);
+      std::copy(ts.anchor_offset, ts.anchor_offset + 3, at.anchor_offset);
+      std::copy(ts.friction_u, ts.friction_u + 3, at.friction_u);
+      at.friction = ts.friction;
+    } else if (ts.friction != FrictionState::kNone) {
+      ts.friction = FrictionState::kNone;  // friction switched off: forget the anchor
+      std::fill(ts.anchor_atoms, ts.anchor_atoms + kAnchorAtoms, -1);
+    }
     // Scalpel: the quad swept since the last tick (thesis 3.2.6: slicing removes elements).
     if (at.kind == ToolKind::kScalpel && had_scalpel) {
       report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.pos, at.blade_tip);

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "command.h"
+#include "idms/sim/drag.h"
 #include "idms/sim/edit.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
@@ -27,6 +28,7 @@ struct RunArgs {
   std::vector<double> plot_window;                   // --plot-window T0,T1: the plot's time axis
   int64_t max_ticks = -1;                            // -1 = the whole script
   bool full = false, json = false;
+  bool friction = false;  // the tool has friction (set by Run): the plot draws f_t and f_n
 };
 
 // Figures of merit of one crossing of a stroke (thesis 6.1.2): the forces while the MIO moves
@@ -76,6 +78,7 @@ bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
   }
   std::stringstream in(colon == std::string::npos ? "" : spec.substr(colon + 1));
   std::string item;
+  bool mu_d_given = false;
   while (std::getline(in, item, ',')) {
     const size_t eq = item.find('=');
     const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
@@ -88,10 +91,18 @@ bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
       tool->stiffness = number;
     } else if (key == "law" && (value == "thesis" || value == "linear")) {
       tool->law = value == "thesis" ? ContactLaw::kThesis : ContactLaw::kLinear;
+    } else if (SetFrictionItem(key, value, tool)) {
+      if (key == "mu_s" && !mu_d_given) tool->mu_d = tool->mu_s;  // mu_d defaults to mu_s
+      mu_d_given = mu_d_given || key == "mu_d";
     } else {
-      *error = "--tool '" + spec + "': bad item '" + item + "' (expected r=POSITIVE, k=POSITIVE, law=thesis|linear)";
+      *error = "--tool '" + spec + "': bad item '" + item +
+               "' (expected r=POSITIVE, k=POSITIVE, law=thesis|linear, mu_s=, mu_d=, k_t=, b_t=)";
       return false;
     }
+  }
+  if (!ValidateFriction(*tool, error)) {
+    *error = "--tool '" + spec + "': " + *error;
+    return false;
   }
   return true;
 }
@@ -120,7 +131,9 @@ void Plot(const RunArgs& a, const std::string& title) {
   spec.width_px = 1000, spec.height_px = 700;
   spec.key = "outside right";
   if (a.plot_window.size() == 2) spec.x_range = std::array<double, 2>{a.plot_window[0], a.plot_window[1]};
-  const char* columns[][2] = {{"x", "x"}, {"y", "y"}, {"z", "z"}, {"fx", "f_x"}, {"fy", "f_y"}, {"fz", "f_z"}};
+  std::vector<std::array<const char*, 2>> columns = {{"x", "x"},    {"y", "y"},    {"z", "z"},
+                                                     {"fx", "f_x"}, {"fy", "f_y"}, {"fz", "f_z"}};
+  if (a.friction) columns.push_back({"ft", "|f_t| (friction)"}), columns.push_back({"fn", "f_n"});
   for (const auto& c : columns) {
     spec.series.push_back({.title = c[1],
                            .csv_path = a.csv,
@@ -173,20 +186,29 @@ void PlotFit(const RunArgs& a, const std::vector<std::array<double, 2>>& zf, con
   if (!PlotPng(spec, a.fit_plot, &error)) Fail("run", "--fit-plot: " + error);
 }
 
-void Run(const RunArgs& a) {
+void Run(RunArgs& a) {
   // Model, script, tool, integrator.
   Model model;
   LoadError load_error;
   std::string fem, plg;
   ModelPaths(a.model, &fem, &plg);
   if (!LoadModel(fem, plg, {}, &model, &load_error)) Fail("run", load_error.ToString());
-  Script script;
-  if (!ParseScriptName(a.script, &script))
-    Fail("run", "--script '" + a.script + "': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle");
+  Script script = Script::kPalpate;
+  const bool drag = a.script == "drag" || a.script.rfind("drag:", 0) == 0;
+  if (!drag && !ParseScriptName(a.script, &script)) {
+    Fail("run", "--script '" + a.script +
+                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or drag[:fraction=F,...]");
+  }
   ToolCommand tool;
-  tool.kind = script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
+  tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   std::string error;
   if (!a.tool.empty() && !ParseTool(a.tool, &tool, &error)) Fail("run", error);
+  DragOptions drag_options;
+  if (drag && !ParseDragSpec(a.script, &drag_options, &error)) Fail("run", "--script: " + error);
+  if (drag && !(tool.mu_s > 0))
+    Fail("run", "--script drag pushes at a fraction of mu_s f_n: give --tool sphere:mu_s=...");
+  drag_options.mu_s = tool.mu_s;
+  a.friction = tool.mu_s > 0;
   Preset preset{};
   if (!ParsePresetName(a.preset, &preset)) Fail("run", "--preset '" + a.preset + "': expected default or thesis");
   const PresetSettings settings = SettingsOf(preset);
@@ -211,11 +233,21 @@ void Run(const RunArgs& a) {
   // Full mode streams the whole model every tick: past the caches, huge pages save page walks.
   if (options.full) AdviseHugePages(state, workspace);
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
-  const int64_t script_ticks = std::llround(ScriptDuration(script) / a.dt);
+  DragHand hand(geometry, drag_options);
+  const int64_t script_ticks = std::llround((drag ? hand.Duration() : ScriptDuration(script)) / a.dt);
   const int64_t ticks = a.max_ticks >= 0 ? std::min(a.max_ticks, script_ticks) : script_ticks;
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
   if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
-  if (csv) std::fputs("t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us\n", csv);
+  // Friction's columns come after the ten of a frictionless run, so their readers keep working.
+  if (csv) {
+    std::fputs(a.friction ? "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,ftx,fty,ftz,ft,fn,friction\n"
+                          : "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us\n",
+               csv);
+  }
+  int64_t stick_ticks = 0, slip_ticks = 0, transitions = 0;
+  double friction_work = 0, friction_work_max_sum = 0, max_ft = 0;
+  FrictionState last_friction = FrictionState::kNone;
+  double last_force[3] = {0, 0, 0};
   ToolInput input;
   input.num_tools = 1;
   std::vector<double> compute_us, cpu_us;
@@ -225,9 +257,11 @@ void Run(const RunArgs& a) {
   std::vector<std::array<double, 2>> loading;  // (z, f_z) while pressing in, in contact
   int64_t fallbacks = 0, fused_ticks = 0, substeps = 0;
   std::vector<Crossing> crossings;
-  for (const auto& [t0, t1] : StrokeCrossings(script)) crossings.push_back({.t0 = t0, .t1 = t1});
+  for (const auto& [t0, t1] : StrokeCrossings(drag ? Script::kPalpate : script))
+    crossings.push_back({.t0 = t0, .t1 = t1});
   for (int64_t n = 0; n < ticks; ++n) {
-    const ScriptSample sample = SampleScript(script, geometry, (n + 1) * a.dt);
+    const ScriptSample sample =
+        drag ? hand.Next((n + 1) * a.dt, last_force) : SampleScript(script, geometry, (n + 1) * a.dt);
     tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
     tool.closed = sample.closed;
     input.tools[0] = tool;
@@ -239,6 +273,19 @@ void Run(const RunArgs& a) {
     compute_us.push_back(us);
     if (a.full) cpu_us.push_back(1e6 * (ThreadCpuSeconds() - cpu_start));
     const double* f = report.tools[0].force;
+    std::copy(f, f + 3, last_force);
+    const ToolReport& tr = report.tools[0];
+    const double ft =
+        std::sqrt(tr.friction_force[0] * tr.friction_force[0] + tr.friction_force[1] * tr.friction_force[1] +
+                  tr.friction_force[2] * tr.friction_force[2]);
+    max_ft = std::max(max_ft, ft);
+    stick_ticks += tr.friction == FrictionState::kStick;
+    slip_ticks += tr.friction == FrictionState::kSlip;
+    transitions +=
+        tr.friction != last_friction && tr.friction != FrictionState::kNone && last_friction != FrictionState::kNone;
+    last_friction = tr.friction;
+    friction_work += tr.friction_work;
+    friction_work_max_sum = std::max(friction_work_max_sum, friction_work);
     max_force = std::max(max_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
     max_fz = std::max(max_fz, f[2]);
     if (std::isnan(onset_z) && std::abs(f[2]) > 1e-3) onset_z = tool.pos[2];
@@ -251,8 +298,14 @@ void Run(const RunArgs& a) {
       if (state.time_s > c.t0 && state.time_s <= c.t1 + 1e-9) c.Add(state.time_s, f);
     }
     if (csv) {
-      std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f\n", state.time_s, tool.pos[0], tool.pos[1],
+      std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f", state.time_s, tool.pos[0], tool.pos[1],
                    tool.pos[2], f[0], f[1], f[2], report.active_atoms, report.substeps, us);
+      if (a.friction) {
+        static constexpr const char* kState[] = {"none", "stick", "slip"};
+        std::fprintf(csv, ",%.6g,%.6g,%.6g,%.6g,%.6g,%s", tr.friction_force[0], tr.friction_force[1],
+                     tr.friction_force[2], ft, tr.normal_force, kState[static_cast<int>(tr.friction)]);
+      }
+      std::fputc('\n', csv);
     }
   }
   if (csv) std::fclose(csv);
@@ -272,7 +325,7 @@ void Run(const RunArgs& a) {
   for (const Crossing& c : crossings) crossings_json.push_back(c.Json());
   nlohmann::json warnings_by_kind = nlohmann::json::object();
   for (const WarningKind& k : WarningKinds(state.warnings)) warnings_by_kind[k.name] = k.count;
-  const nlohmann::json summary = {
+  nlohmann::json summary = {
       {"stiffness_fit", {{"k", -fit.slope}, {"intercept", fit.intercept}, {"r2", fit.r2}, {"points", fit.points}}},
       {"ticks", ticks},
       {"crossings", crossings_json},
@@ -301,6 +354,13 @@ void Run(const RunArgs& a) {
        {{"p50", Percentile(compute_us, 0.5)},
         {"p99", Percentile(compute_us, 0.99)},
         {"max", compute_us.empty() ? 0.0 : *std::max_element(compute_us.begin(), compute_us.end())}}}};
+  // Only with friction, so a frictionless run's summary is what it always was.
+  if (a.friction) {
+    summary["friction"] = {{"mu_s", tool.mu_s},          {"mu_d", tool.mu_d},
+                           {"stick_ticks", stick_ticks}, {"slip_ticks", slip_ticks},
+                           {"transitions", transitions}, {"max_ft", max_ft},
+                           {"work", friction_work},      {"work_max_running_sum", friction_work_max_sum}};
+  }
   if (a.json) {
     PrintJson(summary);
   } else {
@@ -311,6 +371,13 @@ void Run(const RunArgs& a) {
         options.full ? NAN : options.local_radius, static_cast<long long>(ticks), max_force, max_fz, onset_z,
         static_cast<long long>(TotalWarnings(state.warnings)), static_cast<long long>(fallbacks),
         summary["compute_us"]["p50"].get<double>(), summary["compute_us"]["p99"].get<double>());
+    if (a.friction) {
+      std::printf(
+          "friction mu_s %.3g mu_d %.3g: %lld stick, %lld slip ticks, %lld transitions, max |f_t| %.4g N, work %.4g "
+          "(largest running sum %.3g)\n",
+          tool.mu_s, tool.mu_d, static_cast<long long>(stick_ticks), static_cast<long long>(slip_ticks),
+          static_cast<long long>(transitions), max_ft, friction_work, friction_work_max_sum);
+    }
     for (const nlohmann::json& c : crossings_json) {
       std::printf(
           "  crossing %.2f-%.2f s: max |f_x| %.3g N, max |f_y| %.3g N, f_z %.3g +- %.2g N (%.3g to %.3g), "
@@ -336,7 +403,8 @@ void Setup(CLI::App& app) {
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
   cmd->add_option("--script", a.script,
                   "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a "
-                  "slow stroke to watch)")
+                  "slow stroke to watch) | drag[:fraction=F,depth=D,mass=M,damping=B,push=S] (press, then push "
+                  "sideways at F mu_s f_n through a simulated hand; needs mu_s)")
       ->capture_default_str();
   cmd->add_option("--preset", a.preset,
                   "default (symplectic Euler, r_l = 2 r: the error-against-run-time choice) | thesis (explicit "
@@ -349,8 +417,12 @@ void Setup(CLI::App& app) {
   cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
   cmd->add_option("--ticks", a.max_ticks, "Stop after this many ticks (default: the whole script)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--tool", a.tool, "sphere:r=1.5,k=400[,law=thesis|linear] or tweezers:... (pluck)");
-  cmd->add_option("--csv", a.csv, "Write t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us per tick");
+  cmd->add_option("--tool", a.tool,
+                  "sphere:r=1.5,k=400[,law=thesis|linear][,mu_s=S,mu_d=D,k_t=K,b_t=B] or tweezers:... (pluck); "
+                  "mu_s > 0: Coulomb friction with stiction (mu_d defaults to mu_s, k_t to k, b_t to k_t dt)");
+  cmd->add_option("--csv", a.csv,
+                  "Write t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us per tick (with friction, then "
+                  "ftx,fty,ftz,ft,fn,friction)");
   cmd->add_option("--plot", a.plot, "Write a PNG of the position and force histories (needs --csv)");
   cmd->add_option("--plot-window", a.plot_window, "T0,T1: the plot's time axis, s (default: the whole run)")
       ->delimiter(',')

@@ -30,7 +30,8 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"), std::string::npos)
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or (scripted) drag"),
+            std::string::npos)
       << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
   EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
@@ -109,6 +110,132 @@ TEST(Devices, TheBuiltInSceneTakesTheDefaultStepAndTheThesisStepByName) {
   EXPECT_EQ(step.integrator, Integrator::kExplicitEuler);
   EXPECT_EQ(step.local_radius, 2.25);
   EXPECT_EQ(tool.kind, ToolKind::kTweezers);
+}
+
+// Friction from the scene or --friction reaches the tool; bad coefficients are refused by name;
+// the scripted stroke's samples carry the tangential force and the stick/slip state.
+TEST(Devices, FrictionReachesTheToolAndTheSamples) {
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  std::string error;
+  v1::Scene scene = agent::DefaultScene("stroke-slow");
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.mu_s, 0.0) << "the built-in scene is frictionless";
+  scene.set_model("hex_4x5_home");  // as the agent's command line names it before --friction
+  ASSERT_TRUE(agent::ApplyFrictionSpec("mu_s=0.6,mu_d=0.4", &scene, &error)) << error;
+  EXPECT_EQ(scene.tools(0).static_friction(), 0.6);
+  EXPECT_EQ(scene.tools(0).friction_stiffness(), 400);
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  EXPECT_EQ(tool.mu_s, 0.6);
+  EXPECT_EQ(tool.mu_d, 0.4);
+  EXPECT_DOUBLE_EQ(tool.friction_damping, 0.4);
+  v1::Scene bad = scene;
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=0.3,mu_d=0.5", &bad, &error));
+  EXPECT_EQ(error, "--friction: tools[0].kinetic_friction: must be <= static_friction (0.3), got 0.5");
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=nan", &bad, &error));
+  EXPECT_NE(error.find("bad item 'mu_s=nan'"), std::string::npos) << error;
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=-1", &bad, &error));
+  EXPECT_EQ(error, "--friction: tools[0].static_friction: must be in [0, inf), got -1");
+
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  context.registration = reg;
+  auto device = agent::MakeDevice("scripted:stroke-slow", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *device, options);
+  int64_t stick = 0, slip = 0;
+  double max_ft = 0;
+  for (int i = 0; i < 5800; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (loop.samples().pop(s)) {
+      stick += s.friction == FrictionState::kStick;
+      slip += s.friction == FrictionState::kSlip;
+      max_ft = std::max(max_ft, std::hypot(s.friction_force[0], s.friction_force[1], s.friction_force[2]));
+      if (s.friction != FrictionState::kNone) {
+        ASSERT_LE(std::hypot(s.friction_force[0], s.friction_force[1], s.friction_force[2]),
+                  0.6 * s.normal_force + 1e-9);
+      }
+    }
+    int32_t index;
+    while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_GT(stick, 100);
+  EXPECT_GT(slip, 100);
+  EXPECT_GT(max_ft, 0.1);
+
+  // Closed loop: a simulated hand strokes with friction; the stick holds the hand back and nothing
+  // grows (no warning, the force stays under the thesis stroke's scale).
+  auto hand = agent::MakeDevice("human:stroke-slow", context, &error);
+  ASSERT_TRUE(hand) << error;
+  agent::Loop human_loop(model, step, tool, reg, *hand, options);
+  double max_force = 0;
+  int64_t human_stick = 0, warnings = 0;
+  for (int i = 0; i < 5800; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    human_loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (human_loop.samples().pop(s)) {
+      max_force = std::max(max_force, std::hypot(s.force[0], s.force[1], s.force[2]));
+      human_stick += s.friction == FrictionState::kStick;
+      warnings += s.warnings;
+    }
+    int32_t index;
+    while (human_loop.PopMeshSlot(&index)) human_loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_EQ(warnings, 0);
+  EXPECT_GT(human_stick, 100);
+  EXPECT_LT(max_force, 5.0);
+}
+
+// scripted:drag holds a finger with friction under a sideways push at half of mu_s f_n: over the
+// script's last 10 s the device does not move (and without friction the device is refused).
+TEST(Devices, DragHoldsBelowTheStaticLimit) {
+  const Model model = Hex();
+  v1::Scene scene = agent::DefaultScene("drag");
+  scene.set_model("hex_4x5_home");
+  std::string error;
+  ASSERT_TRUE(agent::ApplyFrictionSpec("mu_s=0.6,mu_d=0.4", &scene, &error)) << error;
+  StepOptions step;
+  ToolCommand tool;
+  agent::Registration reg;
+  ASSERT_TRUE(agent::SceneToLoop(scene, &step, &tool, &reg, &error)) << error;
+  agent::DeviceContext context;
+  context.model = &model;
+  context.registration = reg;
+  EXPECT_FALSE(agent::MakeDevice("scripted:drag", context, &error));
+  EXPECT_NE(error.find("give the tool friction"), std::string::npos) << error;
+  context.mu_s = tool.mu_s;
+  EXPECT_FALSE(agent::MakeDevice("scripted:drag,fraction=-1", context, &error));
+  auto device = agent::MakeDevice("scripted:drag,fraction=0.5", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::LoopOptions options;
+  options.realtime = false;
+  agent::Loop loop(model, step, tool, reg, *device, options);
+  double x_at_5s = 0, x_last = 0;
+  int64_t slip = 0, stick = 0;
+  for (int i = 0; i < 15000; ++i) {
+    const int64_t now = agent::MonotonicNs();
+    loop.Tick(now, now + 1000000000);
+    agent::TickSample s;
+    while (loop.samples().pop(s)) {
+      if (s.tick == 4999) x_at_5s = s.tool_pos[0];
+      x_last = s.tool_pos[0];
+      slip += s.friction == FrictionState::kSlip;
+      stick += s.friction == FrictionState::kStick;
+    }
+    int32_t index;
+    while (loop.PopMeshSlot(&index)) loop.ReleaseMeshSlot(index);
+  }
+  EXPECT_EQ(slip, 0);
+  EXPECT_GT(stick, 13000);
+  EXPECT_LT(std::fabs(x_last - x_at_5s), 1e-6);
+  EXPECT_GT(x_last, MakeScriptGeometry(model, 1.5).center[0] + 1e-3) << "the push did not move the hand at all";
 }
 
 TEST(Devices, HumanHandIsStableInContact) {

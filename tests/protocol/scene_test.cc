@@ -171,3 +171,41 @@ TEST(Scene, ParseWithoutValidation) {
 
 }  // namespace
 }  // namespace idms
+
+namespace idms {
+namespace {
+
+// Friction's fields (issue 30): bad coefficients are refused naming the field and its place;
+// defaults are filled only where there is friction.
+TEST(Scene, FrictionIsValidatedAndDefaulted) {
+  const std::string tool = "model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1.5\n  stiffness: 400\n";
+  EXPECT_EQ(LoadError(tool + "  static_friction: -0.5\n}\n"),
+            "test.scene:6:3: tools[0].static_friction: must be in [0, inf), got -0.5");
+  EXPECT_EQ(LoadError(tool + "  static_friction: 0.4\n  kinetic_friction: 0.6\n}\n"),
+            "test.scene:7:3: tools[0].kinetic_friction: must be <= static_friction (0.4), got 0.6");
+  EXPECT_EQ(LoadError(tool + "  static_friction: nan\n}\n"),
+            "test.scene:6:3: tools[0].static_friction: must be in [0, inf), got nan");
+  EXPECT_EQ(LoadError(tool + "  kinetic_friction: 0.3\n}\n"),
+            "test.scene:6:3: tools[0].kinetic_friction: needs static_friction (mu_s >= mu_d) set too");
+  EXPECT_EQ(LoadError(tool + "  static_friction: 0.5\n  friction_stiffness: 0\n}\n"),
+            "test.scene:7:3: tools[0].friction_stiffness: must be in (0, inf), got 0");
+  EXPECT_EQ(LoadError(tool + "  static_friction: 0.5\n  friction_damping: -1\n}\n"),
+            "test.scene:7:3: tools[0].friction_damping: must be in [0, inf), got -1");
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SCALPEL\n  radius: 1\n  stiffness: 1\n"
+                      "  static_friction: 0.5\n}\n"),
+            "test.scene:6:3: tools[0].static_friction: friction applies to KIND_SPHERE and KIND_TWEEZERS only");
+
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(tool + "  static_friction: 0.6\n}\ndt_s: 0.002\n", "f.scene", &scene, &error)) << error;
+  EXPECT_EQ(scene.tools(0).kinetic_friction(), 0.6);
+  EXPECT_EQ(scene.tools(0).friction_stiffness(), 400);
+  EXPECT_DOUBLE_EQ(scene.tools(0).friction_damping(), 0.8);
+  // Frictionless: no friction field appears.
+  ASSERT_TRUE(LoadSceneText(kMinimal, "m.scene", &scene, &error)) << error;
+  EXPECT_FALSE(scene.tools(0).has_static_friction());
+  EXPECT_FALSE(scene.tools(0).has_friction_damping());
+}
+
+}  // namespace
+}  // namespace idms

@@ -474,8 +474,24 @@ TEST_F(RecordingRenderTest, TheToolIsAnOutlineWhereTheDeviceWasAndTheForceArrowS
     return n;
   };
   o.show_tool = o.show_force = true;
-  EXPECT_GT(yellow(Draw(state, o)), 50);
+  const Image arrow = Draw(state, o);
+  EXPECT_GT(yellow(arrow), 50);
   EXPECT_EQ(yellow(with_tool), 0);
+  // Friction's part (issue 30): a magenta arrow along the sample's tangential force, only when
+  // the sample carries one.
+  auto magenta = [](const Image& image) {
+    int64_t n = 0;
+    for (size_t i = 0; i < image.rgba.size(); i += 4) {
+      n += image.rgba[i] > 120 && image.rgba[i + 1] < 80 && image.rgba[i + 2] > 110;
+    }
+    return n;
+  };
+  EXPECT_EQ(magenta(arrow), 0);
+  SceneView sliding = state.View();
+  sliding.friction_force = {0.8, 0, 0};
+  Image with_friction;
+  ASSERT_TRUE(renderer_.Render(sliding, o, &with_friction, &error)) << error;
+  EXPECT_GT(magenta(with_friction), 50);
 }
 
 TEST_F(RecordingRenderTest, TheSameTimeRenderedTwiceIsTheSameImage) {

@@ -150,8 +150,10 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck or stroke-gentle"),
-            std::string::npos)
+  EXPECT_NE(
+      out.text.find(
+          "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or drag[:fraction=F,...]"),
+      std::string::npos)
       << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
   EXPECT_NE(out.status, 0);
@@ -168,6 +170,44 @@ TEST(RunCli, BadArgumentsAreClearErrors) {
   out = RunSim("run --model " + kHex + " --local-radius 1");
   EXPECT_NE(out.status, 0);
   EXPECT_NE(out.text.find("expected at least the tool's radius"), std::string::npos) << out.text;
+}
+
+}  // namespace
+
+namespace {
+
+// Friction on the command line (issue 30): the drag script holds below mu_s f_n and slides above
+// it, the CSV adds its columns after the ten, and bad coefficients are refused by name.
+TEST(RunCli, DragHoldsBelowMuSAndSlidesAboveWithFrictionColumns) {
+  const std::string csv = testing::TempDir() + "/drag.csv";
+  Output out =
+      RunSim("run --model " + kHex + " --script drag:fraction=0.5 --tool sphere:mu_s=0.6,mu_d=0.4 --json --csv " + csv);
+  ASSERT_EQ(out.status, 0) << out.text;
+  auto j = nlohmann::json::parse(out.text);
+  EXPECT_EQ(j["friction"]["slip_ticks"].get<int64_t>(), 0);
+  EXPECT_GT(j["friction"]["stick_ticks"].get<int64_t>(), 10000);
+  std::ifstream in(csv);
+  std::string header, line, last;
+  std::getline(in, header);
+  EXPECT_EQ(header, "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,ftx,fty,ftz,ft,fn,friction");
+  while (std::getline(in, line)) last = line;
+  EXPECT_EQ(last.substr(last.rfind(',') + 1), "stick");
+
+  out = RunSim("run --model " + kHex + " --script drag:fraction=1.3 --tool sphere:mu_s=0.6,mu_d=0.4 --json");
+  ASSERT_EQ(out.status, 0) << out.text;
+  j = nlohmann::json::parse(out.text);
+  EXPECT_GT(j["friction"]["slip_ticks"].get<int64_t>(), 5000);
+  EXPECT_LE(j["friction"]["work_max_running_sum"].get<double>(), 1e-9);
+
+  out = RunSim("run --model " + kHex + " --script stroke-slow --tool sphere:mu_s=0.4,mu_d=0.6");
+  EXPECT_NE(out.status, 0);
+  EXPECT_NE(out.text.find("mu_d must be <= mu_s (0.4), got 0.6"), std::string::npos) << out.text;
+  out = RunSim("run --model " + kHex + " --script stroke-slow --tool sphere:mu_s=-1");
+  EXPECT_NE(out.text.find("mu_s must be a finite number >= 0, got -1"), std::string::npos) << out.text;
+  out = RunSim("run --model " + kHex + " --script stroke-slow --tool sphere:mu_s=nan");
+  EXPECT_NE(out.text.find("bad item 'mu_s=nan'"), std::string::npos) << out.text;
+  out = RunSim("run --model " + kHex + " --script drag:fraction=-1 --tool sphere:mu_s=0.5");
+  EXPECT_NE(out.text.find("bad item 'fraction=-1'"), std::string::npos) << out.text;
 }
 
 }  // namespace

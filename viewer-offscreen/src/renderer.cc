@@ -401,8 +401,14 @@ struct Renderer::Impl {
   }
 
   // The force arrow from the tool's surface, lit by one light from the viewer's upper left.
+  // The device force, and its tangential (friction) part when there is one, each an arrow from
+  // the tool's surface along it, the same length per unit of force.
   void DrawForce(const SceneView& scene, double r) {
-    const Vec3 f{scene.force[0], scene.force[1], scene.force[2]};
+    DrawArrow(scene, {scene.force[0], scene.force[1], scene.force[2]}, r, kForceColour);
+    DrawArrow(scene, {scene.friction_force[0], scene.friction_force[1], scene.friction_force[2]}, r, kFrictionColour);
+  }
+
+  void DrawArrow(const SceneView& scene, const Vec3& f, double r, const std::array<float, 3>& colour) {
     const double magnitude = Norm(f);
     if (!(magnitude > 1e-9)) return;
     glEnable(GL_LIGHTING);
@@ -416,7 +422,7 @@ struct Renderer::Impl {
                           z[0] * length, z[1] * length, z[2] * length, 0, base[0],  base[1],  base[2],  1};
     glPushMatrix();
     glMultMatrixd(m);
-    SetMaterial(GL_FRONT_AND_BACK, kForceColour, 0.3f);
+    SetMaterial(GL_FRONT_AND_BACK, colour, 0.3f);
     DrawShape(arrow);
     glPopMatrix();
     glDisable(GL_LIGHTING);

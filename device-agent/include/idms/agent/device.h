@@ -56,10 +56,13 @@ struct DeviceContext {
   Registration registration;     // scripted trajectories are made in the model frame and mapped back
   double mio_radius = 1.5;       // model units: where contact starts, for the scripts
   double dt_s = 1e-3;            // loop period, s: the hand's integration step, the udp timeout's unit
+  double mu_s = 0;               // the tool's static friction: the drag pushes at a fraction of mu_s f_n
 };
 
 // Parses a --device spec and opens the device (the UDP socket is bound here):
 //   scripted:palpate|stroke-slow|stroke-fast|pluck|stroke-gentle
+//   scripted:drag[,fraction=F,depth=D,mass=M,damping=B,push=S]   press, then push sideways at
+//                                           F mu_s f_n through a simulated hand (needs mu_s > 0)
 //   human:SCRIPT[,mass=M][,k=K][,zeta=Z]   simulated hand (defaults 0.05, 60, 0.7)
 //   udp:PORT[,bind=ADDR][,timeout_ms=T]     bridge (defaults 127.0.0.1, 50)
 //   replay:FILE.mcap                        the /device channel of a session recording

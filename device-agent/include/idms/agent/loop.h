@@ -38,6 +38,11 @@ struct TickSample {
   bool overrun = false;        // the work ended after the next deadline
   bool force_limited = false;  // the device force was clamped at its limit this tick
   bool reset = false;          // the model was put back to rest at the start of this tick (a command)
+  // Friction (ToolReport): the tangential part of `force` (scaled as it was clamped), the normal
+  // force, the state.
+  double friction_force[3] = {0, 0, 0};
+  double normal_force = 0;
+  FrictionState friction = FrictionState::kNone;
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.

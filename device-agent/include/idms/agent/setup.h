@@ -17,6 +17,11 @@ namespace idms::agent {
 // r_l = 2.25), with defaults applied.
 v1::Scene DefaultScene(const std::string& script, v1::Preset preset = v1::PRESET_DEFAULT);
 
+// --friction mu_s=S[,mu_d=D,k_t=K,b_t=B] (idms-sim run's --tool items): replaces every tool's
+// friction fields in the scene (so the recorded scene says what ran), validates it and fills the
+// defaults again. False with a message naming the item or the field.
+bool ApplyFrictionSpec(const std::string& spec, v1::Scene* scene, std::string* error);
+
 // Maps a validated scene with defaults applied. Tool 0 is the one the device drives; a scene
 // with more tools is refused (one device per agent). False with a message naming the field.
 bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,

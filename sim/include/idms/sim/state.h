@@ -30,6 +30,13 @@ enum class ToolKind : uint8_t {
   kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
 };
 
+// Friction at a contact tool (thesis 7.2.4): none (no friction, or no contact), sticking to its
+// anchor on the surface, or slipping (the anchor dragged so that |f_t| = mu_d f_n).
+enum class FrictionState : uint8_t { kNone, kStick, kSlip };
+
+// Atoms a friction anchor is spread over: the tool's strongest contacts when it was placed.
+inline constexpr int kAnchorAtoms = 4;
+
 // Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip
 // and the tweezers); the scalpel only cuts.
 constexpr bool IsContactTool(ToolKind kind) { return kind == ToolKind::kSphere || kind == ToolKind::kTweezers; }
@@ -53,6 +60,16 @@ struct ToolState {
   // then until it has caught up with the contact force.
   bool easing = false;
   int32_t easing_ticks = 0;  // ticks of the transition window still to come
+  // Friction's anchor (thesis 7.2.4, friction.cc): a point on the surface, the weighted mean of
+  // up to kAnchorAtoms atoms (weights sum to 1, unused slots -1), so it moves as the tissue
+  // deforms; the tool sticks where its centre is the anchor point + anchor_offset. friction_u is
+  // the committed tangential displacement from there (the implicit-Euler state of Kikuuwe et al.
+  // 2006). Cleared when the tool loses contact.
+  int32_t anchor_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
+  double anchor_w[kAnchorAtoms] = {0, 0, 0, 0};
+  double anchor_offset[3] = {0, 0, 0};  // model units: centre - anchor point when sticking
+  double friction_u[3] = {0, 0, 0};     // model units, committed at the end of the last tick
+  FrictionState friction = FrictionState::kNone;
 };
 
 // Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).

@@ -122,6 +122,15 @@ struct ToolReport {
   int32_t grasp_atom = -1;          // tweezers: grasped atom after this tick, -1 = none
   int32_t cut_elements = 0;         // scalpel: elements this tick's sweep crossed (pending edit)
   bool input_held = false;          // the input was invalid; the last valid pose was used
+  // Friction (friction.cc): its part of force_raw (tangential to the contact, tick average), the
+  // normal force it was bounded by (|contact force|, tick average), and the state
+  // after this tick. friction_work: the work friction's forces did on the atoms and the device
+  // this tick plus the change of its spring's energy (k_t |u|^2 / 2): <= 0 when friction is
+  // passive (it only dissipates). All 0 / kNone without friction.
+  double friction_force[3] = {0, 0, 0};  // on the device, force units
+  double normal_force = 0;               // force units
+  double friction_work = 0;              // force * length
+  FrictionState friction = FrictionState::kNone;
 };
 
 struct StepReport {

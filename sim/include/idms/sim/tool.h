@@ -4,6 +4,8 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
+#include <string_view>
 
 #include "idms/sim/state.h"
 
@@ -25,7 +27,24 @@ struct ToolCommand {
   ContactLaw law = ContactLaw::kThesis;
   bool closed = false;           // tweezers: closed this tick
   double blade[3] = {0, 0, -1};  // scalpel: the blade runs from pos to pos + blade, model units
+  // Coulomb friction with stiction at this sphere/tweezers' contacts (friction.cc). mu_s = 0 is
+  // no friction (the thesis: frictionless, and it costs nothing). 0 <= mu_d <= mu_s. The
+  // tangential spring-damper to the anchor: stiffness k_t (force / length; <= 0 = the MIO's k)
+  // and damping b_t (force / (length / s); < 0 = k_t * dt, twice Colgate's passivity bound
+  // k_t dt / 2 for a sampled spring).
+  double mu_s = 0;
+  double mu_d = 0;
+  double friction_stiffness = 0;
+  double friction_damping = -1;
 };
+
+// One item of a friction spec on a command line ("mu_s=0.6", "mu_d", "k_t", "b_t") into the
+// tool; false when the key is not one of them or the value is not a finite number.
+bool SetFrictionItem(std::string_view key, std::string_view value, ToolCommand* tool);
+
+// The tool's friction as a boundary checks it: finite, mu_s >= 0, 0 <= mu_d <= mu_s, k_t finite,
+// b_t finite. False with *error naming the field ("mu_d must be <= mu_s (0.4), got 0.6").
+bool ValidateFriction(const ToolCommand& tool, std::string* error);
 
 struct ToolInput {
   std::array<ToolCommand, kMaxTools> tools{};

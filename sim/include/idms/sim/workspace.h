@@ -32,6 +32,24 @@ struct ActiveTool {
   double eval_force[3] = {0, 0, 0};  // sum of this tool's forces on atoms, current evaluation
   double tick_force[3] = {0, 0, 0};  // the same, weighted over the tick's evaluations
   int32_t contacts = 0;
+  // Friction (friction.cc): coefficients and spring-damper as resolved for this tick (mu_s = 0:
+  // none), the anchor as ToolState holds it, the tick's strongest contacts (new anchors), and what
+  // the evaluations found.
+  double mu_s = 0, mu_d = 0, k_t = 0, b_t = 0;
+  int32_t anchor_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
+  double anchor_w[kAnchorAtoms] = {0, 0, 0, 0};
+  double anchor_offset[3] = {0, 0, 0};
+  double friction_u[3] = {0, 0, 0};
+  FrictionState friction = FrictionState::kNone;
+  int32_t strong_atoms[kAnchorAtoms] = {-1, -1, -1, -1};  // contacts by force, strongest first
+  double strong_f[kAnchorAtoms] = {0, 0, 0, 0};
+  double anchor_start[3] = {0, 0, 0};   // anchor point at the tick's start
+  double prev_pos[3] = {0, 0, 0};       // the tool's pose before this tick (friction's work)
+  double eval_friction[3] = {0, 0, 0};  // friction's part of eval_force
+  double tick_friction[3] = {0, 0, 0};  // ... of tick_force
+  double eval_normal[3] = {0, 0, 0};    // unit contact normal (surface -> tool), last evaluation
+  double eval_fn = 0;                   // |contact force|, last evaluation
+  double tick_fn = 0;                   // ... weighted over the tick's evaluations
 };
 
 // Linearised backward Euler on the active set: a row-major CSR matrix (viewed by Eigen through

@@ -35,7 +35,7 @@ struct RenderOptions {
   Camera camera;
   bool wireframe = false;   // the triangles' edges instead of the shaded surface
   bool show_tool = false;   // the tool at the device position, with its radius (outlined, see-through)
-  bool show_force = false;  // the device force as an arrow from the tool
+  bool show_force = false;  // the device force as an arrow from the tool (and its friction part as a second one)
   ColourBy colour_by = ColourBy::kDisplacement;
   // Drawn position = rest + scale (p - rest): exaggerates the deformation; colours, contacts and
   // the tool stay true. In (0, kMaxDeformationScale].
@@ -54,8 +54,9 @@ struct SceneView {
   // The scene's units (Scene.units), > 0 when declared: the legend then reads in mm (and N/mm).
   double mm_per_unit = 0;
   double newtons_per_force_unit = 0;
-  std::array<double, 3> force{0, 0, 0};  // force on the device, model frame, force units
-  bool contact = false, grasp = false;   // the device's last sample's flags
+  std::array<double, 3> force{0, 0, 0};           // force on the device, model frame, force units
+  std::array<double, 3> friction_force{0, 0, 0};  // its tangential (friction) part, the same frame and units
+  bool contact = false, grasp = false;            // the device's last sample's flags
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
@@ -66,6 +67,7 @@ struct SceneView {
 // protocol/display.json's (display.h), shared with the browser.
 inline constexpr std::array<float, 3> kBackground{0.93f, 0.94f, 0.96f};
 inline constexpr std::array<float, 3> kForceColour{0.95f, 0.80f, 0.10f};
+inline constexpr std::array<float, 3> kFrictionColour{0.80f, 0.15f, 0.75f};  // the force's tangential part
 inline constexpr std::array<float, 3> kWireColour{0.15f, 0.20f, 0.30f};
 // The force arrow is this many tool radii long per unit of force, at most kMaxArrowRadii radii.
 inline constexpr double kArrowRadiiPerForce = 1.0;
