@@ -141,7 +141,10 @@ HandlerResponse GetSamplesCsv(SessionHub& hub, ApiRequest& req) {
   if (fd < 0) return JsonError(req, http::status::internal_server_error, "no temporary file for the CSV");
   boost::beast::file file;
   file.native_handle(fd);  // owns it from here
-  std::string text = "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings\n";
+  // Friction's columns (as idms-sim run --csv names them) after the first twelve, so that readers
+  // of those keep working; zero and "none" without friction.
+  std::string text =
+      "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings,ftx,fty,ftz,ft,fn,friction\n";
   bool ok = true;
   const auto flush = [&] {
     boost::beast::error_code ec;
@@ -152,14 +155,18 @@ HandlerResponse GetSamplesCsv(SessionHub& hub, ApiRequest& req) {
     text.clear();
   };
   RecordedMessage m;
-  char line[320];
+  char line[480];
+  static constexpr const char* kFriction[] = {"none", "stick", "slip"};
   while (ok && reader.Next(&m, &error)) {
     if (!m.envelope.has_device_samples()) continue;
     for (const v1::DeviceSample& s : m.envelope.device_samples().samples()) {
-      const int n = std::snprintf(line, sizeof line, "%llu,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%u,%u\n",
-                                  static_cast<unsigned long long>(s.tick()), s.time_s(), s.tool_pos().x(),
-                                  s.tool_pos().y(), s.tool_pos().z(), s.force().x(), s.force().y(), s.force().z(),
-                                  s.contact() ? 1 : 0, s.force_limited() ? 1 : 0, s.num_contacts(), s.warnings());
+      const v1::Vec3& ft = s.friction_force();
+      const int state = s.friction() >= 0 && s.friction() <= 2 ? static_cast<int>(s.friction()) : 0;
+      const int n = std::snprintf(
+          line, sizeof line, "%llu,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%u,%u,%.9g,%.9g,%.9g,%.9g,%.9g,%s\n",
+          static_cast<unsigned long long>(s.tick()), s.time_s(), s.tool_pos().x(), s.tool_pos().y(), s.tool_pos().z(),
+          s.force().x(), s.force().y(), s.force().z(), s.contact() ? 1 : 0, s.force_limited() ? 1 : 0, s.num_contacts(),
+          s.warnings(), ft.x(), ft.y(), ft.z(), std::hypot(ft.x(), ft.y(), ft.z()), s.normal_force(), kFriction[state]);
       text.append(line, static_cast<size_t>(std::max(n, 0)));
     }
     if (text.size() >= (1u << 20)) flush();

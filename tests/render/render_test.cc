@@ -492,6 +492,12 @@ TEST_F(RecordingRenderTest, TheToolIsAnOutlineWhereTheDeviceWasAndTheForceArrowS
   Image with_friction;
   ASSERT_TRUE(renderer_.Render(sliding, o, &with_friction, &error)) << error;
   EXPECT_GT(magenta(with_friction), 50);
+  // A slipping contact's ring is display.json's slip colour; a sticking one keeps the contact's.
+  sliding.slip = true;
+  Image slipping;
+  ASSERT_TRUE(renderer_.Render(sliding, o, &slipping, &error)) << error;
+  EXPECT_GT(RingPixels(slipping, TheDisplay().tool_slip, cx, cy, radius_px), ring / 2);
+  EXPECT_LT(RingPixels(with_friction, TheDisplay().tool_slip, cx, cy, radius_px), ring / 10);
 }
 
 TEST_F(RecordingRenderTest, TheSameTimeRenderedTwiceIsTheSameImage) {

@@ -21,7 +21,7 @@ using json = nlohmann::json;
 using std::chrono::seconds;
 
 // Ticks first..first+n-1 at 1 kHz (time (tick + 1) ms), in contact, with a force of `force`
-// except at `peak_tick` (force `peak`, at the device's limit, one numerical warning).
+// except at `peak_tick` (force `peak`, at the device's limit, one numerical warning, slipping).
 bool SendPress(FakeAgent& agent, uint64_t first, int n, double force, uint64_t peak_tick = UINT64_MAX,
                double peak = 0) {
   v1::Envelope e;
@@ -33,7 +33,12 @@ bool SendPress(FakeAgent& agent, uint64_t first, int n, double force, uint64_t p
     s->set_contact(true);
     s->mutable_tool_pos()->set_z(1.4);
     s->mutable_force()->set_z(tick == peak_tick ? peak : force);
-    if (tick == peak_tick) s->set_warnings(1), s->set_force_limited(true);
+    if (tick == peak_tick) {
+      s->set_warnings(1), s->set_force_limited(true);
+      s->mutable_friction_force()->set_x(0.3);  // and slipping, with friction (issue 30)
+      s->set_normal_force(1.0);
+      s->set_friction(v1::FRICTION_SLIP);
+    }
   }
   return agent.Send(e);
 }
@@ -120,8 +125,9 @@ TEST(Figures, TheSummaryDescribesTheWholeRecordingAcrossAKillARestartAndAResume)
   EXPECT_EQ(csv.headers.at("content-type"), "text/csv; charset=utf-8");
   EXPECT_EQ(std::count(csv.body.begin(), csv.body.end(), '\n'), 2001) << csv.body.substr(0, 300);
   EXPECT_EQ(csv.body.substr(0, csv.body.find('\n')),
-            "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings");
-  EXPECT_NE(csv.body.find("\n500,0.501,0,0,1.4,0,0,8,1,1,0,1\n"), std::string::npos);
+            "tick,time_s,x,y,z,fx,fy,fz,contact,force_limited,num_contacts,warnings,ftx,fty,ftz,ft,fn,friction");
+  EXPECT_NE(csv.body.find("\n500,0.501,0,0,1.4,0,0,8,1,1,0,1,0.3,0,0,0.3,1,slip\n"), std::string::npos);
+  EXPECT_NE(csv.body.find("\n501,0.502,0,0,1.4,0,0,1,1,0,0,0,0,0,0,0,0,none\n"), std::string::npos);
 
   // The force over the whole session in 100 slices (a plot's): the peak kept where it was.
   const HttpReply profile = Get(server->port(), "/api/sessions/" + id + "/force?points=100", observer);

@@ -63,6 +63,7 @@ Display Parse() {
     d.tool_free = ParseSrgb(tool.at("free_srgb"));
     d.tool_contact = ParseSrgb(tool.at("contact_srgb"));
     d.tool_grasp = ParseSrgb(tool.at("grasp_srgb"));
+    d.tool_slip = ParseSrgb(tool.at("slip_srgb"));
     d.tool_fill_alpha = tool.at("fill_alpha").get<double>();
     d.tool_outline_px = tool.at("outline_px").get<double>();
     const auto& contact = j.at("contact");

@@ -382,7 +382,10 @@ struct Renderer::Impl {
                       c[2] + (u[2] * std::cos(a) + v[2] * std::sin(a)) * radius};
       glVertex3d(p[0], p[1], p[2]);
     };
-    const Srgb& colour = scene.grasp ? d.tool_grasp : scene.contact ? d.tool_contact : d.tool_free;
+    const Srgb& colour = scene.grasp     ? d.tool_grasp
+                         : scene.slip    ? d.tool_slip
+                         : scene.contact ? d.tool_contact
+                                         : d.tool_free;
     glDisable(GL_DEPTH_TEST);
     glDisable(GL_LIGHTING);
     glEnable(GL_BLEND);

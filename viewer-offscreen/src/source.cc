@@ -24,6 +24,7 @@ SceneView ViewerState::View() const {
     v.tool_pos = {sample.tool_pos().x(), sample.tool_pos().y(), sample.tool_pos().z()};
     v.force = {sample.force().x(), sample.force().y(), sample.force().z()};
     v.friction_force = {sample.friction_force().x(), sample.friction_force().y(), sample.friction_force().z()};
+    v.slip = sample.friction() == v1::FRICTION_SLIP;
     v.contact = sample.contact();
     v.grasp = sample.grasp();
   }

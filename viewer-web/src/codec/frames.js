@@ -11,7 +11,8 @@ import { idms } from './proto.js';
 /**
  * One tick, as idms.v1.DeviceSample's fields the viewer reads (unset fields read 0 / false).
  * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number,
- *   forceLimited: boolean}} Sample
+ *   forceLimited: boolean, frictionForce: Vec3, normalForce: number, friction: number}} Sample
+ *   friction: idms.v1.FrictionState (0 none, 1 stick, 2 slip)
  */
 
 /**
@@ -47,7 +48,7 @@ const kWireLength = 2;
 
 /** @returns {Sample} */
 const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0,
-  forceLimited: false });
+  forceLimited: false, frictionForce: { x: 0, y: 0, z: 0 }, normalForce: 0, friction: 0 });
 
 export class FrameDecoder {
   constructor() {
@@ -137,8 +138,11 @@ export class FrameDecoder {
     s.grasp = false;
     s.warnings = 0;
     s.forceLimited = false;
+    s.normalForce = 0;
+    s.friction = 0;
     zero(s.toolPos);
     zero(s.force);
+    zero(s.frictionForce);
     while (r.pos < end) {
       const tag = r.uint32();
       switch (tag >>> 3) {
@@ -149,6 +153,9 @@ export class FrameDecoder {
         case 8: s.grasp = r.bool(); break;
         case 10: s.warnings = r.uint32(); break;
         case 12: s.forceLimited = r.bool(); break;
+        case 13: this.readVec3(s.frictionForce, r.uint32() + r.pos); break;
+        case 14: s.normalForce = r.double(); break;
+        case 15: s.friction = r.int32(); break;
         default: r.skipType(tag & 7);
       }
     }

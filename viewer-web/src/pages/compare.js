@@ -97,7 +97,7 @@ class Side {
       if (count === 0) return;
       const last = samples[count - 1];
       const f = last.force, p = last.toolPos;
-      view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp);
+      view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, last.friction === 2);
       this.st.timeS = last.timeS || 0;
       this.onTime(this);
       const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';

@@ -15,13 +15,15 @@ import { parseObj } from '../codec/obj.js';
  * What the view has seen (a part of the page's state object, window.__idms).
  * @typedef {{frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, lastError: string, lastInvalid: string,
- *   movedVertices: number, peakForce: number, contactSamples: number, forceLimited: boolean, forceLimitHits: number}} ViewState
+ *   movedVertices: number, peakForce: number, contactSamples: number, forceLimited: boolean, forceLimitHits: number,
+ *   friction?: string}} ViewState  friction: 'stick' | 'slip' | '' at the last sample
  */
 
 /**
  * Where the view draws: elements the page has laid out.
  * @typedef {{view: HTMLElement, force: HTMLElement, position: HTMLElement, depth: HTMLElement,
- *   toolState: HTMLElement, gapNote: HTMLElement, forceLimit: HTMLElement}} ViewHosts
+ *   toolState: HTMLElement, gapNote: HTMLElement, forceLimit: HTMLElement, contact?: HTMLElement}} ViewHosts
+ *   contact: where friction's normal and tangential force go (hidden until the scene has friction)
  */
 
 /** The time plots' titles, units and series (the bench's standing panel draws the same). */
@@ -29,6 +31,10 @@ export const kForcePlot = { title: 'Device force', unit: display.unit.force, axi
   { label: 'Fx', color: '#c0392b' }, { label: 'Fy', color: '#27ae60' }, { label: 'Fz', color: '#2471a3' }, { label: '|F|', color: '#222' }] };
 export const kPositionPlot = { title: 'Tool position', unit: display.unit.length, axis: 'position', series: [
   { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] };
+
+/** Friction's plot: the contact's normal force and the tangential (friction) force's magnitude. */
+export const kContactPlot = { title: 'Contact force', unit: display.unit.force, axis: 'force', series: [
+  { label: 'normal f_n', color: '#2471a3' }, { label: 'tangential |f_t|', color: '#b5179e' }] };
 
 export class LiveView {
   /**
@@ -45,6 +51,9 @@ export class LiveView {
     this.view = new SurfaceView(hosts.view, this.loop);
     this.view.onRender = () => st.renders++;
     const capacity = windowS * 1000;
+    this.capacity = capacity;
+    /** Normal and tangential force, once the scene says its tools have friction. @type {RollingPlot | null} */
+    this.contactPlot = null;
     this.forcePlot = new RollingPlot(hosts.force, { ...kForcePlot, capacity }, this.loop);
     this.posPlot = new RollingPlot(hosts.position, { ...kPositionPlot, capacity }, this.loop);
     this.depthPlot = new DepthPlot(hosts.depth, capacity, this.loop, { force: display.unit.force, length: display.unit.length });
@@ -77,6 +86,7 @@ export class LiveView {
     this.forcePlot.setTitle(kForcePlot.title, units.force);
     this.posPlot.setTitle(kPositionPlot.title, units.length);
     this.depthPlot.units = { force: units.force, length: units.length };
+    this.contactPlot?.setTitle(kContactPlot.title, units.force);
     this.depthPlot.invalidate();
     this.view.setUnits(units);
   }
@@ -145,7 +155,9 @@ export class LiveView {
    * Allocates nothing.
    * @param {{timeS?: number | null, force?: {x?: number | null, y?: number | null, z?: number | null} | null,
    *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
-   *   grasp?: boolean | null, warnings?: number | null, forceLimited?: boolean | null}[]} samples
+   *   grasp?: boolean | null, warnings?: number | null, forceLimited?: boolean | null,
+   *   frictionForce?: {x?: number | null, y?: number | null, z?: number | null} | null, normalForce?: number | null,
+   *   friction?: number | null}[]} samples
    * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
   onSamples(samples, count = samples.length) {
@@ -163,6 +175,10 @@ export class LiveView {
       if (s.contact) st.contactSamples++;
       this.posPlot.push(t, px * ls, py * ls, pz * ls);
       this.depthPlot.push(px * ls, py * ls, pz * ls, fx * fs, fy * fs, fz * fs, !!s.contact);
+      if (this.contactPlot) {
+        const t3 = s.frictionForce;
+        this.contactPlot.push(t, (s.normalForce || 0) * fs, length3(t3?.x || 0, t3?.y || 0, t3?.z || 0) * fs);
+      }
       st.warnings += s.warnings || 0;
       // A hit: the force comes to the limit (the server's summary counts the same way).
       const limited = !!s.forceLimited;
@@ -174,22 +190,38 @@ export class LiveView {
     this.showForceLimit();
     const last = samples[count - 1];
     const f = last.force, p = last.toolPos;
-    this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp);
-    // The tool's state in words (colour alone is not enough), written only when it changes.
-    const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';
+    const friction = last.friction || 0;  // idms.v1.FrictionState: 1 stick, 2 slip
+    this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, friction === 2);
+    // The tool's state in words (colour alone is not enough), written only when it changes; with
+    // friction, whether the contact sticks or slips.
+    const held = friction === 1 ? ', sticking' : friction === 2 ? ', slipping' : '';
+    const words = last.grasp ? `tool: grasping${held}` : last.contact ? `tool: in contact${held}` : 'tool: free';
+    st.friction = friction === 1 ? 'stick' : friction === 2 ? 'slip' : '';
     if (words !== this.shownToolState) this.hosts.toolState.textContent = this.shownToolState = words;
     st.timeS = last.timeS || 0;
+  }
+
+  /**
+   * The session's tools have friction (its scene, from the Welcome): the normal and tangential
+   * force get their own plot under the force's, in its host (shown from here on).
+   */
+  showContactForces() {
+    if (this.contactPlot || !this.hosts.contact) return;
+    this.hosts.contact.hidden = false;
+    this.contactPlot = new RollingPlot(this.hosts.contact, { ...kContactPlot, unit: this.units.force, capacity: this.capacity }, this.loop);
   }
 
   /** Forgets the plots' samples (a seek in a replay). */
   clearPlots() {
     this.st.forceLimited = false;
+    this.contactPlot?.clear();
     this.forcePlot.clear();
     this.posPlot.clear();
     this.depthPlot.clear();
   }
 
   dispose() {
+    this.contactPlot?.dispose();
     this.view.dispose();
     this.forcePlot.dispose();
     this.posPlot.dispose();

@@ -40,6 +40,7 @@ function layout(id, mode, panels) {
   const hosts = {
     view: h('div', { class: 'view3d', id: 'view3d' }),
     force: h('div', { class: 'plot', id: 'force-plot' }),
+    contact: h('div', { class: 'plot', id: 'contact-plot', hidden: true }),
     position: h('div', { class: 'plot', id: 'position-plot' }),
     depth: h('div', { class: 'plot', id: 'depth-plot' }),
     toolState: h('span', { id: 'tool-state', class: 'tool-state', role: 'status', text: 'tool: –' }),
@@ -54,7 +55,7 @@ function layout(id, mode, panels) {
     display.displacement.scales.map((x) => h('option', { value: String(x), text: `×${x}` })));
   const plots = h('aside', { class: 'side plots-side' }, [
     h('section', { 'aria-labelledby': 'plots-title' }, [h('h2', { id: 'plots-title', text: `Last ${kWindowS} s at 1 kHz` }),
-      hosts.force, hosts.position, hosts.depth]),
+      hosts.force, hosts.contact, hosts.position, hosts.depth]),
   ]);
   const below = h('div', { class: 'side below-view' }, [
     h('section', { 'aria-labelledby': 'notes-title' }, [h('h2', { id: 'notes-title', text: 'Annotations' }),
@@ -107,6 +108,7 @@ function dispatch(p, env) {
   } else if (env.welcome) {
     p.view.setUnits(new Units(env.welcome.scene?.units));
     const tools = env.welcome.scene?.tools || [];
+    if (tools.some((t) => (t.staticFriction ?? 0) > 0)) p.view.showContactForces();
     p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
     p.commands?.setTools(tools);
     p.health.setRate(env.welcome.scene?.device?.maxRateHz || 1000);

@@ -22,6 +22,7 @@ const hexNumber = (/** @type {string} */ hex) => Number.parseInt(hex.slice(1), 1
 const kToolFree = hexNumber(display.tool.free_srgb);
 const kToolContact = hexNumber(display.tool.contact_srgb);
 const kToolGrasp = hexNumber(display.tool.grasp_srgb);
+const kToolSlip = hexNumber(display.tool.slip_srgb);
 
 /** The camera's direction from what it looks at: in front, a little above and to the side. */
 const kViewFrom = new THREE.Vector3(0.3, -2.6, 1.0).normalize();
@@ -378,12 +379,13 @@ export class SurfaceView {
    * @param {number} x @param {number} y @param {number} z tool centre, model units
    * @param {number} fx @param {number} fy @param {number} fz force on the device
    * @param {boolean} contact @param {boolean} grasp
+   * @param {boolean} [slip] its contact slips (friction): the ring in display.json's slip colour
    */
-  setTool(x, y, z, fx, fy, fz, contact, grasp) {
+  setTool(x, y, z, fx, fy, fz, contact, grasp, slip = false) {
     this.tool.visible = true;
     this.tool.position.set(x, y, z);
     if (this.fitted && !this.userMoved && this.toolOutOfFrame()) this.fit();
-    this.tool.setColor(grasp ? kToolGrasp : contact ? kToolContact : kToolFree);
+    this.tool.setColor(grasp ? kToolGrasp : slip ? kToolSlip : contact ? kToolContact : kToolFree);
     this.contact = contact;
     const f = length3(fx, fy, fz);
     if (f > 1e-9) {

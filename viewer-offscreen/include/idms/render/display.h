@@ -34,7 +34,7 @@ struct Display {
   double ambient = 0;
   Light key, fill;
   Srgb back{}, plain{};
-  Srgb tool_free{}, tool_contact{}, tool_grasp{};
+  Srgb tool_free{}, tool_contact{}, tool_grasp{}, tool_slip{};
   double tool_fill_alpha = 0, tool_outline_px = 0;
   double contact_radius_tolerance = 0;
   Srgb contact_outer{}, contact_inner{};

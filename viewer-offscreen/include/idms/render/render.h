@@ -57,6 +57,7 @@ struct SceneView {
   std::array<double, 3> force{0, 0, 0};           // force on the device, model frame, force units
   std::array<double, 3> friction_force{0, 0, 0};  // its tangential (friction) part, the same frame and units
   bool contact = false, grasp = false;            // the device's last sample's flags
+  bool slip = false;                              // its contact slipped (friction): the ring's slip colour
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)

@@ -1,0 +1,90 @@
+// Friction in the browser (issue 30), against the real server and agent: a tool with Coulomb
+// friction dragged sideways past mu_s f_n first sticks, then slips; the live view says which in
+// words and draws the tool's ring in the slip colour while it slips, and its contact-force plot
+// shows the normal and tangential force; a session without friction has no such plot.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { copyFileSync, mkdirSync } from 'node:fs';
+import { join } from 'node:path';
+import { Server, tempDir, launchBrowser, login, shot, startAgent, artifacts, sourceDir } from './harness.mjs';
+
+/** @type {Server} */
+let server;
+/** @type {Awaited<ReturnType<typeof launchBrowser>>} */
+let browser;
+/** @type {ReturnType<typeof startAgent>[]} */
+const agents = [];
+
+/** A screenshot, also kept in docs/web. @param {import('playwright-core').Page} page @param {string} name */
+async function docShot(page, name) {
+  await shot(page, name);
+  mkdirSync(join(sourceDir(), 'docs', 'web'), { recursive: true });
+  copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
+}
+
+before(async () => {
+  server = await new Server(tempDir('friction')).start();
+  browser = await launchBrowser();
+});
+after(async () => {
+  for (const a of agents) a.kill();
+  await browser?.context.close();
+  await server?.stop();
+});
+
+/** The live session's id once listed. */
+async function liveSession() {
+  for (let i = 0; i < 200; i++) {
+    const { body } = await server.get('/api/sessions');
+    const live = JSON.parse(body).sessions.find((/** @type {any} */ s) => s.state === 'live');
+    if (live) return String(live.id);
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  throw new Error('no live session');
+}
+
+test('live: a drag past mu_s f_n sticks, then slips; the words, the ring and the contact-force plot say so', async () => {
+  const { page, errors } = browser;
+  const agent = startAgent(server, 20, 'scripted:drag,fraction=1.3', { library: true, args: ['--friction', 'mu_s=0.6,mu_d=0.4'] });
+  agents.push(agent);
+  const id = await liveSession();
+  await login(page, server, 'admin', `/session/${id}`);
+  const plot = page.locator('#contact-plot');
+  await plot.waitFor({ state: 'visible' });
+  assert.match(await plot.locator('.u-title').innerText(), /Contact force \(model force units\)/);
+  // Sticking first (the press, then the push building up), then slipping.
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms?.friction === 'stick', undefined, { timeout: 30000 });
+  assert.match(await page.locator('#tool-state').innerText(), /in contact, sticking/);
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms?.friction === 'slip', undefined, { timeout: 30000 });
+  await page.waitForFunction(() => /slipping/.test(document.getElementById('tool-state')?.textContent ?? ''));
+  // The ring in display.json's slip colour (#0f9d8f): its pixels are on the canvas.
+  await page.waitForFunction(() => {
+    const canvas = /** @type {HTMLCanvasElement | null} */ (document.querySelector('#view3d canvas'));
+    if (!canvas) return false;
+    const c = document.createElement('canvas');
+    c.width = canvas.width; c.height = canvas.height;
+    const g = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
+    g.drawImage(canvas, 0, 0);
+    const d = g.getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) n += Math.abs(d[i] - 0x0f) < 24 && Math.abs(d[i + 1] - 0x9d) < 24 && Math.abs(d[i + 2] - 0x8f) < 24 ? 1 : 0;
+    return n > 30;
+  }, undefined, { timeout: 10000 });
+  await docShot(page, 'live-friction-slip.png');
+  agent.kill();
+  assert.deepEqual(errors, []);
+});
+
+test('a session without friction has no contact-force plot and no stick or slip', async () => {
+  const { page, errors } = browser;
+  const agent = startAgent(server, 3, 'scripted:palpate', { library: true });
+  agents.push(agent);
+  assert.equal(await agent.exited, 0, agent.log());
+  const { body } = await server.get('/api/sessions');
+  const plain = JSON.parse(body).sessions.find((/** @type {any} */ s) => s.device === 'scripted:palpate');
+  await page.goto(`${server.base}/replay/${plain.id}?t=2.8`);
+  await page.waitForFunction(() => /** @type {any} */ (window).__idms?.samples > 0);
+  assert.equal(await page.locator('#contact-plot').isVisible(), false);
+  assert.doesNotMatch(await page.locator('#tool-state').innerText(), /sticking|slipping/);
+  assert.deepEqual(errors, []);
+});
