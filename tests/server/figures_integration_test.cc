@@ -368,17 +368,21 @@ TEST(Figures, NotesAreAddedLiveAndInReplayAndListedByTimeAcrossARestart) {
     id = NewSession(agent);
     ASSERT_FALSE(id.empty());
     ASSERT_TRUE(SendPress(agent, 0, 1000, 1.0));
-    // Live, through the API (a rewound replay's page adds them so): recorded and broadcast.
-    TestViewer viewer(server->port(), id, observer);
-    const HttpReply live = PostNote(server->port(), observer, id, R"({"time_s": 0.8, "text": "live, at 0.8 s"})");
-    ASSERT_EQ(live.status, 201) << live.body;
-    EXPECT_EQ(json::parse(live.body)["id"], 1);
-    ASSERT_TRUE(Eventually([&] {
-      for (const v1::Envelope& f : viewer.Frames()) {
-        if (f.has_annotation() && f.annotation().text() == "live, at 0.8 s") return true;
-      }
-      return false;
-    }));
+    {
+      // Live, through the API (a rewound replay's page adds them so): recorded and broadcast. (The
+      // viewer goes before the session ends: TestViewer's destructor and its reader thread's
+      // teardown of a connection the server closes would race, as ThreadSanitizer sees.)
+      TestViewer viewer(server->port(), id, observer);
+      const HttpReply live = PostNote(server->port(), observer, id, R"({"time_s": 0.8, "text": "live, at 0.8 s"})");
+      ASSERT_EQ(live.status, 201) << live.body;
+      EXPECT_EQ(json::parse(live.body)["id"], 1);
+      ASSERT_TRUE(Eventually([&] {
+        for (const v1::Envelope& f : viewer.Frames()) {
+          if (f.has_annotation() && f.annotation().text() == "live, at 0.8 s") return true;
+        }
+        return false;
+      }));
+    }
     ASSERT_TRUE(agent.End(999));
   }
   ASSERT_TRUE(Eventually([&] { return Row(server->port(), observer, id)["state"] == "ended"; })) << server->Log();

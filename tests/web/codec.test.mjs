@@ -155,7 +155,7 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
   const batch = (/** @type {number} */ n, /** @type {boolean} */ stats) => Envelope.encode({ deviceSamples: {
     samples: Array.from({ length: n }, (_, k) => ({ tick: 2 ** 40 + k, timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 },
       force: k % 2 ? { x: 0.25, z: -k } : null, contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, substeps: 1,
-      forceLimited: k % 4 === 1 })),
+      forceLimited: k % 4 === 1, ...(k === 4 ? { frictionForce: { x: 0.3, y: -0.1 }, normalForce: 1.25, friction: 2 } : {}) })),
     stats: stats ? { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true, periodMaxUs: 9 } : null,
     samplesDropped: 12, sentUnixNs: 1.7e18 } }).finish();
   const first = decoder.decode(batch(17, true));
@@ -167,7 +167,9 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
   for (let k = 0; k < 17; k++) {
     const s = d.samples[k];
     assert.deepEqual(s, { timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 }, force: k % 2 ? { x: 0.25, y: 0, z: -k } : { x: 0, y: 0, z: 0 },
-      contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, forceLimited: k % 4 === 1 }, `sample ${k}`);
+      contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, forceLimited: k % 4 === 1,
+      frictionForce: k === 4 ? { x: 0.3, y: -0.1, z: 0 } : { x: 0, y: 0, z: 0 }, normalForce: k === 4 ? 1.25 : 0,
+      friction: k === 4 ? 2 : 0 }, `sample ${k}`);
   }
   const sample3 = d.samples[3];
   // A smaller batch without statistics: the same objects, rewritten.

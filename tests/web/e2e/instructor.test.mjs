@@ -195,7 +195,7 @@ test('live: force-limit indicator and events, loop verdict in words, depth plot 
     const box = host.getBoundingClientRect();
     return [...host.querySelectorAll('canvas')].filter((c) => c.getBoundingClientRect().right > box.right + 1).length;
   }));
-  assert.deepEqual(overflow, [0, 0, 0]);
+  assert.ok(overflow.length >= 3 && overflow.every((n) => n === 0), `canvases outside their plots' boxes: ${overflow}`);
   assert.ok(Number(ticks) > 0);
   await page.evaluate(() => scrollTo(0, 0));
   await docShot(page, 'live-force-limit.png');
