@@ -5,9 +5,9 @@
 // the force over the session and its notes, and prints to exactly one A4 page.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { copyFileSync, mkdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { Server, tempDir, launchBrowser, login, shot, startAgent, artifacts, sourceDir } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, artifacts, sourceDir, docShot } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -17,13 +17,6 @@ let browser;
 const agents = [];
 /** The tight scene's session (fails its peak-force limit) and the loose one's (passes). */
 const ids = { failed: '', passed: '' };
-
-/** A screenshot, also kept in docs/web (the README shows them). @param {import('playwright-core').Page} page @param {string} name */
-async function docShot(page, name) {
-  await shot(page, name);
-  mkdirSync(join(sourceDir(), 'docs', 'web'), { recursive: true });
-  copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
-}
 
 /**
  * The palpation scene with a grading block (and more lines).

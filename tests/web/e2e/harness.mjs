@@ -2,7 +2,7 @@
 // directory), the real idms-agent publishing a scripted session, Debian's chromium through
 // playwright-core with a fresh profile, the login, and screenshots kept under build/.
 import { spawn } from 'node:child_process';
-import { mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { copyFileSync, mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { createInterface } from 'node:readline';
@@ -135,6 +135,16 @@ export async function login(page, server, role, next = '/sessions') {
   await page.goto(`${server.base}/login?next=${encodeURIComponent(next)}`);
   await page.fill('#token', server.token(role));
   await Promise.all([page.waitForURL((u) => u.pathname === next), page.click('button[type=submit]')]);
+}
+
+/**
+ * A screenshot kept under build/web-artifacts and in docs/web (the README shows them).
+ * @param {import('playwright-core').Page} page @param {string} name
+ */
+export async function docShot(page, name) {
+  await shot(page, name);
+  mkdirSync(join(sourceDir(), 'docs', 'web'), { recursive: true });
+  copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
 }
 
 /** A screenshot kept under build/web-artifacts. @param {import('playwright-core').Page | import('playwright-core').Locator} target @param {string} name */

@@ -7,9 +7,7 @@
 // duplicate events), its keys; the phone's cards, the model page at 1280 px, the favicon.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { copyFileSync, mkdirSync } from 'node:fs';
-import { join } from 'node:path';
-import { Server, tempDir, launchBrowser, login, shot, startAgent, tooWide, artifacts, sourceDir } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, tooWide, docShot } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -19,13 +17,6 @@ let browser;
 const agents = [];
 /** The recorded sessions by what they are. */
 const ids = { aliceLimited: '', alice: '', bob: '' };
-
-/** A screenshot, also kept in docs/web (the README shows them). @param {import('playwright-core').Page} page @param {string} name */
-async function docShot(page, name) {
-  await shot(page, name);
-  mkdirSync(join(sourceDir(), 'docs', 'web'), { recursive: true });
-  copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
-}
 
 /** @param {import('playwright-core').Page} page */
 const state = (page) => page.evaluate(() => /** @type {any} */ (window).__idms);

@@ -5,7 +5,7 @@
 // opened or sought past keyframes (every 5 s), paused, the plots hold the whole 5 s before the time.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, shot, startAgent, tooWide } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, shot, startAgent, tooWide, docShot } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -237,7 +237,8 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   // Kept: a new visit lists it from the server.
   await page.reload();
   await page.waitForSelector(`#annotations li:has-text("${replayNote}")`);
-  await shot(page, 'replay-notes.png');
+  await page.locator('#annotations').scrollIntoViewIfNeeded();
+  await docShot(page, 'replay-notes.png');
   assert.deepEqual(errors, []);
 });
 
