@@ -14,7 +14,7 @@ import { Units, kModelUnits } from '../view/units.js';
 import { ProfilePlot } from '../plots/profile.js';
 import { h, page, fixed, formatDate, formatTime } from './dom.js';
 import { Timeline } from './timeline.js';
-import { loadModelRest } from './live_view.js';
+import { loadModelRest, toolWords } from './live_view.js';
 import { gradeBadge, gradeWords } from './grade.js';
 import { traineeHref } from './session_table.js';
 
@@ -100,7 +100,7 @@ class Side {
       view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, last.friction === 2);
       this.st.timeS = last.timeS || 0;
       this.onTime(this);
-      const words = last.grasp ? 'tool: grasping' : last.contact ? 'tool: in contact' : 'tool: free';
+      const words = toolWords(last);
       if (this.toolState.textContent !== words) this.toolState.textContent = words;
     } else if (env.playbackState) {
       this.state = env.playbackState;

@@ -32,6 +32,16 @@ export const kForcePlot = { title: 'Device force', unit: display.unit.force, axi
 export const kPositionPlot = { title: 'Tool position', unit: display.unit.length, axis: 'position', series: [
   { label: 'x', color: '#c0392b' }, { label: 'y', color: '#27ae60' }, { label: 'z', color: '#2471a3' }] };
 
+/**
+ * The tool's state in words, for beside the 3D view (colour alone is not enough); with friction,
+ * whether the contact sticks or slips.
+ * @param {{contact?: boolean | null, grasp?: boolean | null, friction?: number | null}} sample the last one
+ */
+export function toolWords(sample) {
+  const held = sample.friction === 1 ? ', sticking' : sample.friction === 2 ? ', slipping' : '';
+  return sample.grasp ? `tool: grasping${held}` : sample.contact ? `tool: in contact${held}` : 'tool: free';
+}
+
 /** Friction's plot: the contact's normal force and the tangential (friction) force's magnitude. */
 export const kContactPlot = { title: 'Contact force', unit: display.unit.force, axis: 'force', series: [
   { label: 'normal f_n', color: '#2471a3' }, { label: 'tangential |f_t|', color: '#b5179e' }] };
@@ -192,10 +202,8 @@ export class LiveView {
     const f = last.force, p = last.toolPos;
     const friction = last.friction || 0;  // idms.v1.FrictionState: 1 stick, 2 slip
     this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, friction === 2);
-    // The tool's state in words (colour alone is not enough), written only when it changes; with
-    // friction, whether the contact sticks or slips.
-    const held = friction === 1 ? ', sticking' : friction === 2 ? ', slipping' : '';
-    const words = last.grasp ? `tool: grasping${held}` : last.contact ? `tool: in contact${held}` : 'tool: free';
+    // The tool's state in words (colour alone is not enough), written only when it changes.
+    const words = toolWords(last);
     st.friction = friction === 1 ? 'stick' : friction === 2 ? 'slip' : '';
     if (words !== this.shownToolState) this.hosts.toolState.textContent = this.shownToolState = words;
     st.timeS = last.timeS || 0;

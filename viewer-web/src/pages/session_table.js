@@ -146,7 +146,7 @@ class SessionRow {
     // A session whose scene declares its units shows N and mm, said in the cell; others the
     // model's units of the column's head.
     const peak = Number(sum.peak_force ?? NaN);
-    this.text(kPeak, units.forceScale !== 1 || units.force !== kForceUnit ? `${fixed(units.frc(peak))} ${units.force}` : fixed(peak));
+    this.text(kPeak, units.force !== kForceUnit ? `${fixed(units.frc(peak))} ${units.force}` : fixed(peak));
     this.cells[kPeak].title = `${fixed(units.frc(peak))} ${units.force}`;
     this.text(7, `${fixed(sum.contact_time_s ?? NaN, 1)} s`);
     // Hits: how often the device force reached its limit; under it, for how long it stayed there.
