@@ -1,10 +1,15 @@
-// idms-server fan-out: one real idms-agent at 1 kHz publishing a session, N viewers on loopback
-// (1, 10, 100, 200 by default, all in this process on one thread). For each N, over a window:
-// server CPU, server memory per viewer, bytes per viewer per second, delivered mesh frames per
-// viewer per second, latency from the agent's sample batch (DeviceSamples.sent_unix_ns, stamped
-// just after its last tick) to a viewer's receipt (p50 / p99 over all viewers), and the deltas
-// the server skipped for slow viewers. Prints a table; never fails on time.
-//   idms-fanout-bench [--viewers 1,10,100,200] [--seconds 10] [--model hex_4x5_home] [--csv FILE]
+// idms-server fan-out: one real idms-agent at 1 kHz publishing a session, N viewers on loopback.
+// The viewers run in a separate process of this binary (--load), so that with --pin the server
+// has one core to itself and the viewers and the agent the other: what is measured is the
+// server, not the load. For each N, over a window: server CPU, server memory per viewer, bytes
+// and WebSocket messages per viewer per second, mesh frames per viewer per second, latency from
+// the agent's sample batch (DeviceSamples.sent_unix_ns, stamped just after its last tick) to a
+// viewer's receipt (p50 / p99 over the probe viewers, which decode whole messages; the others
+// only walk the tags to count mesh frames), and the deltas the server skipped for slow viewers.
+// Prints a table; never fails on time.
+//   idms-fanout-bench [--viewers 1,10,100,200] [--seconds 10] [--model hex_4x5_home]
+//                     [--device scripted:palpate] [--pin] [--csv FILE]
+#include <sched.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -17,7 +22,9 @@
 #include <boost/beast/websocket.hpp>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
@@ -40,24 +47,37 @@ uint64_t UnixNs() {
           .count());
 }
 
-// What all viewers saw in the window (one thread: no locks).
+// What the viewers saw in the window (one thread: no locks).
 struct Tally {
   bool counting = false;
   std::vector<double> latency_ms;
-  uint64_t bytes = 0;
+  uint64_t bytes = 0, probe_bytes = 0, probe_messages = 0;
+  int probes = 0;
+  std::vector<char> scratch = std::vector<char>(size_t{1} << 16);  // what the counting viewers read into
 };
 
+// A viewer. A probe reads WebSocket messages through Beast and decodes them (latency, mesh
+// frames); the others only count the bytes the server sent them, reading the socket under the
+// WebSocket directly into one shared buffer (what a byte costs the load is then one copy), and
+// ping through Beast every few seconds so the server does not drop them as silent.
 class Viewer : public std::enable_shared_from_this<Viewer> {
  public:
-  Viewer(asio::io_context& io, Tally& tally) : ws_(io), tally_(tally) {}
-  void Start(uint16_t port, const std::string& session, const std::string& token) {
+  Viewer(asio::io_context& io, Tally& tally, bool probe) : ws_(io), tally_(tally), probe_(probe) {}
+  bool Start(uint16_t port, const std::string& session, const std::string& token) {
     ws_.set_option(websocket::stream_base::decorator(
         [token](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
-    beast::get_lowest_layer(ws_).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-    ws_.handshake("127.0.0.1", "/ws/session/" + session);
-    Read();
+    beast::error_code ec;
+    beast::get_lowest_layer(ws_).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port), ec);
+    if (!ec) ws_.handshake("127.0.0.1", "/ws/session/" + session, ec);
+    if (ec) return false;
+    probe_ ? Read() : Count();
+    return true;
+  }
+  void Ping() {
+    if (!probe_ && open_) ws_.async_ping({}, [self = shared_from_this()](beast::error_code) {});
   }
   uint64_t mesh_frames = 0;
+  bool probe() const { return probe_; }
 
  private:
   void Read() {
@@ -65,24 +85,38 @@ class Viewer : public std::enable_shared_from_this<Viewer> {
       if (ec) return;
       const uint64_t now = UnixNs();
       const auto data = self->buffer_.data();
-      idms::v1::Envelope e;
+      Tally& t = self->tally_;
+      std::vector<idms::v1::Envelope> frames;
       std::string error;
-      if (self->tally_.counting &&
-          idms::ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error)) {
-        self->tally_.bytes += n;
-        if (e.has_mesh_delta() || e.has_mesh_keyframe()) ++self->mesh_frames;
-        if (e.has_device_samples() && e.device_samples().sent_unix_ns() > 0) {
-          self->tally_.latency_ms.push_back(
-              (static_cast<double>(now) - static_cast<double>(e.device_samples().sent_unix_ns())) * 1e-6);
+      if (t.counting &&
+          idms::ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), &frames, &error)) {
+        t.probe_bytes += n;
+        ++t.probe_messages;
+        for (const auto& e : frames) {
+          if (e.has_mesh_keyframe() || e.has_mesh_delta()) ++self->mesh_frames;
+          if (e.has_device_samples() && e.device_samples().sent_unix_ns() > 0) {
+            t.latency_ms.push_back((static_cast<double>(now) - static_cast<double>(e.device_samples().sent_unix_ns())) *
+                                   1e-6);
+          }
         }
       }
       self->buffer_.consume(self->buffer_.size());
       self->Read();
     });
   }
+  void Count() {
+    beast::get_lowest_layer(ws_).socket().async_read_some(asio::buffer(tally_.scratch),
+                                                          [self = shared_from_this()](beast::error_code ec, size_t n) {
+                                                            if (ec) return void(self->open_ = false);
+                                                            if (self->tally_.counting) self->tally_.bytes += n;
+                                                            self->Count();
+                                                          });
+  }
   websocket::stream<beast::tcp_stream> ws_;
   beast::flat_buffer buffer_;
   Tally& tally_;
+  bool probe_;
+  bool open_ = true;
 };
 
 std::string HttpGet(uint16_t port, const std::string& target, const std::string& token) {
@@ -129,17 +163,96 @@ double Percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size())))];
 }
 
+// utime + stime of this process, s.
+double SelfCpuSeconds() { return CpuSeconds(static_cast<int>(getpid())); }
+
+// The viewers, in this process (--load): one line "counting" once they are connected and settled,
+// then one JSON line with what they saw in the window.
+int RunLoad(uint16_t port, const std::string& session, const std::string& token, int n, double seconds, int cpu) {
+  if (cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cpu, &set);
+    sched_setaffinity(0, sizeof set, &set);
+  }
+  asio::io_context io;
+  Tally tally;
+  std::vector<std::shared_ptr<Viewer>> viewers;
+  // Up to 32 probe viewers (and at least one) decode whole messages for the latency; the rest only count.
+  const int probe_every = std::max(1, n / 32);
+  int connected = 0;
+  for (int i = 0; i < n; ++i) {
+    viewers.push_back(std::make_shared<Viewer>(io, tally, i % probe_every == 0));
+    connected += viewers.back()->Start(port, session, token) ? 1 : 0;
+  }
+  // Pings every 5 s (the server drops a viewer silent for 15 s).
+  asio::steady_timer ping(io);
+  std::function<void()> keepalive = [&] {
+    for (const auto& v : viewers) v->Ping();
+    ping.expires_after(std::chrono::seconds(5));
+    ping.async_wait([&](beast::error_code ec) {
+      if (!ec) keepalive();
+    });
+  };
+  keepalive();
+  io.run_for(std::chrono::seconds(2));  // settle: every viewer past its keyframe
+  std::printf("counting\n");
+  std::fflush(stdout);
+  const double cpu0 = SelfCpuSeconds();
+  const auto t0 = Clock::now();
+  tally.counting = true;
+  io.run_for(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds)));
+  tally.counting = false;
+  const double wall = std::chrono::duration<double>(Clock::now() - t0).count();
+  std::vector<double> fps;
+  int probes = 0;
+  for (const auto& v : viewers) {
+    if (v->probe()) fps.push_back(static_cast<double>(v->mesh_frames) / wall), ++probes;
+  }
+  const int counters = n - probes;
+  const nlohmann::json out = {
+      {"connected", connected},
+      {"wall_s", wall},
+      {"probes", probes},
+      // kB/s per counting viewer (all bytes, WebSocket framing included), and per probe
+      {"kbytes_per_s", counters > 0 ? static_cast<double>(tally.bytes) / 1e3 / wall / counters : 0},
+      {"probe_kbytes_per_s", static_cast<double>(tally.probe_bytes) / 1e3 / wall / probes},
+      {"probe_messages_per_s", static_cast<double>(tally.probe_messages) / wall / probes},
+      {"mesh_fps_median", Percentile(fps, 0.5)},
+      {"mesh_fps_min", Percentile(fps, 0)},
+      {"latency_p50_ms", Percentile(tally.latency_ms, 0.5)},
+      {"latency_p99_ms", Percentile(tally.latency_ms, 0.99)},
+      {"load_cpu_percent", (SelfCpuSeconds() - cpu0) / wall * 100}};
+  std::printf("%s\n", out.dump().c_str());
+  std::fflush(stdout);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string viewers_list = "1,10,100,200", model = "hex_4x5_home", csv;
+  std::string viewers_list = "1,10,100,200", model = "hex_4x5_home", device = "scripted:palpate", csv;
   double seconds = 10;
-  CLI::App app{"idms-server fan-out: one agent at 1 kHz, N viewers on loopback"};
+  bool pin = false;
+  uint16_t load_port = 0;
+  std::string load_session, load_token;
+  int load_viewers = 0, load_cpu = -1;
+  CLI::App app{"idms-server fan-out: one agent at 1 kHz, N viewers on loopback in a separate process"};
   app.add_option("--viewers", viewers_list, "Comma-separated viewer counts")->capture_default_str();
   app.add_option("--seconds", seconds, "Measurement window per count")->capture_default_str();
   app.add_option("--model", model, "Library model the agent runs")->capture_default_str();
+  app.add_option("--device", device, "The agent's device (scripted:palpate, scripted:stroke-fast, ...)")
+      ->capture_default_str();
+  app.add_flag("--pin", pin, "The server on CPU 0 with one I/O thread; the agent and the viewers on CPU 1");
   app.add_option("--csv", csv, "Also write the table as CSV");
+  // The viewers' process (started by the bench itself).
+  app.add_option("--load-port", load_port)->group("");
+  app.add_option("--load-session", load_session)->group("");
+  app.add_option("--load-token", load_token)->group("");
+  app.add_option("--load-viewers", load_viewers)->group("");
+  app.add_option("--load-cpu", load_cpu)->group("");
   CLI11_PARSE(app, argc, argv);
+  if (load_port != 0) return RunLoad(load_port, load_session, load_token, load_viewers, seconds, load_cpu);
   std::vector<int> counts;
   for (std::stringstream ss(viewers_list); ss.good();) {
     std::string item;
@@ -147,21 +260,39 @@ int main(int argc, char** argv) {
     if (!item.empty()) counts.push_back(std::stoi(item));
   }
   std::printf(
-      "idms-server fan-out: one agent (%s, scripted palpation at 1 kHz, 60 Hz mesh), %.0f s per row, "
-      "%u cores shared by server, agent and viewers\n",
-      model.c_str(), seconds, std::thread::hardware_concurrency());
-  std::printf("%8s %10s %12s %14s %12s %10s %10s %10s %8s\n", "viewers", "server %", "MB/viewer", "kB/s/viewer",
-              "mesh fps", "p50 ms", "p99 ms", "skipped", "resyncs");
+      "idms-server fan-out: one agent (%s, %s at 1 kHz, 60 Hz mesh), %.0f s per row, viewers in their own process, "
+      "%s\n",
+      model.c_str(), device.c_str(), seconds,
+      pin ? "server pinned to CPU 0 (1 I/O thread), agent and viewers to CPU 1" : "nothing pinned");
+  std::printf("%8s %9s %10s %11s %10s %9s %9s %9s %9s %8s %8s %8s\n", "viewers", "server %", "MB/viewer", "kB/s/viewer",
+              "msg/s/vwr", "mesh fps", "p50 ms", "p99 ms", "skipped", "resyncs", "load %", "agent %");
   std::ofstream out;
   if (!csv.empty()) {
     out.open(csv);
-    out << "viewers,server_cpu_percent,server_mb_per_viewer,kbytes_per_viewer_per_s,mesh_fps_median,latency_p50_ms,"
-           "latency_p99_ms,deltas_skipped,resyncs\n";
+    out << "viewers,server_cpu_percent,server_mb_per_viewer,kbytes_per_viewer_per_s,messages_per_viewer_per_s,"
+           "mesh_fps_median,latency_p50_ms,latency_p99_ms,deltas_skipped,resyncs,load_cpu_percent,agent_cpu_percent\n";
   }
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
   for (int n : counts) {
     const std::string dir = idms::test::TempDir("fanout-" + std::to_string(n));
-    idms::test::ChildProcess server(IDMS_SERVER_BIN, {"--listen", "127.0.0.1:0", "--data", dir + "/data"},
-                                    dir + "/server.log", true);
+    std::vector<std::string> server_args = {"--listen",
+                                            "127.0.0.1:0",
+                                            "--data",
+                                            dir + "/data",
+                                            "--max-connections",
+                                            std::to_string(n + 64),
+                                            "--max-connections-per-address",
+                                            std::to_string(n + 64)};
+    std::string server_bin = IDMS_SERVER_BIN, agent_bin = IDMS_AGENT_BIN;
+    std::vector<std::string> agent_prefix;
+    if (pin) {
+      server_args.insert(server_args.begin(), {"-c", "0", server_bin});
+      server_args.insert(server_args.end(), {"--threads", "1", "--workers", "1"});
+      server_bin = "/usr/bin/taskset";
+      agent_prefix = {"-c", "1", agent_bin};
+      agent_bin = "/usr/bin/taskset";
+    }
+    idms::test::ChildProcess server(server_bin, server_args, dir + "/server.log", true);
     const auto line = server.ReadLine(std::chrono::seconds(60));
     if (!line) return std::fprintf(stderr, "server did not start: %s\n", server.Log().c_str()), 1;
     const uint16_t port = static_cast<uint16_t>(std::stoi(line->substr(line->rfind(':') + 1)));
@@ -179,11 +310,11 @@ int main(int argc, char** argv) {
         if (role == "observer") observer_token = token;
       }
     }
-    idms::test::ChildProcess agent(
-        IDMS_AGENT_BIN,
-        {"--server", "ws://127.0.0.1:" + std::to_string(port), "--token", agent_token, "--model", model, "--device",
-         "scripted:palpate", "--duration", "0", "--cache-dir", dir + "/cache"},
-        dir + "/agent.log");
+    std::vector<std::string> agent_args = agent_prefix;
+    agent_args.insert(agent_args.end(),
+                      {"--server", "ws://127.0.0.1:" + std::to_string(port), "--token", agent_token, "--model", model,
+                       "--device", device, "--duration", "0", "--cache-dir", dir + "/cache"});
+    idms::test::ChildProcess agent(agent_bin, agent_args, dir + "/agent.log");
     // The session, live.
     std::string session;
     for (int i = 0; i < 500 && session.empty(); ++i) {
@@ -193,41 +324,44 @@ int main(int argc, char** argv) {
     }
     if (session.empty()) return std::fprintf(stderr, "no session\n"), 1;
     const double rss0 = RssBytes(server.pid());
-    asio::io_context io;
-    Tally tally;
-    std::vector<std::shared_ptr<Viewer>> viewers;
-    for (int i = 0; i < n; ++i) {
-      viewers.push_back(std::make_shared<Viewer>(io, tally));
-      viewers.back()->Start(port, session, observer_token);
-    }
-    // One second to settle, then the window.
-    io.run_for(std::chrono::seconds(1));
+    idms::test::ChildProcess load(
+        self,
+        {"--load-port", std::to_string(port), "--load-session", session, "--load-token", observer_token,
+         "--load-viewers", std::to_string(n), "--load-cpu", pin ? "1" : "-1", "--seconds", std::to_string(seconds)},
+        dir + "/load.log", true);
+    const auto counting = load.ReadLine(std::chrono::seconds(120));
+    if (!counting) return std::fprintf(stderr, "the viewers did not start: %s\n", load.Log().c_str()), 1;
     const std::string m0 = HttpGet(port, "/metrics", observer_token);
-    const double cpu0 = CpuSeconds(server.pid());
+    const double cpu0 = CpuSeconds(server.pid()), agent_cpu0 = CpuSeconds(agent.pid());
     const auto t0 = Clock::now();
-    tally.counting = true;
-    io.run_for(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds)));
-    tally.counting = false;
+    const auto result = load.ReadLine(std::chrono::seconds(static_cast<int>(seconds) + 120));
     const double wall = std::chrono::duration<double>(Clock::now() - t0).count();
     const double cpu = (CpuSeconds(server.pid()) - cpu0) / wall * 100;
+    const double agent_cpu = (CpuSeconds(agent.pid()) - agent_cpu0) / wall * 100;
     const double rss1 = RssBytes(server.pid());
     const std::string m1 = HttpGet(port, "/metrics", observer_token);
-    std::vector<double> fps;
-    for (const auto& v : viewers) fps.push_back(static_cast<double>(v->mesh_frames) / wall);
+    if (!result) return std::fprintf(stderr, "the viewers did not report: %s\n", load.Log().c_str()), 1;
+    const auto r = nlohmann::json::parse(*result);
     const double skipped =
         MetricValue(m1, "idms_viewer_deltas_skipped_total") - MetricValue(m0, "idms_viewer_deltas_skipped_total");
     const double resyncs = MetricValue(m1, "idms_viewer_resyncs_total") - MetricValue(m0, "idms_viewer_resyncs_total");
-    const double p50 = Percentile(tally.latency_ms, 0.5), p99 = Percentile(tally.latency_ms, 0.99);
     const double mb_per_viewer = (rss1 - rss0) / 1e6 / n;
-    const double kbps = static_cast<double>(tally.bytes) / 1e3 / wall / n;
-    std::printf("%8d %10.1f %12.3f %14.1f %12.1f %10.2f %10.2f %10.0f %8.0f\n", n, cpu, mb_per_viewer, kbps,
-                Percentile(fps, 0.5), p50, p99, skipped, resyncs);
+    const double kbps =
+        r["probes"].get<int>() == n ? r["probe_kbytes_per_s"].get<double>() : r["kbytes_per_s"].get<double>();
+    const double mps = r["probe_messages_per_s"].get<double>();
+    if (r["connected"].get<int>() != n)
+      std::printf("(only %d of %d viewers connected)\n", r["connected"].get<int>(), n);
+    std::printf("%8d %9.1f %10.3f %11.1f %10.1f %9.1f %9.2f %9.2f %9.0f %8.0f %8.1f %8.1f\n", n, cpu, mb_per_viewer,
+                kbps, mps, r["mesh_fps_median"].get<double>(), r["latency_p50_ms"].get<double>(),
+                r["latency_p99_ms"].get<double>(), skipped, resyncs, r["load_cpu_percent"].get<double>(), agent_cpu);
     std::fflush(stdout);
     if (out) {
-      out << n << "," << cpu << "," << mb_per_viewer << "," << kbps << "," << Percentile(fps, 0.5) << "," << p50 << ","
-          << p99 << "," << skipped << "," << resyncs << "\n";
+      out << n << "," << cpu << "," << mb_per_viewer << "," << kbps << "," << mps << ","
+          << r["mesh_fps_median"].get<double>() << "," << r["latency_p50_ms"].get<double>() << ","
+          << r["latency_p99_ms"].get<double>() << "," << skipped << "," << resyncs << ","
+          << r["load_cpu_percent"].get<double>() << "," << agent_cpu << "\n";
     }
-    viewers.clear();
+    load.Wait(std::chrono::seconds(30));
     agent.Signal(SIGTERM);
     agent.Wait(std::chrono::seconds(30));
     server.Signal(SIGTERM);

@@ -30,6 +30,28 @@ bool ParseEnvelope(std::string_view bytes, v1::Envelope* out, std::string* error
   return true;
 }
 
+bool ParseFrames(std::string_view bytes, std::vector<v1::Envelope>* out, std::string* error, int64_t max_bytes) {
+  v1::Envelope e;
+  if (!ParseEnvelope(bytes, &e, error, max_bytes)) return false;
+  if (!e.has_frames()) {
+    out->push_back(std::move(e));
+    return true;
+  }
+  const auto& inner = e.frames().envelopes();
+  for (int i = 0; i < inner.size(); ++i) {
+    v1::Envelope& one = out->emplace_back();
+    std::string why;
+    if (!ParseEnvelope(inner[i], &one, &why, max_bytes) || one.has_frames()) {
+      out->pop_back();
+      if (error != nullptr) {
+        *error = "frames[" + std::to_string(i) + "]: " + (why.empty() ? "a Frames inside a Frames" : why);
+      }
+      return false;
+    }
+  }
+  return true;
+}
+
 void SerializeEnvelope(const v1::Envelope& envelope, std::string* out) {
   out->clear();
   envelope.AppendToString(out);
@@ -61,6 +83,8 @@ const char* EnvelopeBodyName(const v1::Envelope& envelope) {
       return "annotation";
     case v1::Envelope::kAck:
       return "ack";
+    case v1::Envelope::kFrames:
+      return "frames";
     case v1::Envelope::BODY_NOT_SET:
       return "none";
   }

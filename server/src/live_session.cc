@@ -12,6 +12,7 @@
 #include "idms/server/log.h"
 #include "idms/sim/check.h"
 #include "recordings.h"
+#include "relay.h"
 #include "sessions.h"
 
 namespace idms::server {
@@ -21,10 +22,12 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-constexpr size_t kViewerQueueLimit = 256;              // frames queued for a viewer before it counts as behind
-constexpr size_t kViewerQueueBytes = size_t{8} << 20;  // bytes queued for a viewer, likewise
-constexpr size_t kHistoryFrames = 512;                 // events and notes kept for late viewers
-constexpr size_t kHistoryBytes = size_t{1} << 20;      // likewise, in bytes
+// A sample batch waits at most this long for a mesh frame to travel with (the mesh comes at 60 Hz,
+// so usually less than 17 ms): the force plot's latency against one WebSocket message instead of
+// two per mesh frame, which is what a viewer costs the server.
+constexpr std::chrono::milliseconds kGatherTime{25};
+constexpr size_t kHistoryFrames = 512;             // events and notes kept for late viewers
+constexpr size_t kHistoryBytes = size_t{1} << 20;  // likewise, in bytes
 constexpr uint16_t kNormal = 1000;
 constexpr uint16_t kGoingAway = 1001;
 constexpr uint16_t kPolicyError = 1008;
@@ -41,6 +44,8 @@ LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::
       timer_(strand_),
       recorder_(std::move(recorder)),
       mirror_(limits),
+      audience_(core, hub),
+      gather_timer_(strand_),
       next_tick_(row.next_tick),
       row_(std::move(row)) {
   // A resumed session (after a restart or its resume window) carries on with the figures of all
@@ -53,7 +58,66 @@ LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::
 LiveSession::~LiveSession() = default;
 
 void LiveSession::Start() {
+  if (Bus* bus = hub_.bus()) {
+    // The epoch orders this server's ownership after any earlier owner's (its start, in ns).
+    relay_epoch_ = UnixNs();
+    const std::weak_ptr<LiveSession> w = weak_from_this();
+    std::string error;
+    join_sub_ = bus->Subscribe(
+        JoinSubject(id_),
+        [w](std::string_view, const std::string& reply) {
+          if (auto s = w.lock(); s && !reply.empty()) asio::post(s->strand_, [s, reply] { s->AnswerJoin(reply); });
+        },
+        &error);
+    viewer_sub_ = bus->Subscribe(
+        ViewerSubject(id_),
+        [w](std::string_view data, const std::string&) {
+          v1::RelayViewerMessage m;
+          if (!m.ParseFromArray(data.data(), static_cast<int>(data.size()))) return;
+          if (auto s = w.lock()) asio::post(s->strand_, [s, m = std::move(m)] { s->FromRelayedViewer(m); });
+        },
+        &error);
+    if (!join_sub_ || !viewer_sub_) Log(LogLevel::kWarn, "the session is not relayed: " + error, {{"session", id_}});
+  }
   asio::post(strand_, [self = shared_from_this()] { self->Tick(); });
+}
+
+void LiveSession::Publish(const std::shared_ptr<const std::string>& bytes, int deltas,
+                          const std::string& close_reason) {
+  Bus* bus = hub_.bus();
+  if (bus == nullptr || !join_sub_) return;
+  v1::RelayFrame f;
+  f.set_epoch(relay_epoch_);
+  f.set_sequence(++relay_sequence_);
+  if (bytes) f.set_message(*bytes);
+  f.set_sent_unix_ns(UnixNs());
+  f.set_deltas(static_cast<uint32_t>(deltas));
+  f.set_close_reason(close_reason);
+  if (bus->Publish(LiveSubject(id_), f.SerializeAsString())) ++hub_.relay_counters().frames_published;
+}
+
+void LiveSession::AnswerJoin(const std::string& reply) {
+  Bus* bus = hub_.bus();
+  if (bus == nullptr) return;
+  v1::RelayJoin j;
+  j.set_epoch(relay_epoch_);
+  j.set_sequence(relay_sequence_);
+  j.set_live(live_);
+  j.set_node(core_.options.node_id);
+  j.mutable_welcome()->set_session_id(id_);
+  *j.mutable_welcome()->mutable_scene() = scene_;
+  if (const auto k = Keyframe()) j.set_keyframe(*k);
+  for (const auto& bytes : history_) j.add_history(*bytes);
+  bus->Publish(reply, j.SerializeAsString());
+}
+
+void LiveSession::FromRelayedViewer(const v1::RelayViewerMessage& m) {
+  std::string error;
+  if (m.envelope().has_annotation() && CheckAnnotation(m.envelope().annotation(), &error)) {
+    ViewerAnnotation(m.envelope().annotation(), m.peer());
+  } else if (m.envelope().has_command() && m.admin()) {
+    ViewerCommand(m.envelope().command(), m.peer());
+  }
 }
 
 void LiveSession::AssertOnStrand() const { IDMS_CHECK(strand_.running_in_this_thread()); }
@@ -117,7 +181,7 @@ void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& me
   ev->set_tick(next_tick_);
   ev->set_time_s(summary_.last_time_s);
   const auto bytes = Serialized(*e);
-  Broadcast(bytes, false, false);
+  Broadcast(bytes, FrameKind::kOther);
   if (kind != v1::SessionEvent::KIND_VIEWER_JOINED && kind != v1::SessionEvent::KIND_VIEWER_LEFT) Remember(bytes);
   Record(std::move(e));
 }
@@ -135,57 +199,59 @@ void LiveSession::SendToAgent(const v1::Envelope& e) {
   if (auto agent = agent_.lock()) agent->Send(Serialized(e), true);
 }
 
-void LiveSession::Broadcast(const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples) {
-  for (Viewer& v : viewers_) Offer(v, bytes, is_delta, is_samples);
+void LiveSession::Broadcast(const std::shared_ptr<const std::string>& bytes, FrameKind kind) {
+  if (pending_.empty()) pending_since_ = Clock::now();
+  pending_.emplace_back(bytes, kind);
+  if (kind != FrameKind::kSamples) return Flush();
+  ArmGatherTimer();
 }
 
-// Deltas are skipped while the viewer is behind (until a keyframe); sample batches and events
-// are dropped and counted; nothing waits.
-void LiveSession::Offer(Viewer& v, const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples) {
-  const std::shared_ptr<WsPeer> peer = v.peer.lock();
-  if (!peer || v.closed) return;
-  if (is_delta && v.skipping) return void(++hub_.deltas_skipped);
-  if (peer->queued() >= kViewerQueueLimit || peer->queued_bytes() >= kViewerQueueBytes) {
-    // Behind: a viewer stalled past the limit is closed; until then it loses deltas (and is
-    // resynchronised with a keyframe once it drains), sample batches and events (counted).
-    const auto now = Clock::now();
-    if (!v.behind_since) v.behind_since = now;
-    const std::chrono::seconds limit = core_.options.viewer_stall_timeout;
-    if (now - *v.behind_since > limit) {
-      ++hub_.stalled_closed;
-      v.closed = true;
-      peer->Close(kPolicyError, "viewer stalled: more than " + std::to_string(kViewerQueueLimit) + " frames or " +
-                                    std::to_string(kViewerQueueBytes >> 20) + " MiB behind for " +
-                                    std::to_string(limit.count()) + " s");
-      return;
-    }
-    if (is_delta) {
-      ++hub_.deltas_skipped;
-      v.skipping = true;
-      v.drain_wanted->store(true);
-      return;
-    }
-    return void(is_samples ? ++hub_.samples_dropped : ++hub_.events_dropped);
+void LiveSession::ArmGatherTimer() {
+  if (gather_armed_) return;
+  gather_armed_ = true;
+  gather_timer_.expires_at(pending_since_ + kGatherTime);
+  gather_timer_.async_wait([w = weak_from_this()](boost::system::error_code ec) {
+    const auto self = w.lock();
+    if (ec || !self) return;
+    self->gather_armed_ = false;
+    if (self->pending_.empty()) return;
+    if (Clock::now() - self->pending_since_ >= kGatherTime) return self->Flush();
+    self->ArmGatherTimer();  // gathered since the last flush: its own deadline
+  });
+}
+
+void LiveSession::Flush() {
+  AssertOnStrand();
+  if (pending_.empty()) return;
+  Audience::Outgoing out;
+  for (const auto& [bytes, kind] : pending_) {
+    (kind == FrameKind::kDelta ? out.deltas : kind == FrameKind::kSamples ? out.samples : out.others) += 1;
   }
-  v.behind_since.reset();
-  SendTo(v, bytes);
+  // One frame alone goes as it came; several, as one Frames message.
+  const auto gather = [](const auto& pending, bool deltas) -> std::shared_ptr<const std::string> {
+    v1::Envelope e;
+    v1::Frames* frames = e.mutable_frames();
+    for (const auto& [bytes, kind] : pending) {
+      if (deltas || kind != FrameKind::kDelta) frames->add_envelopes(*bytes);
+    }
+    if (frames->envelopes_size() == 0) return nullptr;
+    if (frames->envelopes_size() == 1) return std::make_shared<const std::string>(frames->envelopes(0));
+    return Serialized(e);
+  };
+  out.bytes = pending_.size() == 1 ? pending_.front().first : gather(pending_, true);
+  if (out.deltas > 0 && out.samples + out.others > 0) {
+    out.without_deltas_maker = [&] { return gather(pending_, false); };
+  }
+  audience_.Offer(out);
+  Publish(out.bytes, out.deltas, "");
+  pending_.clear();
 }
 
-void LiveSession::SendTo(Viewer& v, const std::shared_ptr<const std::string>& bytes) {
-  const std::shared_ptr<WsPeer> peer = v.peer.lock();
-  if (!peer || v.closed) return;
-  ++hub_.viewer_frames;
-  hub_.viewer_bytes += bytes->size();
-  peer->Send(bytes, true);
-}
-
-void LiveSession::KeyframeFor(Viewer& v) {
+std::shared_ptr<const std::string> LiveSession::Keyframe() {
   v1::Envelope e;
   std::string error;
-  if (!mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return;
-  v.skipping = false;
-  ++hub_.resyncs;
-  SendTo(v, Serialized(e));
+  if (!mirror_.has_keyframe() || !mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return nullptr;
+  return Serialized(e);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -266,14 +332,14 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
       row_.duration_s = summary_.first_time_s < 0 ? 0 : summary_.last_time_s - summary_.first_time_s;
       row_.summary_json = summary_.Json();
     }
-    Broadcast(bytes, false, true);
+    Broadcast(bytes, FrameKind::kSamples);
     return Record(std::move(envelope));
   }
   if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
     std::string error;
     switch (mirror_.Apply(e, &error)) {
       case MirrorStatus::kOk:
-        Broadcast(bytes, e.has_mesh_delta(), false);
+        Broadcast(bytes, e.has_mesh_delta() ? FrameKind::kDelta : FrameKind::kOther);
         return Record(std::move(envelope));
       case MirrorStatus::kGap: {
         // A delta for a base the server does not hold: ask the agent for a keyframe.
@@ -295,12 +361,12 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
   const v1::Envelope& event = *envelope;
   if (event.has_session_event() && event.session_event().kind() == v1::SessionEvent::KIND_ENDED) {
     // The agent ended the session: recorded, then finished; the agent hears it in a final Ack.
-    Broadcast(bytes, false, false);
+    Broadcast(bytes, FrameKind::kOther);
     Record(std::move(envelope));
     return End("ended", "the session ended");
   }
   if (event.has_session_event() || event.has_topology_event()) {
-    Broadcast(bytes, false, false);
+    Broadcast(bytes, FrameKind::kOther);
     Remember(bytes);
     return Record(std::move(envelope));
   }
@@ -326,16 +392,18 @@ void LiveSession::End(const std::string& state, const std::string& why) {
   AssertOnStrand();
   if (!live_.exchange(false)) return;
   timer_.cancel();
+  Flush();  // what the viewers were still owed
+  gather_timer_.cancel();
   {
     std::lock_guard lock(row_mu_);
     row_.state = state;
     row_.recording = hub_.recordings().NameFor(id_, state);
   }
-  for (Viewer& v : viewers_) {
-    if (auto peer = v.peer.lock()) peer->Close(kNormal, why);
-  }
-  viewers_.clear();
+  audience_.CloseAll(kNormal, why);
   num_viewers_ = 0;
+  Publish(nullptr, 0, why);
+  join_sub_.reset();
+  viewer_sub_.reset();
   // Once the file is closed and published: the row stored, the hub told, the agent acknowledged.
   const bool ended = state == "ended";
   recorder_->Finish([self = shared_from_this(), ended](bool ok) {
@@ -364,8 +432,9 @@ void LiveSession::Stop(const std::string& why) {
   bye.mutable_session_event()->set_kind(v1::SessionEvent::KIND_RECORDING_STOPPED);
   bye.mutable_session_event()->set_message(why);
   const auto bytes = Serialized(bye);
+  Flush();
   if (auto agent = agent_.lock()) agent->Send(bytes, true), agent->Close(kGoingAway, why);
-  for (Viewer& v : viewers_) SendTo(v, bytes);
+  audience_.SendToAll(bytes);
   agent_.reset();
   agent_conn_ = 0;
   End("interrupted", why);
@@ -388,33 +457,26 @@ void LiveSession::ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer_wea
   welcome->set_identity("idms-server");
   welcome->set_session_id(id_);
   *welcome->mutable_scene() = scene_;
-  Viewer& v = viewers_.emplace_back();
-  v.id = viewer;
-  v.peer = std::move(peer_weak);
-  v.admin = admin;
-  v.drain_wanted = std::move(drain_wanted);
-  SendTo(v, Serialized(w));
-  if (mirror_.has_keyframe()) KeyframeFor(v);
+  audience_.Add(viewer, std::move(peer_weak), admin, std::move(drain_wanted));
+  audience_.SendTo(viewer, Serialized(w));
+  if (const auto keyframe = Keyframe()) audience_.SendTo(viewer, keyframe), ++hub_.resyncs;
   // What happened before it joined: the events and notes so far, in order.
-  for (const auto& bytes : history_) SendTo(v, bytes);
-  num_viewers_ = static_cast<int>(viewers_.size());
+  for (const auto& bytes : history_) audience_.SendTo(viewer, bytes);
+  num_viewers_ = static_cast<int>(audience_.size());
   RecordEvent(v1::SessionEvent::KIND_VIEWER_JOINED, "a viewer joined", peer->peer());
 }
 
 void LiveSession::ViewerDetached(uint64_t viewer) {
   AssertOnStrand();
-  const size_t before = viewers_.size();
-  std::erase_if(viewers_, [&](const Viewer& v) { return v.id == viewer; });
-  num_viewers_ = static_cast<int>(viewers_.size());
-  if (viewers_.size() != before && live_) RecordEvent(v1::SessionEvent::KIND_VIEWER_LEFT, "a viewer left", "");
+  const bool was_here = audience_.Remove(viewer);
+  num_viewers_ = static_cast<int>(audience_.size());
+  if (was_here && live_) RecordEvent(v1::SessionEvent::KIND_VIEWER_LEFT, "a viewer left", "");
 }
 
 void LiveSession::ViewerDrained(uint64_t viewer) {
   AssertOnStrand();
   // Caught up after skipping: a keyframe from the session's mirror puts the viewer right.
-  for (Viewer& v : viewers_) {
-    if (v.id == viewer && v.skipping) KeyframeFor(v);
-  }
+  audience_.Drained(viewer, [this] { return Keyframe(); });
 }
 
 std::optional<v1::Annotation> LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
@@ -434,7 +496,7 @@ std::optional<v1::Annotation> LiveSession::ViewerAnnotation(const v1::Annotation
   }
   v1::Annotation stamped = *a;
   const auto bytes = Serialized(*e);
-  Broadcast(bytes, false, false);
+  Broadcast(bytes, FrameKind::kOther);
   Remember(bytes);
   Record(std::move(e));
   return stamped;

@@ -15,7 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "audience.h"
 #include "idms/protocol/mesh_mirror.h"
+#include "idms/server/bus.h"
 #include "idms/server/storage.h"
 #include "server_internal.h"
 #include "session_summary.h"
@@ -26,16 +28,14 @@ namespace idms::server {
 class Recorder;
 class SessionHub;
 
-class LiveSession : public std::enable_shared_from_this<LiveSession> {
+class LiveSession : public WatchedSession, public std::enable_shared_from_this<LiveSession> {
  public:
-  using Strand = boost::asio::strand<boost::asio::io_context::executor_type>;
-
   // `limits`: what the session's model can need of a mesh frame (the mirror refuses more).
   LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::Scene scene, std::shared_ptr<Recorder> recorder,
               const DecodeLimits& limits);
   ~LiveSession();
   const std::string& id() const { return id_; }
-  Strand& strand() { return strand_; }
+  Strand& strand() override { return strand_; }
 
   void Start();  // the once-a-second timer (after construction: it needs shared_from_this)
 
@@ -47,13 +47,12 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> envelope,
                   std::shared_ptr<const std::string> bytes);
   void AgentDetached(uint64_t conn);
-  // `drain_wanted`: shared with the viewer's endpoint, set here when the viewer starts skipping,
-  // so that its connection reports the next drain (ViewerDrained) and no other.
   void ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer, bool admin,
-                      std::shared_ptr<std::atomic<bool>> drain_wanted);
-  void ViewerDetached(uint64_t viewer);
-  void ViewerDrained(uint64_t viewer);  // its queue emptied: a keyframe if it was skipping
-  void ViewerCommand(const v1::Command& command, const std::string& peer);
+                      std::shared_ptr<std::atomic<bool>> drain_wanted) override;
+  void ViewerDetached(uint64_t viewer) override;
+  void ViewerDrained(uint64_t viewer) override;
+  void ViewerCommand(const v1::Command& command, const std::string& peer) override;
+  void ViewerNote(const v1::Annotation& note, const std::string& peer) override { ViewerAnnotation(note, peer); }
   // A note from a viewer or the notes API, stamped (id, author, time) and recorded; the stamped
   // note, or nothing once the session is no longer live.
   std::optional<v1::Annotation> ViewerAnnotation(const v1::Annotation& note, const std::string& peer);
@@ -64,27 +63,20 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   void SetTrainee(const std::string& trainee);  // any thread; stored at once
   int viewers() const { return num_viewers_.load(); }
   // False once the session is ending (ENDED, the resume window, shutdown): no resume, no viewer.
-  bool live() const { return live_.load(); }
+  bool live() const override { return live_.load(); }
   const v1::Scene& scene() const { return scene_; }
 
  private:
-  // A viewer, as the session sees it: its connection and its back-pressure state.
-  struct Viewer {
-    uint64_t id = 0;
-    std::weak_ptr<WsPeer> peer;
-    bool admin = false;
-    bool closed = false;    // closed by the session (stalled); detaching
-    bool skipping = false;  // behind: deltas skipped until a keyframe
-    std::shared_ptr<std::atomic<bool>> drain_wanted;
-    std::optional<std::chrono::steady_clock::time_point> behind_since;
-  };
-
   void AssertOnStrand() const;
   void Refuse(const std::string& what);
-  void Broadcast(const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples);
-  void Offer(Viewer& v, const std::shared_ptr<const std::string>& bytes, bool is_delta, bool is_samples);
-  void SendTo(Viewer& v, const std::shared_ptr<const std::string>& bytes);
-  void KeyframeFor(Viewer& v);
+  // What a relayed frame is, for a viewer that is behind: deltas are skipped until a keyframe,
+  // sample batches and everything else dropped (and counted).
+  enum class FrameKind { kSamples, kDelta, kOther };
+  // To every viewer: a sample batch waits (up to kGatherTime) for the next mesh frame or event,
+  // which takes everything waiting with it in one Frames message (idms.proto); the others go at once.
+  void Broadcast(const std::shared_ptr<const std::string>& bytes, FrameKind kind);
+  void Flush();                                   // what is waiting, to every viewer (and to the bus), now
+  std::shared_ptr<const std::string> Keyframe();  // the mirror's surface; null before the first
   void Record(std::shared_ptr<const v1::Envelope> envelope);
   void RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer);
   void SendToAgent(const v1::Envelope& e);
@@ -106,7 +98,21 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   std::weak_ptr<WsPeer> agent_;
   uint64_t agent_conn_ = 0;  // 0: no agent
   std::chrono::steady_clock::time_point agent_gone_since_ = std::chrono::steady_clock::now();
-  std::vector<Viewer> viewers_;
+  Audience audience_;
+  // With a bus: what this server, the session's owner, publishes for the other servers' viewers
+  // (relay.h), and the subscriptions that answer them.
+  uint64_t relay_epoch_ = 0, relay_sequence_ = 0;
+  std::unique_ptr<Bus::Subscription> join_sub_, viewer_sub_;
+  void Publish(const std::shared_ptr<const std::string>& bytes, int deltas, const std::string& close_reason);
+  void AnswerJoin(const std::string& reply);
+  void FromRelayedViewer(const v1::RelayViewerMessage& m);
+  // Frames gathered for the viewers (Broadcast) and the timer that sends them when no mesh frame
+  // comes; pending_since_: when the oldest was gathered.
+  std::vector<std::pair<std::shared_ptr<const std::string>, FrameKind>> pending_;
+  std::chrono::steady_clock::time_point pending_since_;
+  boost::asio::steady_timer gather_timer_;
+  bool gather_armed_ = false;
+  void ArmGatherTimer();
   // The events and notes so far (not viewers coming and going), for a viewer who joins late:
   // bounded, the oldest dropped first.
   std::deque<std::shared_ptr<const std::string>> history_;

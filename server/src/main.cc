@@ -119,6 +119,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 65536))
       ->capture_default_str();
 
+  app.add_option("--bus", o.bus,
+                 "Several servers: NATS URLs (nats://HOST:PORT, comma-separated) of the bus that carries live "
+                 "sessions between them; a viewer of a session another server owns is served here");
+  app.add_option("--node", o.node_id, "This server's name on the bus (default HOST:PORT)");
+
   // idms-server token create ROLE --tokens FILE
   CLI::App* token = app.add_subcommand("token", "Manage tokens");
   CLI::App* create =

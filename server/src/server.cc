@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "idms/server/bus.h"
 #include "idms/server/log.h"
 #include "render_api.h"
 #include "server_internal.h"
@@ -45,6 +46,7 @@ struct Server::Impl {
   ServerCore core;
   Storage storage;
   std::unique_ptr<Library> library;
+  std::unique_ptr<Bus> bus;  // before the hub: its sessions' subscriptions go first
   std::unique_ptr<SessionHub> hub;
   LoginSessions logins;
   std::mutex tokens_mu;
@@ -191,6 +193,13 @@ bool Server::Impl::Start(std::string* error) {
     return false;
   }
   port = acceptor.local_endpoint().port();
+  if (core.options.node_id.empty()) core.options.node_id = o.host + ":" + std::to_string(port);
+  if (!o.bus.empty()) {
+    bus = OpenNatsBus(o.bus, core.options.node_id, error);
+    if (!bus) return false;
+    hub->SetBus(bus.get());
+    Log(LogLevel::kInfo, "on the bus", {{"bus", o.bus}, {"node", core.options.node_id}});
+  }
   threads = ResolveThreads(o.threads);
   return true;
 }

@@ -207,6 +207,28 @@ std::shared_ptr<LiveSession> SessionHub::FindLive(const std::string& id) {
   return it == live_.end() ? nullptr : it->second;
 }
 
+std::shared_ptr<WatchedSession> SessionHub::FindForViewer(const std::string& id) {
+  if (auto s = FindLive(id)) return s;
+  if (bus_ == nullptr) return nullptr;
+  std::shared_ptr<RelayedSession> relayed;
+  {
+    std::lock_guard lock(mu_);
+    if (auto it = relayed_.find(id); it != relayed_.end() && it->second->live()) return it->second;
+    relayed = std::make_shared<RelayedSession>(core_, *this, *bus_, relay_, id, [this, id](RelayedSession* gone) {
+      std::lock_guard l(mu_);
+      if (auto it = relayed_.find(id); it != relayed_.end() && it->second.get() == gone) relayed_.erase(it);
+    });
+    relayed_[id] = relayed;
+  }
+  std::string error;
+  if (!relayed->Start(&error)) {
+    Log(LogLevel::kWarn, "cannot relay the session: " + error, {{"session", id}});
+    asio::post(relayed->strand(), [relayed] { relayed->Close("the bus refused: cannot watch this session here"); });
+    return nullptr;
+  }
+  return relayed;
+}
+
 void SessionHub::Forget(const std::string& id, const LiveSession* session) {
   std::lock_guard lock(mu_);
   if (auto it = live_.find(id); it != live_.end() && it->second.get() == session) live_.erase(it);
@@ -302,6 +324,12 @@ void SessionHub::StopAll() {
     for (auto& [id, s] : live_) all.push_back(s);
   }
   for (auto& s : all) asio::post(s->strand(), [s] { s->Stop("the server is shutting down"); });
+  std::vector<std::shared_ptr<RelayedSession>> relayed;
+  {
+    std::lock_guard lock(mu_);
+    for (auto& [id, s] : relayed_) relayed.push_back(s);
+  }
+  for (auto& s : relayed) asio::post(s->strand(), [s] { s->Close("the server is shutting down"); });
 }
 
 namespace {
@@ -310,6 +338,44 @@ std::string Counter(const char* name, const char* help, const std::atomic<uint64
          std::to_string(value.load()) + "\n";
 }
 }  // namespace
+
+// The relay's lines: only with a bus (a server alone has none of these).
+std::string SessionHub::RelayMetrics() {
+  if (bus_ == nullptr) return "";
+  size_t relayed = 0;
+  {
+    std::lock_guard lock(mu_);
+    relayed = relayed_.size();
+  }
+  const double lag_sum_s = static_cast<double>(relay_.lag_ns_sum.load()) / 1e9;
+  return "# HELP idms_relay_sessions Sessions other servers own that this server relays to its viewers.\n"
+         "# TYPE idms_relay_sessions gauge\nidms_relay_sessions " +
+         std::to_string(relayed) +
+         "\n# HELP idms_bus_connected Whether this server's bus (NATS) connection is up.\n"
+         "# TYPE idms_bus_connected gauge\nidms_bus_connected " +
+         std::string(bus_->connected ? "1" : "0") + "\n" +
+         Counter("idms_bus_published_bytes_total", "Bytes this server published on the bus.", bus_->published_bytes) +
+         Counter("idms_bus_received_bytes_total", "Bytes this server received from the bus.", bus_->received_bytes) +
+         Counter("idms_bus_publish_failures_total", "Messages the bus refused (closed, or its buffer full).",
+                 bus_->publish_failures) +
+         Counter("idms_bus_disconnects_total", "Times the bus connection dropped.", bus_->disconnects) +
+         Counter("idms_bus_slow_consumer_total", "Times the bus dropped messages for this server (slow consumer).",
+                 bus_->slow_consumer_errors) +
+         Counter("idms_relay_frames_published_total", "Messages this server published for the sessions it owns.",
+                 relay_.frames_published) +
+         Counter("idms_relay_frames_relayed_total", "Messages relayed from other servers to viewers here.",
+                 relay_.frames_relayed) +
+         Counter("idms_relay_gaps_total", "Gaps in a relayed stream (each followed by a resync).", relay_.gaps) +
+         Counter("idms_relay_epoch_changes_total", "Relayed sessions that changed owner (a new epoch).",
+                 relay_.epoch_changes) +
+         Counter("idms_relay_joins_total", "Session states received from owners (a start or a resync).", relay_.joins) +
+         "# HELP idms_relay_lag_seconds From the owner's publish to the relay here.\n"
+         "# TYPE idms_relay_lag_seconds summary\nidms_relay_lag_seconds_sum " +
+         json(lag_sum_s).dump() + "\nidms_relay_lag_seconds_count " + std::to_string(relay_.lag_count.load()) +
+         "\n# HELP idms_relay_lag_max_seconds The largest relay lag seen.\n# TYPE idms_relay_lag_max_seconds gauge\n"
+         "idms_relay_lag_max_seconds " +
+         json(static_cast<double>(relay_.lag_ns_max.load()) / 1e9).dump() + "\n";
+}
 
 std::string SessionHub::MetricsText() {
   std::vector<std::shared_ptr<LiveSession>> all;
@@ -350,6 +416,7 @@ std::string SessionHub::MetricsText() {
          Counter("idms_recording_failures_total", "Recordings that stopped on an error (see the log).",
                  recording_failures) +
          Counter("idms_viewer_stalled_closed_total", "Viewers closed for staying stalled.", stalled_closed) +
+         RelayMetrics() +
          "# HELP idms_session_samples Device samples received, per live session.\n"
          "# TYPE idms_session_samples gauge\n" +
          samples + "# HELP idms_session_viewers Viewers, per live session.\n# TYPE idms_session_viewers gauge\n" +

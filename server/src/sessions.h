@@ -14,8 +14,10 @@
 #include <vector>
 
 #include "idms/protocol/idms.pb.h"
+#include "idms/server/bus.h"
 #include "idms/server/storage.h"
 #include "live_session.h"
+#include "relay.h"
 #include "server_internal.h"
 
 namespace idms::server {
@@ -48,6 +50,13 @@ class SessionHub {
   // interrupted. Any thread. The session itself sends the Welcome (LiveSession::AgentAttached).
   AgentAdmission OpenForAgent(const v1::Hello& hello, const std::string& peer);
   std::shared_ptr<LiveSession> FindLive(const std::string& id);
+  // For a viewer: the live session here, else (with a bus) this server's relay of the session
+  // another server owns (made for the first viewer; it closes its viewers when no owner answers).
+  std::shared_ptr<WatchedSession> FindForViewer(const std::string& id);
+  // The bus to the other servers (null: alone). Set before the first session; outlives the hub.
+  void SetBus(Bus* bus) { bus_ = bus; }
+  Bus* bus() const { return bus_; }
+  RelayCounters& relay_counters() { return relay_; }
   // The session's recording is finished and its row stored: it is no longer live here.
   void Forget(const std::string& id, const LiveSession* session);
   std::vector<SessionRow> List();  // live first (their current figures), then the index
@@ -76,6 +85,7 @@ class SessionHub {
   int live_count();
   // Prometheus lines: live sessions, viewers, and per live session its samples, tick p99 and overruns.
   std::string MetricsText();
+  std::string RelayMetrics();
 
  private:
   // A live session and its recorder, under mu_; continue_finished: a resume after a restart.
@@ -89,6 +99,9 @@ class SessionHub {
   boost::asio::strand<boost::asio::thread_pool::executor_type> index_strand_;
   std::mutex mu_;
   std::map<std::string, std::shared_ptr<LiveSession>> live_;
+  std::map<std::string, std::shared_ptr<RelayedSession>> relayed_;  // under mu_
+  Bus* bus_ = nullptr;
+  RelayCounters relay_;
   std::mutex ended_rows_mu_;  // an ended session's row is read, changed and stored under it
 };
 

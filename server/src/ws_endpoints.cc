@@ -103,7 +103,7 @@ class AgentEndpoint : public WsEndpoint, public std::enable_shared_from_this<Age
 // session holds its back-pressure state.
 class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<ViewerEndpoint> {
  public:
-  ViewerEndpoint(ServerCore& core, std::shared_ptr<LiveSession> session, Role role)
+  ViewerEndpoint(ServerCore& core, std::shared_ptr<WatchedSession> session, Role role)
       : session_(std::move(session)), admin_(role == Role::kAdmin), id_(core.next_endpoint_id++) {}
 
   void OnOpen(std::weak_ptr<WsPeer> peer) override {
@@ -126,7 +126,7 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
     if (e.has_annotation()) {
       if (!CheckAnnotation(e.annotation(), &error)) return peer->Send(Serialized(ErrorEvent(error)), true);
       return asio::post(session_->strand(),
-                        [s = session_, a = e.annotation(), p = peer->peer()] { s->ViewerAnnotation(a, p); });
+                        [s = session_, a = e.annotation(), p = peer->peer()] { s->ViewerNote(a, p); });
     }
     if (e.has_command()) {
       if (!admin_) {
@@ -150,7 +150,7 @@ class ViewerEndpoint : public WsEndpoint, public std::enable_shared_from_this<Vi
   }
 
  private:
-  std::shared_ptr<LiveSession> session_;
+  std::shared_ptr<WatchedSession> session_;
   const bool admin_;
   const uint64_t id_;
   std::weak_ptr<WsPeer> peer_;
@@ -173,7 +173,7 @@ void AppendWebSocketRoutes(ServerCore& core, std::vector<Route>* routes) {
   routes->push_back(ws("/ws/agent", P::kPublish,
                        [c](const ApiRequest&, std::string*) { return std::make_shared<AgentEndpoint>(*c); }));
   routes->push_back(ws("/ws/session/{id}", P::kRead, [c](const ApiRequest& req, std::string* refusal) {
-    std::shared_ptr<LiveSession> s = c->hub->FindLive(req.params[0]);
+    std::shared_ptr<WatchedSession> s = c->hub->FindForViewer(req.params[0]);
     if (!s || !s->live()) {
       *refusal = "no live session " + req.params[0];
       return std::shared_ptr<WsEndpoint>();

@@ -83,5 +83,44 @@ TEST(Envelope, RejectsEmptyBody) {
   EXPECT_NE(error.find("no body"), std::string::npos) << error;
 }
 
+TEST(Envelope, ParseFramesUnpacksAFramesMessageInOrderAndPassesALoneEnvelope) {
+  v1::Envelope samples, delta, outer;
+  samples.mutable_device_samples()->add_samples()->set_tick(41);
+  delta.mutable_mesh_delta()->set_sequence(9);
+  std::string a, b, bytes;
+  SerializeEnvelope(samples, &a);
+  SerializeEnvelope(delta, &b);
+  outer.mutable_frames()->add_envelopes(a);
+  outer.mutable_frames()->add_envelopes(b);
+  SerializeEnvelope(outer, &bytes);
+  std::vector<v1::Envelope> out;
+  std::string error;
+  ASSERT_TRUE(ParseFrames(bytes, &out, &error)) << error;
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].device_samples().samples(0).tick(), 41u);
+  EXPECT_EQ(out[1].mesh_delta().sequence(), 9u);
+  out.clear();
+  ASSERT_TRUE(ParseFrames(a, &out, &error)) << error;
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_TRUE(out[0].has_device_samples());
+  // A malformed inner envelope, or a Frames inside a Frames, is refused with its index.
+  v1::Envelope bad;
+  bad.mutable_frames()->add_envelopes(a);
+  bad.mutable_frames()->add_envelopes("\xff\xff garbage");
+  SerializeEnvelope(bad, &bytes);
+  out.clear();
+  EXPECT_FALSE(ParseFrames(bytes, &out, &error));
+  EXPECT_NE(error.find("frames[1]"), std::string::npos) << error;
+  v1::Envelope nested;
+  std::string inner;
+  SerializeEnvelope(outer, &inner);
+  nested.mutable_frames()->add_envelopes(inner);
+  SerializeEnvelope(nested, &bytes);
+  out.clear();
+  EXPECT_FALSE(ParseFrames(bytes, &out, &error));
+  EXPECT_NE(error.find("frames[0]: a Frames inside a Frames"), std::string::npos) << error;
+  EXPECT_TRUE(out.empty());
+}
+
 }  // namespace
 }  // namespace idms

@@ -196,15 +196,18 @@ void TestViewer::Read() {
     beast::error_code ec;
     ws_.read(buffer, ec);
     if (ec) break;
-    v1::Envelope e;
+    std::vector<v1::Envelope> frames;
     std::string error;
     const auto data = buffer.data();
-    if (ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, &error)) {
+    ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), &frames, &error);
+    {
       std::lock_guard lock(mu_);
-      if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
-        if (mirror_.Apply(e, &error) != MirrorStatus::kOk) ++gaps_;
+      for (v1::Envelope& e : frames) {
+        if (e.has_mesh_keyframe() || e.has_mesh_delta()) {
+          if (mirror_.Apply(e, &error) != MirrorStatus::kOk) ++gaps_;
+        }
+        frames_.push_back(std::move(e));
       }
-      frames_.push_back(std::move(e));
     }
     buffer.consume(buffer.size());
   }

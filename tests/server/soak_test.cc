@@ -204,6 +204,16 @@ bool ReadEnvelope(Ws& ws, v1::Envelope* e, std::string* error) {
   return ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), e, error);
 }
 
+// One message of a live session's viewer: an envelope, or several in a Frames.
+bool ReadFrames(Ws& ws, std::vector<v1::Envelope>* frames, std::string* error) {
+  beast::flat_buffer buffer;
+  beast::error_code ec;
+  ws.read(buffer, ec);
+  if (ec) return *error = "read: " + ec.message(), false;
+  const auto data = buffer.data();
+  return ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), frames, error);
+}
+
 void SendEnvelope(Ws& ws, const v1::Envelope& e) {
   std::string bytes;
   SerializeEnvelope(e, &bytes);
@@ -242,8 +252,11 @@ void ViewerWave(uint16_t port, const std::string& session, const std::string& to
       // session whose agent has only just started (after a kill), as the agent's first keyframe.
       bool mesh = false;
       for (int n = 0; n < 400 && !mesh; ++n) {
-        if (!ReadEnvelope(*ws, &frame, &error)) break;
-        mesh = frame.has_mesh_keyframe() || frame.has_mesh_delta();
+        std::vector<v1::Envelope> frames;
+        if (!ReadFrames(*ws, &frames, &error)) break;
+        for (const v1::Envelope& f : frames) {
+          if (!mesh && (f.has_mesh_keyframe() || f.has_mesh_delta())) frame = f, mesh = true;
+        }
       }
       if (!mesh || !frame.has_mesh_keyframe())
         tally->Fail("viewer", "the first mesh frame is not a keyframe: " + error);

@@ -88,6 +88,11 @@ std::optional<v1::Envelope> FakeAgent::End(uint64_t last_tick, double time_s) {
 }
 
 std::optional<v1::Envelope> FakeAgent::Read(std::chrono::milliseconds timeout) {
+  if (!unread_.empty()) {
+    v1::Envelope e = std::move(unread_.front());
+    unread_.pop_front();
+    return e;
+  }
   if (closed_) return std::nullopt;
   beast::get_lowest_layer(ws_).expires_after(timeout);
   beast::flat_buffer buffer;
@@ -98,10 +103,11 @@ std::optional<v1::Envelope> FakeAgent::Read(std::chrono::milliseconds timeout) {
     if (ec != beast::error::timeout) closed_ = true;
     return std::nullopt;
   }
-  v1::Envelope e;
+  std::vector<v1::Envelope> frames;
   std::string error;
-  if (!ParseEnvelope(beast::buffers_to_string(buffer.data()), &e, &error)) return std::nullopt;
-  return e;
+  if (!ParseFrames(beast::buffers_to_string(buffer.data()), &frames, &error) || frames.empty()) return std::nullopt;
+  unread_.insert(unread_.end(), std::make_move_iterator(frames.begin() + 1), std::make_move_iterator(frames.end()));
+  return std::move(frames.front());
 }
 
 void FakeAgent::Close() {

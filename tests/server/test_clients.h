@@ -12,6 +12,7 @@
 #include <boost/beast/websocket/stream.hpp>
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -60,6 +61,7 @@ class FakeAgent {
   boost::asio::io_context io_;
   boost::beast::websocket::stream<boost::beast::tcp_stream> ws_{io_};
   bool connected_ = false, closed_ = false;
+  std::deque<v1::Envelope> unread_;  // the rest of a Frames message (a live session's viewers get them)
 };
 
 // A TCP proxy on a free loopback port to `target_port`, pumping bytes both ways on its own

@@ -184,3 +184,25 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
   const cut = batch(3, true);
   assert.throws(() => decoder.decode(cut.subarray(0, cut.length - 4)), RangeError);
 });
+
+test('FrameDecoder.each hands over a Frames message\'s envelopes in order, and a lone envelope as itself', () => {
+  const decoder = new FrameDecoder();
+  const samples = (/** @type {number} */ tick) => Envelope.encode({ deviceSamples: { samples: [{ tick, timeS: tick / 1000 }] } }).finish();
+  const delta = Envelope.encode({ meshDelta: { sequence: 7, baseSequence: 6, numChanged: 1 } }).finish();
+  const note = Envelope.encode({ annotation: { text: 'deep', timeS: 2 } }).finish();
+  const gathered = Envelope.encode({ frames: { envelopes: [samples(40), samples(60), delta, note] } }).finish();
+  /** @type {string[]} */
+  const seen = [];
+  decoder.each(gathered, (f) => {
+    if (f.deviceSamples) seen.push(`samples ${f.deviceSamples.samples[0].timeS * 1000}`);
+    else if (f.meshDelta) seen.push(`delta ${f.meshDelta.sequence}`);
+    else if (f.annotation) seen.push(`note ${f.annotation.text}`);
+  });
+  assert.deepEqual(seen, ['samples 40', 'samples 60', 'delta 7', 'note deep']);
+  /** @type {number[]} */
+  const alone = [];
+  decoder.each(samples(5), (f) => alone.push(f.deviceSamples?.count ?? -1));
+  assert.deepEqual(alone, [1]);
+  // A Frames cut short throws, as any malformed message does.
+  assert.throws(() => decoder.each(gathered.subarray(0, gathered.length - 3), () => {}), RangeError);
+});

@@ -75,20 +75,27 @@ bool WatchLive(const LiveOptions& o, ViewerState* state, const std::function<boo
   ws.set_option(websocket::stream_base::timeout{timeout, timeout, false});
   // Frames until the session ends or the caller has what it wanted.
   beast::flat_buffer buffer;
-  v1::Envelope e;
-  while (true) {
+  std::vector<v1::Envelope> frames;
+  for (bool more = true; more;) {
     buffer.consume(buffer.size());
     ws.read(buffer, ec);
     if (ec == websocket::error::closed) return true;
     if (ec) return *error = "reading the session: " + ec.message(), false;
     const auto data = buffer.data();
-    if (!ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), &e, error)) return false;
-    if (e.has_welcome()) state->SetScene(e.welcome().scene());
-    if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ERROR)
-      return *error = "the server: " + e.session_event().message(), false;
-    if (!state->Apply(e, error)) return false;
-    const bool mesh = e.has_mesh_keyframe() || e.has_mesh_delta();
-    if (mesh && state->mirror.has_keyframe() && !on_update(*state)) break;
+    frames.clear();
+    if (!ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), &frames, error))
+      return false;
+    for (const v1::Envelope& e : frames) {
+      if (e.has_welcome()) state->SetScene(e.welcome().scene());
+      if (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ERROR)
+        return *error = "the server: " + e.session_event().message(), false;
+      if (!state->Apply(e, error)) return false;
+      const bool mesh = e.has_mesh_keyframe() || e.has_mesh_delta();
+      if (mesh && state->mirror.has_keyframe() && !on_update(*state)) {
+        more = false;
+        break;
+      }
+    }
   }
   ws.close(websocket::close_code::normal, ec);
   return true;

@@ -42,6 +42,7 @@ import { idms } from './proto.js';
 
 const kEnvelopeDeviceSamples = 3;
 const kEnvelopeMeshDelta = 5;
+const kEnvelopeFrames = 13;
 const kWireVarint = 0;
 const kWireFixed64 = 1;
 const kWireLength = 2;
@@ -53,6 +54,7 @@ const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 
 export class FrameDecoder {
   constructor() {
     this.reader = new $protobuf.Reader(new Uint8Array(0));
+    this.outer = new $protobuf.Reader(new Uint8Array(0));  // a Frames message's envelopes
     /** @type {SampleBatch} */
     this.batch = { samples: [], count: 0, stats: null, samplesDropped: 0 };
     /** @type {Stats} */
@@ -63,6 +65,36 @@ export class FrameDecoder {
     this.samplesFrame = { deviceSamples: this.batch };
     /** @type {Frame} */
     this.deltaFrame = { meshDelta: this.delta };
+  }
+
+  /**
+   * Every Envelope of one WebSocket message, in order, to `handle`: the message itself, or each
+   * of its Frames (a live session's viewers get sample batches gathered with the next mesh frame
+   * into one message). Each decoded frame is valid until `handle` returns.
+   * @param {Uint8Array} bytes @param {(frame: Frame) => void} handle
+   */
+  each(bytes, handle) {
+    const outer = this.outer;
+    outer.buf = bytes;
+    outer.pos = 0;
+    outer.len = bytes.length;
+    if (outer.len > 0 && outer.uint32() === ((kEnvelopeFrames << 3) | kWireLength)) {
+      const end = outer.uint32() + outer.pos;
+      if (end > outer.len) throw RangeError(`index out of range: ${end} > ${outer.len}`);
+      while (outer.pos < end) {
+        const tag = outer.uint32();
+        if (tag !== ((1 << 3) | kWireLength)) {
+          outer.skipType(tag & 7);
+          continue;
+        }
+        const length = outer.uint32();
+        const start = outer.pos;
+        outer.skip(length);
+        handle(this.decode(bytes.subarray(start, start + length)));
+      }
+      return;
+    }
+    handle(this.decode(bytes));
   }
 
   /**

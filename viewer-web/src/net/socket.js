@@ -47,7 +47,7 @@ export class EnvelopeSocket {
     };
     ws.onmessage = (ev) => {
       if (!(ev.data instanceof ArrayBuffer)) return;
-      this.handlers.onEnvelope(this.decoder.decode(new Uint8Array(ev.data)));
+      this.decoder.each(new Uint8Array(ev.data), (frame) => this.handlers.onEnvelope(frame));
     };
     ws.onclose = () => this.retry();
   }

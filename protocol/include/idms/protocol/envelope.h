@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "idms/protocol/idms.pb.h"
 
@@ -21,6 +22,12 @@ inline constexpr int64_t kDefaultMaxFrameBytes = int64_t{32} << 20;
 // a valid Envelope, or has no body. Unknown fields (from a newer peer) are kept, not an error.
 bool ParseEnvelope(std::string_view bytes, v1::Envelope* out, std::string* error,
                    int64_t max_bytes = kDefaultMaxFrameBytes);
+
+// Parses one WebSocket message into the envelopes it carries: the envelope itself, or each of a
+// Frames' envelopes in order (appended to *out). False with a message as ParseEnvelope, or when a
+// Frames holds a malformed or nested Frames envelope.
+bool ParseFrames(std::string_view bytes, std::vector<v1::Envelope>* out, std::string* error,
+                 int64_t max_bytes = kDefaultMaxFrameBytes);
 
 // Serializes one frame into *out (replacing its contents; reuse the string to avoid allocation).
 void SerializeEnvelope(const v1::Envelope& envelope, std::string* out);

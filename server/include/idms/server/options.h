@@ -48,6 +48,10 @@ struct ServerOptions {
   // 4 MiB), so that a slow peer's backlog builds in the server's queue, where deltas are skipped
   // and keyframes resynchronise, not as seconds of stale frames in the kernel. 0: the system's.
   int ws_send_buffer_bytes = 256 << 10;
+  // Several servers (docs: "Several servers"): the bus between them (NATS URLs, comma-separated;
+  // empty: this server alone) and this server's name on it (empty: HOST:PORT once bound).
+  std::string bus;
+  std::string node_id;
 };
 
 }  // namespace idms::server
