@@ -17,9 +17,11 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
+  libnats-dev
   nodejs npm
 )
-# The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker.
+# The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,
+# nats-server for the several-servers tests (ctest -L scale).
 $build_only || packages+=(
   clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
@@ -27,6 +29,7 @@ $build_only || packages+=(
   prometheus
   docker.io docker-compose debootstrap
   chromium
+  nats-server
 )
 # The viewer's build needs viewer-web's packages; the tests need the others.
 npm_dirs=(viewer-web)
