@@ -53,6 +53,7 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   rest_topology_ = sim.model.topology_version;
   input_.tools[0] = tool;
   input_.num_tools = 0;
+  if (options_.passivity.enabled) passivity_ = PassivityController(options_.passivity);
   // Timing.
   period_ns_ = std::max<int64_t>(1, std::llround(1e9 / options_.rate_hz));
   mesh_interval_s_ = 1.0 / options_.mesh_rate_hz;
@@ -210,6 +211,11 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   double f_model[3] = {0, 0, 0};
   if (reading.valid && input_.num_tools > 0)
     f_model[0] = out.force[0], f_model[1] = out.force[1], f_model[2] = out.force[2];
+  // The passivity controller: the port's energy from the position read and the force the device
+  // held last tick; damping added to this tick's force when the port would turn active.
+  PassivityTick passive;
+  const bool passivity = options_.passivity.enabled;
+  if (passivity) passive = passivity_.Update(tool.pos, reading.valid, f_model, report.energy_after, f_model);
   double f_device[3];
   registration_.ForceToDevice(f_model, f_device);
   const double asked = std::sqrt(f_device[0] * f_device[0] + f_device[1] * f_device[1] + f_device[2] * f_device[2]);
@@ -218,6 +224,11 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   const int64_t written_ns = MonotonicNs();
   registration_.ForceToModel(f_device, f_model);  // what the device was actually told
   if (fault != 0) counters_.force_faults.fetch_add(1, std::memory_order_relaxed);
+  if (passivity) {
+    passivity_.Commanded(f_model);
+    if (passive.acted) counters_.passivity_ticks.fetch_add(1, std::memory_order_relaxed);
+    counters_.passivity_dissipated.store(passivity_.dissipated(), std::memory_order_relaxed);
+  }
 
   // Surface snapshot at the stream rate.
   if (state.time_s >= next_mesh_time_s_ - 1e-9) {
@@ -251,6 +262,9 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     s.normal_force = std::isfinite(out.normal_force) ? out.normal_force : 0.0;
     s.friction = out.friction;
   }
+  s.port_energy = passive.energy;
+  s.port_energy_window = passive.window;
+  s.passivity_damping = passive.damping;
   s.overrun = MonotonicNs() > deadline_ns;
   compute_hist_.Add(s.compute_us);
   if (prev_wake_ns_ >= 0) period_hist_.Add(s.period_us);

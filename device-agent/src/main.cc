@@ -36,7 +36,7 @@ constexpr int kExitRefused = 2;  // the server refused the token or the session
 struct Args {
   std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json,
       dump_final, cache_dir;
-  std::string rotation, offset, friction;
+  std::string rotation, offset, friction, passivity;
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
   int cpu = -1;
@@ -146,6 +146,10 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
       {"keyframes", up.keyframes},
       {"mesh_skipped", c.mesh_skipped.load()},
       {"force_faults", c.force_faults.load()},
+      {"passivity",
+       {{"enabled", loop.options().passivity.enabled},
+        {"ticks_acted", c.passivity_ticks.load()},
+        {"dissipated", c.passivity_dissipated.load()}}},
       {"pose_faults", c.pose_faults.load()},
       {"commands", up.commands},
       {"warnings", TotalWarnings(loop.state().warnings)},
@@ -233,6 +237,10 @@ void AddOptions(CLI::App& app, Args& a) {
   app.add_option("--friction", a.friction,
                  "mu_s=S[,mu_d=D,k_t=K,b_t=B]: Coulomb friction with stiction at the tool's contacts (overrides "
                  "the scene's; mu_d defaults to mu_s, k_t to the tool's k, b_t to k_t dt)");
+  app.add_option("--passivity", a.passivity,
+                 "on|off[,window=S,max_damping=B,quantum=Q]: the passivity observer and controller at the device "
+                 "port (overrides the scene's; default on for udp: devices, off otherwise and with --preset thesis; "
+                 "docs/passivity.md)");
   app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO, mlockall and cpu_dma_latency 0");
   app.add_option("--cpu", a.cpu, "Pin the loop thread to this CPU; the I/O thread keeps off it (default: not pinned)")
       ->check(CLI::Range(0, CPU_SETSIZE - 1));
@@ -264,6 +272,7 @@ bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolComman
   // scene (and the force-limit events quoting it) say the limit in force.
   if (a.max_force > 0) scene->mutable_device()->set_max_force(a.max_force);
   if (!a.friction.empty() && !ApplyFrictionSpec(a.friction, scene, error)) return false;
+  if (!ApplyPassivitySpec(a.passivity, a.device, scene, error)) return false;
   if (!SceneToLoop(*scene, step, tool, registration, error)) return false;
   if (a.scale > 0) registration->scale = a.scale;
   if (!a.rotation.empty() && !ParseRotation(a.rotation, registration->rot, error)) {
@@ -389,6 +398,12 @@ int Main(int argc, char** argv) {
   if (const int status = LoadSceneModel(a, scene, up, offline, &model); status != 0) return status;
   LoopOptions lo;
   if (!MakeLoopOptions(a, scene, &lo, &error)) return Fail(error);
+  lo.passivity = PassivityFromScene(scene, registration, step.dt_s);
+  if (lo.passivity.enabled) {
+    std::fprintf(stderr, "idms-agent: passivity controller on (window %g s, damping up to %g, encoder %g)\n",
+                 scene.device().passivity().window_s(), scene.device().passivity().max_damping(),
+                 scene.device().passivity().encoder_quantum());
+  }
   DeviceContext dc;
   dc.model = &model;
   dc.registration = registration;

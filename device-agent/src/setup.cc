@@ -2,6 +2,8 @@
 #include "idms/agent/setup.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <limits>
 
 #include "idms/protocol/scene.h"
@@ -57,6 +59,67 @@ bool ApplyFrictionSpec(const std::string& spec, v1::Scene* scene, std::string* e
   }
   ApplySceneDefaults(scene);
   return true;
+}
+
+bool ApplyPassivitySpec(const std::string& spec, const std::string& device_spec, v1::Scene* scene, std::string* error) {
+  v1::Passivity* p = scene->mutable_device()->mutable_passivity();
+  // on|off first, then KEY=VALUE items.
+  size_t start = 0;
+  bool first = true;
+  while (!spec.empty() && start <= spec.size()) {
+    const size_t comma = std::min(spec.find(',', start), spec.size());
+    const std::string item = spec.substr(start, comma - start);
+    start = comma + 1;
+    if (first && (item == "on" || item == "off")) {
+      p->set_enabled(item == "on");
+      first = false;
+      continue;
+    }
+    first = false;
+    const size_t eq = item.find('=');
+    const std::string key = item.substr(0, eq);
+    double value = 0;
+    bool number = eq != std::string::npos;
+    if (number) {
+      const std::string text = item.substr(eq + 1);
+      char* end = nullptr;
+      value = std::strtod(text.c_str(), &end);
+      number = !text.empty() && end == text.c_str() + text.size() && std::isfinite(value);
+    }
+    if (number && key == "window") {
+      p->set_window_s(value);
+    } else if (number && key == "max_damping") {
+      p->set_max_damping(value);
+    } else if (number && key == "quantum") {
+      p->set_encoder_quantum(value);
+    } else {
+      *error =
+          "--passivity: bad item '" + item + "' (expected on|off[,window=S,max_damping=B,quantum=Q], finite numbers)";
+      return false;
+    }
+  }
+  // Unset: on for a real device, off for the simulated ones and the thesis's preset.
+  if (!p->has_enabled()) {
+    p->set_enabled(device_spec.rfind("udp:", 0) == 0 && scene->preset() != v1::PRESET_THESIS);
+  }
+  if (!ValidateScene(*scene, error)) {
+    *error = "--passivity: " + *error;
+    return false;
+  }
+  ApplySceneDefaults(scene);
+  return true;
+}
+
+PassivityOptions PassivityFromScene(const v1::Scene& scene, const Registration& registration, double dt_s) {
+  const v1::Passivity& p = scene.device().passivity();
+  PassivityOptions o;
+  o.enabled = p.enabled();
+  o.dt_s = dt_s;
+  o.window_s = p.window_s();
+  // Device units to model units: a length is scale times, a force 1 / force_scale times.
+  o.max_damping = p.max_damping() / (registration.force_scale * registration.scale);
+  o.quantum = p.encoder_quantum() * registration.scale;
+  return o;
 }
 
 bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,

@@ -554,6 +554,9 @@ struct Uplink::Impl final : ConnectionHandler {
       out->set_normal_force(s.normal_force);
       out->set_friction(s.friction == FrictionState::kStick ? v1::FRICTION_STICK : v1::FRICTION_SLIP);
     }
+    out->set_port_energy(s.port_energy);
+    out->set_port_energy_window(s.port_energy_window);
+    out->set_passivity_damping(s.passivity_damping);
   }
 
   void FillStats(v1::LoopStats* out) {
@@ -574,6 +577,8 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_compute_p99_us(compute_summary.p99_us);
     out->set_compute_max_us(compute_summary.max_us);
     out->set_realtime(loop.realtime());
+    out->set_passivity_ticks(loop.counters().passivity_ticks.load(std::memory_order_relaxed));
+    out->set_passivity_dissipated(loop.counters().passivity_dissipated.load(std::memory_order_relaxed));
   }
 
   void StartWrite() {

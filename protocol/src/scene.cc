@@ -171,6 +171,13 @@ void CheckDevice(const v1::DeviceMapping& d, Checker* c) {
   if (d.has_transition_force_rate()) {
     c->Range(path("transition_force_rate"), d.transition_force_rate(), 0, kInf, true);
   }
+  const v1::Passivity& p = d.passivity();
+  const auto ppath = [](const char* field) {
+    return std::vector<std::pair<std::string, int>>{{"device", -1}, {"passivity", -1}, {field, -1}};
+  };
+  if (p.has_window_s()) c->Range(ppath("window_s"), p.window_s(), 0, 1000, false);
+  if (p.has_max_damping()) c->Range(ppath("max_damping"), p.max_damping(), 0, kInf, true);
+  if (p.has_encoder_quantum()) c->Range(ppath("encoder_quantum"), p.encoder_quantum(), 0, kInf, false);
 }
 
 Checker CheckScene(const v1::Scene& scene) {
@@ -382,6 +389,11 @@ void ApplySceneDefaults(v1::Scene* scene) {
   if (!d->has_max_force_rate()) d->set_max_force_rate(0);
   if (!d->has_max_rate_hz()) d->set_max_rate_hz(1000);
   if (!d->has_transition_force_rate()) d->set_transition_force_rate(10);
+  // Passivity: `enabled` stays unset (the agent decides by its device); the rest get defaults.
+  v1::Passivity* p = d->mutable_passivity();
+  if (!p->has_window_s()) p->set_window_s(0.1);
+  if (!p->has_max_damping()) p->set_max_damping(0.5);
+  if (!p->has_encoder_quantum()) p->set_encoder_quantum(0);
   // Friction's defaults only where there is friction (a frictionless tool keeps no friction
   // fields: the scalpel may not have them).
   for (v1::Tool& tool : *scene->mutable_tools()) {

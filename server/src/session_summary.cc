@@ -33,6 +33,7 @@ void SessionSummary::Add(const v1::DeviceSamples& ds) {
   overruns = ds.stats().overruns();
   tick_p99_us = ds.stats().compute_p99_us();
   samples_dropped = ds.samples_dropped();
+  if (ds.has_stats()) passivity_dissipated = ds.stats().passivity_dissipated();
 }
 
 std::string SessionSummary::Json() const {
@@ -46,6 +47,7 @@ std::string SessionSummary::Json() const {
                    {"samples_dropped", samples_dropped},
                    {"force_limit_hits", force_limit_hits},
                    {"force_limited_s", force_limited_s},
+                   {"passivity_dissipated", passivity_dissipated},
                    {"last_limited", last_limited},
                    {"contact_samples", contact_samples},
                    {"first_time_s", first_time_s},
@@ -74,6 +76,7 @@ SessionSummary SessionSummary::FromJson(const std::string& text) {
   s.samples_dropped = number("samples_dropped", uint64_t{0});
   s.force_limit_hits = number("force_limit_hits", int64_t{0});
   s.force_limited_s = number("force_limited_s", 0.0);
+  s.passivity_dissipated = number("passivity_dissipated", 0.0);
   if (const auto it = j.find("last_limited"); it != j.end() && it->is_boolean()) s.last_limited = it->get<bool>();
   s.first_time_s = number("first_time_s", -1.0);
   s.last_time_s = number("last_time_s", 0.0);

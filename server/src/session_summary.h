@@ -18,11 +18,12 @@ struct SessionSummary {
   double path_length = 0;  // of the tool centre, model units
   int64_t warnings = 0;
   uint64_t overruns = 0;
-  uint32_t tick_p99_us = 0;      // compute time p99 (the agent's LoopStats)
-  uint64_t samples_dropped = 0;  // lost to the agent's backlog while disconnected
-  int64_t force_limit_hits = 0;  // times the device force reached its limit (runs of clamped samples)
-  double force_limited_s = 0;    // time spent at the limit
-  bool last_limited = false;     // the last sample was clamped (a run continues across batches)
+  uint32_t tick_p99_us = 0;         // compute time p99 (the agent's LoopStats)
+  uint64_t samples_dropped = 0;     // lost to the agent's backlog while disconnected
+  int64_t force_limit_hits = 0;     // times the device force reached its limit (runs of clamped samples)
+  double force_limited_s = 0;       // time spent at the limit
+  double passivity_dissipated = 0;  // energy dissipated by the passivity controller (the agent's LoopStats)
+  bool last_limited = false;        // the last sample was clamped (a run continues across batches)
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
   double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample

@@ -11,13 +11,16 @@ import { idms } from './proto.js';
 /**
  * One tick, as idms.v1.DeviceSample's fields the viewer reads (unset fields read 0 / false).
  * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number,
- *   forceLimited: boolean, frictionForce: Vec3, normalForce: number, friction: number}} Sample
- *   friction: idms.v1.FrictionState (0 none, 1 stick, 2 slip)
+ *   forceLimited: boolean, frictionForce: Vec3, normalForce: number, friction: number, portEnergy: number,
+ *   portEnergyWindow: number, passivityDamping: number}} Sample
+ *   friction: idms.v1.FrictionState (0 none, 1 stick, 2 slip); portEnergy, portEnergyWindow, passivityDamping: the
+ *   passivity controller's (0 when off)
  */
 
 /**
  * idms.v1.LoopStats's fields the viewer reads.
- * @typedef {{ticks: number, overruns: number, periodP99Us: number, computeP99Us: number, realtime: boolean}} Stats
+ * @typedef {{ticks: number, overruns: number, periodP99Us: number, computeP99Us: number, realtime: boolean,
+ *   passivityTicks: number, passivityDissipated: number}} Stats
  */
 
 /**
@@ -49,7 +52,8 @@ const kWireLength = 2;
 
 /** @returns {Sample} */
 const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0,
-  forceLimited: false, frictionForce: { x: 0, y: 0, z: 0 }, normalForce: 0, friction: 0 });
+  forceLimited: false, frictionForce: { x: 0, y: 0, z: 0 }, normalForce: 0, friction: 0,
+  portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0 });
 
 export class FrameDecoder {
   constructor() {
@@ -58,7 +62,8 @@ export class FrameDecoder {
     /** @type {SampleBatch} */
     this.batch = { samples: [], count: 0, stats: null, samplesDropped: 0 };
     /** @type {Stats} */
-    this.stats = { ticks: 0, overruns: 0, periodP99Us: 0, computeP99Us: 0, realtime: false };
+    this.stats = { ticks: 0, overruns: 0, periodP99Us: 0, computeP99Us: 0, realtime: false, passivityTicks: 0,
+      passivityDissipated: 0 };
     /** @type {Delta} */
     this.delta = { sequence: 0, baseSequence: 0, topologyVersion: 0, timeS: 0, numChanged: 0, compression: 0, payload: new Uint8Array(0) };
     /** @type {Frame} */
@@ -172,6 +177,9 @@ export class FrameDecoder {
     s.forceLimited = false;
     s.normalForce = 0;
     s.friction = 0;
+    s.portEnergy = 0;
+    s.portEnergyWindow = 0;
+    s.passivityDamping = 0;
     zero(s.toolPos);
     zero(s.force);
     zero(s.frictionForce);
@@ -188,6 +196,9 @@ export class FrameDecoder {
         case 13: this.readVec3(s.frictionForce, r.uint32() + r.pos); break;
         case 14: s.normalForce = r.double(); break;
         case 15: s.friction = r.int32(); break;
+        case 16: s.portEnergy = r.double(); break;
+        case 17: s.portEnergyWindow = r.double(); break;
+        case 18: s.passivityDamping = r.double(); break;
         default: r.skipType(tag & 7);
       }
     }
@@ -219,6 +230,8 @@ export class FrameDecoder {
     s.periodP99Us = 0;
     s.computeP99Us = 0;
     s.realtime = false;
+    s.passivityTicks = 0;
+    s.passivityDissipated = 0;
     while (r.pos < end) {
       const tag = r.uint32();
       switch (tag >>> 3) {
@@ -227,6 +240,8 @@ export class FrameDecoder {
         case 4: s.periodP99Us = r.uint32(); break;
         case 8: s.computeP99Us = r.uint32(); break;
         case 10: s.realtime = r.bool(); break;
+        case 11: s.passivityTicks = uint64(r); break;
+        case 12: s.passivityDissipated = r.double(); break;
         default: r.skipType(tag & 7);
       }
     }

@@ -16,7 +16,8 @@ import { parseObj } from '../codec/obj.js';
  * @typedef {{frames: number, keyframes: number, deltas: number, gaps: number, invalid: number,
  *   samples: number, renders: number, timeS: number, warnings: number, lastError: string, lastInvalid: string,
  *   movedVertices: number, peakForce: number, contactSamples: number, forceLimited: boolean, forceLimitHits: number,
- *   friction?: string}} ViewState  friction: 'stick' | 'slip' | '' at the last sample
+ *   friction?: string, portEnergy?: number, passivityDamping?: number}} ViewState  friction: 'stick' | 'slip' | ''
+ *   at the last sample; portEnergy, passivityDamping: the passivity controller's at the last sample (0 when off)
  */
 
 /**
@@ -167,7 +168,7 @@ export class LiveView {
    *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
    *   grasp?: boolean | null, warnings?: number | null, forceLimited?: boolean | null,
    *   frictionForce?: {x?: number | null, y?: number | null, z?: number | null} | null, normalForce?: number | null,
-   *   friction?: number | null}[]} samples
+   *   friction?: number | null, portEnergy?: number | null, passivityDamping?: number | null}[]} samples
    * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
   onSamples(samples, count = samples.length) {
@@ -206,6 +207,8 @@ export class LiveView {
     const words = toolWords(last);
     st.friction = friction === 1 ? 'stick' : friction === 2 ? 'slip' : '';
     if (words !== this.shownToolState) this.hosts.toolState.textContent = this.shownToolState = words;
+    st.portEnergy = last.portEnergy || 0;
+    st.passivityDamping = last.passivityDamping || 0;
     st.timeS = last.timeS || 0;
   }
 

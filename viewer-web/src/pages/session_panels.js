@@ -168,7 +168,8 @@ export class SessionHeader {
  */
 export class HealthPanel {
   /**
-   * @param {{timeS: number, warnings: number, fallbacks: number, frames: number, keyframes: number, gaps: number}} st
+   * @param {{timeS: number, warnings: number, fallbacks: number, frames: number, keyframes: number, gaps: number,
+   *   portEnergy?: number, passivityDamping?: number}} st
    * @param {FrameLoop} loop
    * @param {() => number} [sessionTimeS] the session time shown, s: by default the latest sample's
    *   (st.timeS); a replay's is where playback is
@@ -187,7 +188,7 @@ export class HealthPanel {
     this.dirty = true;
     this.lastDraw = -1e9;
     const labels = ['Session time', 'Tick compute p99', 'Period p99', 'Overruns', 'Real-time', 'Warnings',
-      'Stability fallbacks', 'Samples dropped', 'Mesh frames'];
+      'Stability fallbacks', 'Samples dropped', 'Mesh frames', 'Port energy', 'Passivity controller'];
     /** @type {Text[]} */
     this.values = labels.map(() => document.createTextNode(''));
     // A pair per div (as HTML allows in a dl), so that the pairs flow into as many columns as the
@@ -240,6 +241,13 @@ export class HealthPanel {
     this.set(6, String(st.fallbacks));
     this.set(7, String(this.dropped));
     this.set(8, `${st.frames} (${st.keyframes} keyframes, ${st.gaps} gaps)`);
+    // The passivity controller (docs/passivity.md): the energy the hand has put in through the port,
+    // and how often and how much its damping took out; "off" when the agent runs without it.
+    const acted = Number(s.passivityTicks ?? 0), dissipated = Number(s.passivityDissipated ?? 0);
+    const energy = st.portEnergy ?? 0, damping = st.passivityDamping ?? 0;
+    const on = acted > 0 || energy !== 0 || dissipated !== 0;
+    this.set(9, on ? energy.toPrecision(3) : 'not observed');
+    this.set(10, on ? `acted on ${acted} ticks, dissipated ${dissipated.toPrecision(3)}, damping now ${damping.toPrecision(3)}` : 'off');
     return false;
   }
 

@@ -16,6 +16,7 @@
 #include "idms/agent/registration.h"
 #include "idms/agent/thread_owner.h"
 #include "idms/sim/model.h"
+#include "idms/sim/passivity.h"
 #include "idms/sim/state.h"
 #include "idms/sim/step.h"
 #include "idms/sim/tool.h"
@@ -43,6 +44,12 @@ struct TickSample {
   double friction_force[3] = {0, 0, 0};
   double normal_force = 0;
   FrictionState friction = FrictionState::kNone;
+  // The passivity controller (LoopOptions::passivity), when on: the port energy since the start and
+  // its windowed part (force units * model units), the damping it added (force units * s / model
+  // unit). All 0 when off.
+  double port_energy = 0;
+  double port_energy_window = 0;
+  double passivity_damping = 0;
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.
@@ -82,6 +89,9 @@ struct LoopOptions {
   int fifo_priority = 80;
   int cpu = -1;         // pin the loop thread to this CPU before the first tick; -1 = not pinned
   int64_t spin_ns = 0;  // sleep to deadline - spin_ns, then poll the clock to the deadline; 0 = off
+  // The passivity observer and controller between the step's device force and the guard, in the
+  // model frame and units (PassivityFromScene); off (the default): not run at all.
+  PassivityOptions passivity;
 };
 
 // Counters the loop publishes (relaxed atomics: any thread may read them).
@@ -96,7 +106,9 @@ struct LoopCounters {
   // Wake-ups one full period or more after their scheduled time (the tick's deadline passed
   // before it started): the loop's count of what cyclictest reports as latency >= the period.
   std::atomic<uint64_t> late_wakeups{0};
-  std::atomic<uint64_t> resets{0};  // prepared rest states swapped in
+  std::atomic<uint64_t> resets{0};              // prepared rest states swapped in
+  std::atomic<uint64_t> passivity_ticks{0};     // ticks the passivity controller added damping
+  std::atomic<double> passivity_dissipated{0};  // the work its damping took out, force * model units
 };
 
 class Loop {
@@ -185,6 +197,7 @@ class Loop {
   StepOptions step_options_;
   ToolInput input_;
   Registration registration_;
+  PassivityController passivity_;  // run only when options_.passivity.enabled
   Device& device_;
   LoopOptions options_;
 

@@ -6,6 +6,7 @@
 
 #include "idms/agent/registration.h"
 #include "idms/protocol/idms.pb.h"
+#include "idms/sim/passivity.h"
 #include "idms/sim/step.h"
 #include "idms/sim/tool.h"
 
@@ -21,6 +22,17 @@ v1::Scene DefaultScene(const std::string& script, v1::Preset preset = v1::PRESET
 // friction fields in the scene (so the recorded scene says what ran), validates it and fills the
 // defaults again. False with a message naming the item or the field.
 bool ApplyFrictionSpec(const std::string& spec, v1::Scene* scene, std::string* error);
+
+// The passivity controller (DeviceMapping.passivity, docs/passivity.md): --passivity
+// on|off[,window=S,max_damping=B,quantum=Q] (empty: the scene's) written into the scene, then an
+// unset `enabled` decided by the device: on for udp: (a real hand on a real device: nothing else
+// damps a buzz), off for the simulated and scripted devices and in PRESET_THESIS (the thesis's loop
+// as it ran). The recorded scene says what ran. False with a message naming the item or field.
+bool ApplyPassivitySpec(const std::string& spec, const std::string& device_spec, v1::Scene* scene, std::string* error);
+
+// The scene's passivity options in the model frame and units the loop works in (lengths times
+// the registration's scale, forces divided by its force_scale), for a loop period of dt_s.
+PassivityOptions PassivityFromScene(const v1::Scene& scene, const Registration& registration, double dt_s);
 
 // Maps a validated scene with defaults applied. Tool 0 is the one the device drives; a scene
 // with more tools is refused (one device per agent). False with a message naming the field.
