@@ -38,6 +38,10 @@ bool ParseFrames(std::string_view bytes, std::vector<v1::Envelope>* out, std::st
     return true;
   }
   const auto& inner = e.frames().envelopes();
+  if (inner.empty()) {
+    if (error != nullptr) *error = "a Frames with no envelope";
+    return false;
+  }
   for (int i = 0; i < inner.size(); ++i) {
     v1::Envelope& one = out->emplace_back();
     std::string why;

@@ -40,14 +40,9 @@ void CheckMirrorConsistent(idms::MeshMirror& mirror) {
   if (mirror.positions().size() != a.size()) __builtin_trap();
 }
 
-void ApplyFrame(std::string_view bytes, idms::MeshMirror& mirror) {
-  idms::v1::Envelope env;
-  std::string error;
-  if (!idms::ParseEnvelope(bytes, &env, &error, kMaxFrameBytes)) {
-    if (error.empty()) __builtin_trap();  // every rejection says why
-    return;
-  }
+void ApplyOne(const idms::v1::Envelope& env, idms::MeshMirror& mirror) {
   if (!env.has_mesh_keyframe() && !env.has_mesh_delta()) return;
+  std::string error;
   const uint64_t sequence_before = mirror.sequence();
   const idms::MirrorStatus status = mirror.Apply(env, &error);
   if (status == idms::MirrorStatus::kOk) {
@@ -55,6 +50,21 @@ void ApplyFrame(std::string_view bytes, idms::MeshMirror& mirror) {
   } else {
     if (error.empty()) __builtin_trap();
     if (mirror.sequence() != sequence_before) __builtin_trap();  // rejected frames change nothing
+  }
+}
+
+// One WebSocket message as a viewer reads it: an envelope, or a Frames of them (ParseFrames).
+void ApplyFrame(std::string_view bytes, idms::MeshMirror& mirror) {
+  std::vector<idms::v1::Envelope> frames;
+  std::string error;
+  if (!idms::ParseFrames(bytes, &frames, &error, kMaxFrameBytes)) {
+    if (error.empty()) __builtin_trap();  // every rejection says why
+    return;
+  }
+  if (frames.empty()) __builtin_trap();
+  for (const idms::v1::Envelope& env : frames) {
+    if (env.has_frames()) __builtin_trap();  // never nested
+    ApplyOne(env, mirror);
   }
 }
 

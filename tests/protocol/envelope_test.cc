@@ -120,6 +120,11 @@ TEST(Envelope, ParseFramesUnpacksAFramesMessageInOrderAndPassesALoneEnvelope) {
   EXPECT_FALSE(ParseFrames(bytes, &out, &error));
   EXPECT_NE(error.find("frames[0]: a Frames inside a Frames"), std::string::npos) << error;
   EXPECT_TRUE(out.empty());
+  v1::Envelope empty;
+  empty.mutable_frames();
+  SerializeEnvelope(empty, &bytes);
+  EXPECT_FALSE(ParseFrames(bytes, &out, &error));
+  EXPECT_EQ(error, "a Frames with no envelope");
 }
 
 }  // namespace

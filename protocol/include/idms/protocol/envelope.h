@@ -25,7 +25,7 @@ bool ParseEnvelope(std::string_view bytes, v1::Envelope* out, std::string* error
 
 // Parses one WebSocket message into the envelopes it carries: the envelope itself, or each of a
 // Frames' envelopes in order (appended to *out). False with a message as ParseEnvelope, or when a
-// Frames holds a malformed or nested Frames envelope.
+// Frames is empty or holds a malformed or nested Frames envelope.
 bool ParseFrames(std::string_view bytes, std::vector<v1::Envelope>* out, std::string* error,
                  int64_t max_bytes = kDefaultMaxFrameBytes);
 
