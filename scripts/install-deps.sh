@@ -21,7 +21,7 @@ packages=(
   nodejs npm
 )
 # The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,
-# nats-server for the several-servers tests (ctest -L scale).
+# nats-server and haproxy for the several-servers tests (ctest -L scale).
 $build_only || packages+=(
   clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
@@ -29,7 +29,7 @@ $build_only || packages+=(
   prometheus
   docker.io docker-compose debootstrap
   chromium
-  nats-server
+  nats-server haproxy
 )
 # The viewer's build needs viewer-web's packages; the tests need the others.
 npm_dirs=(viewer-web)

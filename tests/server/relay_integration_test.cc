@@ -2,10 +2,12 @@
 // agent's server) watched on server B through the bus, with the surface B's viewer ends on equal
 // to the agent's, every device tick once and in order, a note from B's viewer recorded by A; and
 // the bus killed and restarted under a session: B's viewer stays connected and is resynchronised
-// (a gap, then a keyframe), its surface right at the end. Label: server;scale.
+// (a gap, then a keyframe), its surface right at the end; and a viewer's server killed under
+// it behind HAProxy, the viewer watching again on another within 2 s. Label: server;scale.
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <boost/asio/ip/tcp.hpp>
 #include <fstream>
 #include <regex>
 #include <thread>
@@ -51,6 +53,67 @@ class NatsServer {
 };
 
 bool HaveNats() { return std::ifstream("/usr/sbin/nats-server").good(); }
+bool HaveHaproxy() { return std::ifstream("/usr/sbin/haproxy").good(); }
+
+// A port no one listens on now (bound and released: haproxy cannot say which port it took).
+uint16_t FreePort() {
+  boost::asio::io_context io;
+  boost::asio::ip::tcp::acceptor a(io, {boost::asio::ip::make_address("127.0.0.1"), 0});
+  return a.local_endpoint().port();
+}
+
+// A new token of `role` appended to `file` (idms-server token create), as several servers share.
+std::string CreateToken(const std::string& file, const std::string& role) {
+  ChildProcess p(IDMS_SERVER_BIN, {"token", "create", role, "--tokens", file}, file + "." + role + ".log", true);
+  const auto line = p.ReadLine(seconds(20));
+  p.Wait(seconds(20));
+  return line.value_or("");
+}
+
+// HAProxy in front of the servers: agents to `agents`, viewers hashed by their URL (the session
+// id) over `viewers`, consistently and with bounded load, health-checked on /api/health.
+class Haproxy {
+ public:
+  Haproxy(const std::string& dir, const std::vector<uint16_t>& agents, const std::vector<uint16_t>& viewers)
+      : port_(FreePort()) {
+    std::string cfg =
+        "global\n  maxconn 4096\n"
+        "defaults\n  mode http\n  timeout connect 1s\n  timeout client 30s\n  timeout server 30s\n"
+        "  timeout tunnel 1h\n  retries 3\n  option redispatch 1\n"
+        "  default-server inter 250ms fall 2 rise 2 on-marked-down shutdown-sessions\n"
+        "frontend idms\n  bind 127.0.0.1:" +
+        std::to_string(port_) +
+        "\n  use_backend agents if { path_beg /ws/agent }\n  default_backend viewers\n"
+        "backend agents\n  balance leastconn\n  option httpchk GET /api/health\n";
+    for (size_t i = 0; i < agents.size(); ++i) {
+      cfg += "  server a" + std::to_string(i) + " 127.0.0.1:" + std::to_string(agents[i]) + " check\n";
+    }
+    cfg +=
+        "backend viewers\n  balance uri\n  hash-type consistent\n  hash-balance-factor 150\n"
+        "  option httpchk GET /api/health\n";
+    for (size_t i = 0; i < viewers.size(); ++i) {
+      cfg += "  server v" + std::to_string(i) + " 127.0.0.1:" + std::to_string(viewers[i]) + " check\n";
+    }
+    std::ofstream(dir + "/haproxy.cfg") << cfg;
+    process_ = std::make_unique<ChildProcess>(
+        "/usr/sbin/haproxy", std::vector<std::string>{"-db", "-f", dir + "/haproxy.cfg"}, dir + "/haproxy.log");
+    // Ready once it accepts.
+    Eventually(
+        [&] {
+          boost::asio::io_context io;
+          boost::asio::ip::tcp::socket socket(io);
+          boost::system::error_code ec;
+          socket.connect({boost::asio::ip::make_address("127.0.0.1"), port_}, ec);
+          return !ec;
+        },
+        seconds(20));
+  }
+  uint16_t port() const { return port_; }
+
+ private:
+  uint16_t port_;
+  std::unique_ptr<ChildProcess> process_;
+};
 
 std::vector<std::string> AgentArgs(const ServerProcess& server, const std::string& dir, double duration) {
   return {"--server",     "ws://127.0.0.1:" + server.port_string(),
@@ -177,6 +240,84 @@ TEST(Relay, TheBusRestartedUnderASessionItsRelayedViewerIsResynchronisedNotDropp
     EXPECT_GE(on_b.Keyframes(), 2);
   }
   EXPECT_GE(MetricValue(b.port(), b.Token("observer"), "idms_bus_disconnects_total"), 1);
+}
+
+// Failure 1 of issue 29: kill -9 a server that only serves viewers; its viewer, reconnecting
+// through HAProxy as the browser does, is watching again (Welcome, keyframe, then every tick in
+// order) within 2 s on another server.
+TEST(Relay, AViewersServerKilledItWatchesAgainThroughHaproxyWithinTwoSeconds) {
+  if (!HaveNats() || !HaveHaproxy()) GTEST_SKIP() << "nats-server or haproxy missing (scripts/install-deps.sh)";
+  const std::string dir = TempDir("relay-haproxy");
+  NatsServer nats(dir);
+  ASSERT_GT(nats.port(), 0) << nats.Log();
+  // One tokens file for every server, as a deployment shares it.
+  const std::string tokens = dir + "/tokens";
+  const std::string agent_token = CreateToken(tokens, "agent"), observer = CreateToken(tokens, "observer");
+  ASSERT_FALSE(agent_token.empty());
+  ASSERT_FALSE(observer.empty());
+  const auto node = [&](const std::string& name) {
+    return std::make_unique<ServerProcess>(
+        dir + "/" + name, std::vector<std::string>{"--bus", nats.url(), "--node", name, "--tokens", tokens,
+                                                   "--max-connections-per-address", "0"});
+  };
+  auto a = node("a"), b = node("b"), c = node("c");
+  ASSERT_TRUE(a->ready() && b->ready() && c->ready()) << a->Log() << b->Log() << c->Log();
+  Haproxy proxy(dir, {a->port()}, {b->port(), c->port()});
+  // The agent, through HAProxy, to a.
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", "ws://127.0.0.1:" + std::to_string(proxy.port()), "--token", agent_token, "--model", "hex_4x5_home",
+       "--device", "scripted:palpate", "--duration", "12", "--cache-dir", dir + "/cache"},
+      dir + "/agent.log");
+  const std::string id = WaitForLiveSession(a->port(), observer);
+  ASSERT_FALSE(id.empty()) << ReadText(dir + "/agent.log");
+  // A viewer through HAProxy, as a browser connects: again at once when refused (a 503 while
+  // HAProxy has no server up for it).
+  const auto connect = [&]() -> std::unique_ptr<TestViewer> {
+    for (const auto until = std::chrono::steady_clock::now() + seconds(10); std::chrono::steady_clock::now() < until;) {
+      try {
+        return std::make_unique<TestViewer>(proxy.port(), id, observer);
+      } catch (const std::exception&) {
+        std::this_thread::sleep_for(milliseconds(20));  // a browser's retry, not a wait for a condition
+      }
+    }
+    return nullptr;
+  };
+  // On b or c, whichever the session's id hashes to.
+  auto viewer = connect();
+  ASSERT_TRUE(viewer);
+  ASSERT_TRUE(Eventually([&] { return viewer->Keyframes() >= 1 && Ticks(*viewer).size() > 200; }));
+  const std::string identity = viewer->Frames()[0].welcome().identity();
+  const bool on_b = identity.find(" b ") != std::string::npos;
+  ASSERT_TRUE(on_b || identity.find(" c ") != std::string::npos) << identity;
+  ServerProcess& serving = on_b ? *b : *c;
+  const auto killed = std::chrono::steady_clock::now();
+  serving.process().Signal(SIGKILL);
+  ASSERT_TRUE(viewer->WaitClosed(seconds(10)));
+  // Reconnect at once, and again on a refusal (HAProxy retries and redispatches; its health
+  // checks mark the dead server down within 0.5 s).
+  double watching_s = -1;
+  while (std::chrono::steady_clock::now() - killed < seconds(10)) {
+    viewer = connect();
+    ASSERT_TRUE(viewer);
+    if (Eventually([&] { return viewer->closed() || viewer->Keyframes() >= 1; }, seconds(5)) && !viewer->closed()) {
+      watching_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
+      break;
+    }
+  }
+  std::printf("haproxy: the viewer watched again %.2f s after its server was killed\n", watching_s);
+  ASSERT_GE(watching_s, 0) << "the viewer never got a keyframe again";
+  EXPECT_LE(watching_s, 2.0);
+  const std::vector<v1::Envelope> first = viewer->Frames();
+  ASSERT_TRUE(first[0].has_welcome());
+  EXPECT_NE(first[0].welcome().identity().find(on_b ? " c " : " b "), std::string::npos)
+      << first[0].welcome().identity();
+  EXPECT_TRUE(first[1].has_mesh_keyframe());
+  // Then the frames, contiguous.
+  ASSERT_TRUE(Eventually([&] { return Ticks(*viewer).size() > 500; }));
+  const std::vector<uint64_t> ticks = Ticks(*viewer);
+  for (size_t i = 1; i < ticks.size(); ++i) ASSERT_EQ(ticks[i], ticks[i - 1] + 1) << "at " << i;
+  EXPECT_EQ(viewer->gaps(), 0);
 }
 
 }  // namespace
