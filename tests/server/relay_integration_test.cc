@@ -3,7 +3,8 @@
 // to the agent's, every device tick once and in order, a note from B's viewer recorded by A; and
 // the bus killed and restarted under a session: B's viewer stays connected and is resynchronised
 // (a gap, then a keyframe), its surface right at the end; and a viewer's server killed under
-// it behind HAProxy, the viewer watching again on another within 2 s. Label: server;scale.
+// it behind HAProxy, the viewer watching again on another within 2 s; one NATS server of three
+// killed; a server cut by the broker as a slow consumer. Label: server;scale.
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -13,6 +14,7 @@
 #include <thread>
 
 #include "idms/protocol/envelope.h"
+#include "idms/server/bus.h"
 #include "server_process.h"
 #include "session_checks.h"
 
@@ -307,6 +309,54 @@ TEST(Relay, OneOfThreeNatsServersKilledNoViewerIsDroppedAndTheGapIsShort) {
     EXPECT_TRUE(ended) << "a viewer was dropped before the session ended";
   }
   EXPECT_GE(MetricValue(b.port(), b.Token("observer"), "idms_bus_disconnects_total"), 1);
+}
+
+// Failure 5 of issue 29: a server too slow for the bus (stopped past NATS's write deadline) is
+// cut by the broker as a slow consumer; resumed, it reconnects and resubscribes by itself, and
+// its relayed viewer is resynchronised (a keyframe, never a stale delta).
+TEST(Relay, AServerTooSlowForTheBusIsCutAndItsViewersResynchroniseWhenItResumes) {
+  if (!HaveNats()) GTEST_SKIP() << "nats-server is not installed (scripts/install-deps.sh installs it)";
+  const std::string dir = TempDir("relay-slow");
+  // A broker that holds little for a client and waits little for its socket.
+  std::ofstream(dir + "/nats.conf") << "max_pending: 131072\nmax_payload: 131072\nwrite_deadline: \"500ms\"\n";
+  NatsServer nats(dir, -1, {"-c", dir + "/nats.conf"});
+  ASSERT_GT(nats.port(), 0) << nats.Log();
+  ServerProcess a(dir + "/a", {"--bus", nats.url(), "--node", "a"}),
+      b(dir + "/b", {"--bus", nats.url(), "--node", "b"});
+  ASSERT_TRUE(a.ready()) << a.Log();
+  ASSERT_TRUE(b.ready()) << b.Log();
+  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(a, dir, 14), dir + "/agent.log");
+  const std::string id = WaitForLiveSession(a.port(), a.Token("observer"));
+  ASSERT_FALSE(id.empty()) << a.Log();
+  TestViewer on_b(b.port(), id, b.Token("observer"));
+  ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() >= 1 && Ticks(on_b).size() > 500; })) << b.Log();
+  const int keyframes = on_b.Keyframes();
+  // B stops; the broker cuts it once its pending bytes pass the limit or a write outlasts the deadline.
+  b.process().Signal(SIGSTOP);
+  // The session's own stream would take minutes to fill the kernel's buffers: another client
+  // floods the subject B listens on (with bytes no relay takes for a frame).
+  std::string error;
+  const std::unique_ptr<server::Bus> flood = server::OpenNatsBus(nats.url(), "flood", &error);
+  ASSERT_TRUE(flood) << error;
+  const std::string junk(60000, '\xff');
+  const bool cut = Eventually(
+      [&] {
+        for (int i = 0; i < 50; ++i) flood->Publish("idms.live." + id, junk);
+        return nats.Log().find("Slow Consumer") != std::string::npos;
+      },
+      seconds(20));
+  b.process().Signal(SIGCONT);
+  ASSERT_TRUE(cut) << "the broker never cut the stopped server: " << nats.Log();
+  // Resumed: reconnected, a gap seen, the state asked for, the viewer given a keyframe.
+  ASSERT_TRUE(Eventually([&] { return MetricValue(b.port(), b.Token("observer"), "idms_relay_gaps_total") >= 1; }))
+      << b.Log();
+  ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() > keyframes; })) << b.Log();
+  EXPECT_GE(MetricValue(b.port(), b.Token("observer"), "idms_bus_disconnects_total"), 1);
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << ReadText(dir + "/agent.log");
+  ASSERT_TRUE(on_b.WaitClosed(seconds(20)));
+  EXPECT_FALSE(on_b.Frames().empty());
+  EXPECT_EQ(on_b.gaps(), 0) << "a delta was applied to a base the viewer did not hold";
+  EXPECT_LE(MaxMirrorError(on_b, ReadNumbersAfterFirstLine(dir + "/final.txt")), on_b.quant_step());
 }
 
 // Failure 1 of issue 29: kill -9 a server that only serves viewers; its viewer, reconnecting
