@@ -6,6 +6,7 @@
 
 #include "idms/protocol/cli.h"
 #include "idms/server/auth.h"
+#include "idms/server/bus.h"
 #include "idms/server/log.h"
 #include "idms/server/server.h"
 
@@ -162,16 +163,22 @@ int main(int argc, char** argv) {
   o.ws_send_buffer_bytes = ws_send_buffer_kb << 10;
   idms::server::SetLogFormat(o.log_format);
 
-  idms::server::Server server(o);
-  std::string error;
-  if (!server.Start(&error)) {
-    std::fprintf(stderr, "idms-server: %s\n", error.c_str());
-    return 1;
+  int status = 0;
+  {
+    idms::server::Server server(o);
+    std::string error;
+    if (!server.Start(&error)) {
+      std::fprintf(stderr, "idms-server: %s\n", error.c_str());
+      status = 1;
+    } else {
+      const char* scheme = o.tls_cert.empty() ? "http" : "https";
+      // Machine-readable first line (tests and scripts wait for it), then where the tokens are.
+      std::printf("idms-server listening on %s://%s:%u\n", scheme, o.host.c_str(), server.port());
+      std::printf("tokens: %s\n", server.tokens_path().c_str());
+      std::fflush(stdout);
+      status = server.Run();
+    }
   }
-  const char* scheme = o.tls_cert.empty() ? "http" : "https";
-  // Machine-readable first line (tests and scripts wait for it), then where the tokens are.
-  std::printf("idms-server listening on %s://%s:%u\n", scheme, o.host.c_str(), server.port());
-  std::printf("tokens: %s\n", server.tokens_path().c_str());
-  std::fflush(stdout);
-  return server.Run();
+  if (!o.bus.empty()) idms::server::CloseBusLibrary();  // after the server and its bus are gone
+  return status;
 }

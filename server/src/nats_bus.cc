@@ -43,12 +43,28 @@ class NatsSubscription : public Bus::Subscription {
   natsSubscription* sub_;
 };
 
+class NatsBus;
+
+// What the connection's callbacks reach the bus through: the client calls them on its own
+// thread, even after natsConnection_Close returned, until the closed callback, which frees this.
+struct Callbacks {
+  std::mutex mu;
+  NatsBus* bus = nullptr;  // null once the bus is gone
+};
+
 class NatsBus : public Bus {
  public:
+  NatsBus() : callbacks_(new Callbacks) { callbacks_->bus = this; }
   ~NatsBus() override {
+    {
+      std::lock_guard lock(callbacks_->mu);
+      callbacks_->bus = nullptr;
+    }
     if (nc_ != nullptr) {
-      natsConnection_Close(nc_);
+      natsConnection_Close(nc_);  // the closed callback frees callbacks_
       natsConnection_Destroy(nc_);
+    } else {
+      delete callbacks_;  // never connected: no callback will come
     }
     if (opts_ != nullptr) natsOptions_Destroy(opts_);
   }
@@ -74,9 +90,10 @@ class NatsBus : public Bus {
     if (s == NATS_OK) s = natsOptions_SetMaxPingsOut(opts_, 2);
     if (s == NATS_OK) s = natsOptions_SetTimeout(opts_, 2000);
     if (s == NATS_OK) s = natsOptions_SetNoEcho(opts_, true);  // a server never relays to itself
-    if (s == NATS_OK) s = natsOptions_SetDisconnectedCB(opts_, &NatsBus::Disconnected, this);
-    if (s == NATS_OK) s = natsOptions_SetReconnectedCB(opts_, &NatsBus::Reconnected, this);
-    if (s == NATS_OK) s = natsOptions_SetErrorHandler(opts_, &NatsBus::Error, this);
+    if (s == NATS_OK) s = natsOptions_SetDisconnectedCB(opts_, &NatsBus::Disconnected, callbacks_);
+    if (s == NATS_OK) s = natsOptions_SetReconnectedCB(opts_, &NatsBus::Reconnected, callbacks_);
+    if (s == NATS_OK) s = natsOptions_SetErrorHandler(opts_, &NatsBus::Error, callbacks_);
+    if (s == NATS_OK) s = natsOptions_SetClosedCB(opts_, &NatsBus::Closed, callbacks_);
     if (s == NATS_OK) s = natsConnection_Connect(&nc_, opts_);
     if (s != NATS_OK) {
       *error = "NATS at " + urls + ": " + natsStatus_GetText(s);
@@ -122,33 +139,43 @@ class NatsBus : public Bus {
 
  private:
   static void Disconnected(natsConnection*, void* closure) {
-    auto* self = static_cast<NatsBus*>(closure);
-    if (!self->connected.exchange(false)) return;
-    ++self->disconnects;
+    auto* c = static_cast<Callbacks*>(closure);
+    std::lock_guard lock(c->mu);
+    if (c->bus == nullptr || !c->bus->connected.exchange(false)) return;
+    ++c->bus->disconnects;
     Log(LogLevel::kWarn, "the bus (NATS) connection dropped; reconnecting", {});
   }
   static void Reconnected(natsConnection*, void* closure) {
-    auto* self = static_cast<NatsBus*>(closure);
-    self->connected = true;
+    auto* c = static_cast<Callbacks*>(closure);
+    std::lock_guard lock(c->mu);
+    if (c->bus == nullptr) return;
+    c->bus->connected = true;
     Log(LogLevel::kInfo, "the bus (NATS) connection is back", {});
-    if (self->on_reconnected) self->on_reconnected();
+    if (c->bus->on_reconnected) c->bus->on_reconnected();
   }
   static void Error(natsConnection*, natsSubscription*, natsStatus err, void* closure) {
-    auto* self = static_cast<NatsBus*>(closure);
+    auto* c = static_cast<Callbacks*>(closure);
+    std::lock_guard lock(c->mu);
+    if (c->bus == nullptr) return;
     if (err == NATS_SLOW_CONSUMER) {
       // Messages dropped for us: the relays notice the gap in their sequence and resynchronise.
-      if (self->slow_consumer_errors++ == 0)
+      if (c->bus->slow_consumer_errors++ == 0) {
         Log(LogLevel::kWarn, "the bus dropped messages for this server (slow consumer)", {});
+      }
       return;
     }
     Log(LogLevel::kWarn, std::string("bus (NATS) error: ") + natsStatus_GetText(err), {});
   }
+  static void Closed(natsConnection*, void* closure) { delete static_cast<Callbacks*>(closure); }
 
+  Callbacks* callbacks_;
   natsOptions* opts_ = nullptr;
   natsConnection* nc_ = nullptr;
 };
 
 }  // namespace
+
+void CloseBusLibrary() { nats_CloseAndWait(2000); }
 
 std::unique_ptr<Bus> OpenNatsBus(const std::string& urls, const std::string& name, std::string* error) {
   auto bus = std::make_unique<NatsBus>();

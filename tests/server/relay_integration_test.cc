@@ -17,6 +17,7 @@
 #include "idms/server/bus.h"
 #include "server_process.h"
 #include "session_checks.h"
+#include "test_clients.h"
 
 namespace idms::test {
 namespace {
@@ -162,10 +163,13 @@ TEST(Relay, AViewerOnAnotherServerSeesTheSessionAndItsNoteIsRecordedByTheOwner) 
   EXPECT_EQ(first[0].welcome().scene().model(), "hex_4x5_home");
   EXPECT_NE(first[0].welcome().identity().find("relayed"), std::string::npos);
   EXPECT_TRUE(first[1].has_mesh_keyframe());
-  // A note from B's viewer: stamped and recorded by A, seen by A's viewer.
+  // A note from a viewer on B (a client of its own: TestViewer reads on another thread, and a
+  // WebSocket stream must not read and write on two at once): stamped and recorded by A, seen by
+  // A's viewer.
   v1::Envelope note;
   note.mutable_annotation()->set_text("seen from b");
-  on_b.Send(note);
+  FakeAgent noting(b.port(), b.Token("observer"), "/ws/session/" + id);
+  ASSERT_TRUE(noting.Send(note));
   ASSERT_EQ(agent.Wait(seconds(60)), 0) << ReadText(dir + "/agent.log");
   // The ENDED event reached B's viewer through the bus, and B closed it.
   ASSERT_TRUE(on_b.WaitClosed(seconds(20)));
@@ -336,7 +340,7 @@ TEST(Relay, AServerTooSlowForTheBusIsCutAndItsViewersResynchroniseWhenItResumes)
   // The session's own stream would take minutes to fill the kernel's buffers: another client
   // floods the subject B listens on (with bytes no relay takes for a frame).
   std::string error;
-  const std::unique_ptr<server::Bus> flood = server::OpenNatsBus(nats.url(), "flood", &error);
+  std::unique_ptr<server::Bus> flood = server::OpenNatsBus(nats.url(), "flood", &error);
   ASSERT_TRUE(flood) << error;
   const std::string junk(60000, '\xff');
   const bool cut = Eventually(
@@ -345,6 +349,8 @@ TEST(Relay, AServerTooSlowForTheBusIsCutAndItsViewersResynchroniseWhenItResumes)
         return nats.Log().find("Slow Consumer") != std::string::npos;
       },
       seconds(20));
+  flood.reset();
+  server::CloseBusLibrary();  // this process's NATS client, freed (LeakSanitizer)
   b.process().Signal(SIGCONT);
   ASSERT_TRUE(cut) << "the broker never cut the stopped server: " << nats.Log();
   // Resumed: reconnected, a gap seen, the state asked for, the viewer given a keyframe.
