@@ -13,14 +13,16 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libzstd-dev zlib1g-dev libssl-dev
-  libosmesa6-dev libpng-dev libsqlite3-dev
+  libosmesa6-dev libpng-dev libsqlite3-dev libpqxx-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
   nodejs npm
 )
-# The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker.
+# The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,
+# postgresql for the --store tests (they start their own server, ctest -L scale).
 $build_only || packages+=(
+  postgresql
   clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk

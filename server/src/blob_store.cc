@@ -144,6 +144,22 @@ std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string
 }
 
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error) {
+  const std::string db = (fs::path(data_dir) / "idms.db").string();
+  std::error_code ec;
+  fs::create_directories(data_dir, ec);
+  if (ec) {
+    *error = "cannot create the data directory " + data_dir + ": " + ec.message();
+    return false;
+  }
+  std::unique_ptr<ModelStore> models = OpenSqliteModelStore(db, error);
+  if (!models) return false;
+  std::unique_ptr<SessionIndex> sessions = OpenSqliteSessionIndex(db, error);
+  if (!sessions) return false;
+  return OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error);
+}
+
+bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error) {
   std::error_code ec;
   fs::create_directories(data_dir, ec);
   if (ec) {
@@ -151,12 +167,10 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
     return false;
   }
   Storage s;
+  s.models = std::move(models);
+  s.sessions = std::move(sessions);
   s.blobs = OpenBlobDirectory((fs::path(data_dir) / "blobs").string(), error);
   if (!s.blobs) return false;
-  s.models = OpenSqliteModelStore((fs::path(data_dir) / "idms.db").string(), error);
-  if (!s.models) return false;
-  s.sessions = OpenSqliteSessionIndex((fs::path(data_dir) / "idms.db").string(), error);
-  if (!s.sessions) return false;
   s.recordings = OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
   if (!s.recordings) return false;
   // A crash between a blob's rename and its row's commit leaves a blob nobody names.
