@@ -138,8 +138,12 @@ std::string PgCluster::CreateDatabase(const std::string& name) {
 std::optional<std::string> PgCluster::Psql(const std::string& db, const std::string& sql) {
   // The SQL through a file: no quoting of quotes in shell.
   const std::string file = dir_ + "/query.sql";
+  std::error_code ec;
+  fs::remove(file, ec);
   std::ofstream(file) << sql << ";\n";
-  fs::permissions(file, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  // Readable by the postgres user when the test runs as root.
+  fs::permissions(file,
+                  fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read | fs::perms::others_read);
   std::string out;
   if (!Run(bin_ + "/psql -X -q -At -v ON_ERROR_STOP=1 -h 127.0.0.1 -p " + std::to_string(port_) + " -U postgres -d " +
                db + " -f " + file,
