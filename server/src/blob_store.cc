@@ -155,7 +155,14 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
   if (!models) return false;
   std::unique_ptr<SessionIndex> sessions = OpenSqliteSessionIndex(db, error);
   if (!sessions) return false;
-  return OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error);
+  if (!OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error)) return false;
+  // A crash between a blob's rename and its row's commit leaves a blob nobody names. Only here,
+  // where this server is the library's only writer: with a shared database another server's
+  // upload may be between the two (its blob stored, its row not yet committed).
+  for (const std::string& sha : storage->blobs->List()) {
+    if (!storage->models->BlobReferenced(sha)) storage->blobs->Remove(sha);
+  }
+  return true;
 }
 
 bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
@@ -173,10 +180,6 @@ bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models
   if (!s.blobs) return false;
   s.recordings = OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
   if (!s.recordings) return false;
-  // A crash between a blob's rename and its row's commit leaves a blob nobody names.
-  for (const std::string& sha : s.blobs->List()) {
-    if (!s.models->BlobReferenced(sha)) s.blobs->Remove(sha);
-  }
   *storage = std::move(s);
   return true;
 }

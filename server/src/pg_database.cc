@@ -100,6 +100,18 @@ std::string WithConnectTimeout(const std::string& conninfo) {
 
 }  // namespace
 
+std::string OneLine(std::string text) {
+  for (char& c : text) {
+    if (c == '\n' || c == '\t') c = ' ';
+  }
+  std::string out;
+  for (char c : text) {
+    if (c != ' ' || (!out.empty() && out.back() != ' ')) out += c;
+  }
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out;
+}
+
 PgDatabase::PgDatabase(std::string conninfo, int max_connections)
     : conninfo_(WithConnectTimeout(conninfo)), max_connections_(std::max(1, max_connections)) {}
 
@@ -120,31 +132,38 @@ bool PgDatabase::ConnectionClass(const std::string& sqlstate) {
 
 PgDatabase::Lease PgDatabase::Acquire() {
   std::vector<std::pair<std::string, std::string>> statements;
+  bool probe = false;
   {
     std::unique_lock lock(mu_);
-    if (std::chrono::steady_clock::now() < down_until_) throw StoreUnavailable(down_reason_);
     freed_.wait(lock, [&] { return !idle_.empty() || open_ < max_connections_; });
     if (!idle_.empty()) {
       std::unique_ptr<pqxx::connection> c = std::move(idle_.back());
       idle_.pop_back();
       return Lease(this, std::move(c));
     }
+    // A new connection: while the database is down, only one call at a time tries.
+    if (!down_reason_.empty()) {
+      if (probing_ || std::chrono::steady_clock::now() < down_until_) throw StoreUnavailable(down_reason_);
+      probing_ = probe = true;
+    }
     ++open_;
     statements = statements_;
   }
-  // A new connection, outside the lock: connecting takes a round trip or more.
+  // Outside the lock: connecting takes a round trip or more.
   try {
     auto c = std::make_unique<pqxx::connection>(conninfo_);
     for (const auto& [name, sql] : statements) c->prepare(name, sql);
+    std::lock_guard lock(mu_);
+    if (probe) probing_ = false;
+    down_reason_.clear();
     return Lease(this, std::move(c));
   } catch (const std::exception& e) {
     std::lock_guard lock(mu_);
     --open_;
+    if (probe) probing_ = false;
     freed_.notify_one();
     down_until_ = std::chrono::steady_clock::now() + kRetryAfterFailure;
-    std::string what = e.what();
-    while (!what.empty() && (what.back() == '\n' || what.back() == ' ')) what.pop_back();
-    down_reason_ = "PostgreSQL unavailable: " + what;
+    down_reason_ = "PostgreSQL unavailable: " + OneLine(e.what());
     throw StoreUnavailable(down_reason_);
   }
 }
@@ -193,9 +212,11 @@ int ApplyMigrations(PgDatabase& db, std::string* error) {
       }
     }
     return applied;
+  } catch (const StoreUnavailable& e) {
+    *error = std::string("--store: ") + e.what();
+    return -1;
   } catch (const std::exception& e) {
-    *error = std::string("PostgreSQL schema: ") + e.what();
-    while (!error->empty() && error->back() == '\n') error->pop_back();
+    *error = std::string("PostgreSQL schema: ") + OneLine(e.what());
     return -1;
   }
 }

@@ -17,6 +17,9 @@
 
 namespace idms::server {
 
+// libpq's multi-line messages as one line (for logs and JSON errors).
+std::string OneLine(std::string text);
+
 class PgDatabase {
  public:
   // `conninfo`: a postgres:// URL or a libpq "key=value" string; `max_connections` bounds the pool.
@@ -33,8 +36,10 @@ class PgDatabase {
   // (the server restarted since it was last used) is replaced and fn run once more on the new
   // one, unless a commit may have happened (pqxx::in_doubt_error). Throws StoreUnavailable when
   // the database cannot be reached; any other exception of fn passes through. Blocks while all
-  // connections are in use. For 250 ms after a failed connection attempt every call fails at
-  // once, so a down database costs each request microseconds, not a connection attempt.
+  // connections are in use. Once a connection attempt failed, calls that need a new connection
+  // fail at once for 250 ms, and after that one call at a time tries again (the others fail at
+  // once meanwhile): a down database costs a request microseconds, and at most one thread waits
+  // for a connection attempt (up to connect_timeout, 3 s unless the conninfo names one).
   template <class F>
   auto Run(F&& fn) -> decltype(fn(std::declval<pqxx::connection&>())) {
     for (int attempt = 0;; ++attempt) {
@@ -43,14 +48,14 @@ class PgDatabase {
         return fn(*c.conn);
       } catch (const pqxx::in_doubt_error& e) {
         Drop(std::move(c));
-        throw StoreUnavailable(std::string("PostgreSQL: the connection was lost during a commit: ") + e.what());
+        throw StoreUnavailable("PostgreSQL: the connection was lost during a commit: " + OneLine(e.what()));
       } catch (const pqxx::broken_connection& e) {
         Drop(std::move(c));
-        if (attempt > 0) throw StoreUnavailable(std::string("PostgreSQL: ") + e.what());
+        if (attempt > 0) throw StoreUnavailable("PostgreSQL: " + OneLine(e.what()));
       } catch (const pqxx::sql_error& e) {
         if (!ConnectionClass(e.sqlstate())) throw;
         Drop(std::move(c));
-        if (attempt > 0) throw StoreUnavailable(std::string("PostgreSQL: ") + e.what());
+        if (attempt > 0) throw StoreUnavailable("PostgreSQL: " + OneLine(e.what()));
       }
     }
   }
@@ -83,7 +88,8 @@ class PgDatabase {
   std::vector<std::unique_ptr<pqxx::connection>> idle_;
   int open_ = 0;  // idle and in use
   std::chrono::steady_clock::time_point down_until_{};
-  std::string down_reason_;
+  std::string down_reason_;  // empty: the last connection attempt succeeded
+  bool probing_ = false;     // a call is trying to connect while the database is down
   std::vector<std::pair<std::string, std::string>> statements_;  // name, SQL
 };
 

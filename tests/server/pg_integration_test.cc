@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "child_process.h"
+#include "idms/server/postgres.h"
 #include "pg_cluster.h"
 #include "server_process.h"
 #include "session_checks.h"
@@ -81,6 +82,31 @@ TEST(PostgresServer, AServerRefusesASchemaNewerThanItKnows) {
   EXPECT_FALSE(second.ready());
   EXPECT_EQ(second.process().Wait(30s), 1);
   EXPECT_NE(second.Log().find("version 999, newer than this server's"), std::string::npos) << second.Log();
+}
+
+// Three servers started at once on a fresh database: all start, one of them applies the schema.
+TEST(PostgresServer, ServersStartingAtOnceOnAFreshDatabaseAllStartAndTheSchemaIsAppliedOnce) {
+  IDMS_REQUIRE_POSTGRES();
+  const std::string dir = TempDir("pg-together");
+  constexpr int kServers = 3;
+  std::vector<std::unique_ptr<ServerProcess>> servers(kServers);
+  std::vector<std::thread> starting;
+  for (int i = 0; i < kServers; ++i) {
+    starting.emplace_back([&, i] {
+      servers[static_cast<size_t>(i)] = std::make_unique<ServerProcess>(
+          dir + "/" + std::to_string(i), std::vector<std::string>{"--store", pg.Url(), "--models-dir", "none"});
+    });
+  }
+  for (std::thread& t : starting) t.join();
+  int appliers = 0;
+  for (const auto& s : servers) {
+    ASSERT_TRUE(s->ready()) << s->Log();
+    EXPECT_EQ(Get(s->port(), "/api/models", s->Token("observer")).status, 200);
+    if (s->Log().find("applied a schema migration") != std::string::npos) ++appliers;
+  }
+  EXPECT_EQ(appliers, 1);
+  EXPECT_EQ(pg.Psql("postgres", "SELECT count(*) FROM schema_migrations"),
+            std::to_string(idms::server::PostgresSchemaVersion()));
 }
 
 // Issue 29, failure 6: PostgreSQL stopped under a live session and started again.

@@ -182,7 +182,9 @@ struct Storage {
 };
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
 // The same with the model library and the session index given (PostgreSQL's, with --store):
-// only the blobs and recordings are opened under `data_dir`, and no idms.db is made.
+// only the blobs and recordings are opened under `data_dir`, and no idms.db is made. Blobs no row
+// names are kept: another server sharing the database (and, later, the blobs) may be between
+// storing an upload's blob and committing its row.
 bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
                  std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error);
 
