@@ -62,7 +62,11 @@ TEST(PostgresServer, LoginsSurviveARestartAndAnotherServerHonoursThem) {
       b.port(),
       HttpCall{"POST", "/api/logout", {{"Cookie", cookie}, {"Origin", "http://127.0.0.1:" + b.port_string()}}, ""});
   EXPECT_EQ(logout.status, 200) << logout.body;
-  EXPECT_EQ(WithCookie(a->port(), "/api/whoami", cookie).status, 401);
+  EXPECT_EQ(WithCookie(b.port(), "/api/whoami", cookie).status, 401);
+  // The first server trusts a login it checked for 2 s before asking again.
+  const auto logged_out = std::chrono::steady_clock::now();
+  EXPECT_TRUE(Eventually([&] { return WithCookie(a->port(), "/api/whoami", cookie).status == 401; }, 5000ms));
+  EXPECT_LT(std::chrono::steady_clock::now() - logged_out, 2500ms);
   // Only digests in the database and no cookie in either log.
   EXPECT_EQ(pg.Psql("postgres", "SELECT count(*) FROM logins"), "0");
   const std::string value = cookie.substr(cookie.find('=') + 1);
@@ -128,6 +132,12 @@ TEST(PostgresServer, TheDatabaseRestartedUnderALiveSessionRestAnswers503ThenReco
   TestViewer viewer(port, id, observer);
   ASSERT_TRUE(Eventually([&] { return viewer.Frames().size() >= 20; })) << server.Log();
   ASSERT_EQ(Get(port, "/api/models", observer).status, 200);
+  // A browser logged in (its cookie checked once, as a page load does).
+  const HttpReply browser = Http(
+      port, HttpCall{"POST", "/api/login", {{"Content-Type", "application/json"}}, json{{"token", observer}}.dump()});
+  ASSERT_EQ(browser.status, 200) << browser.body;
+  const std::string cookie = browser.headers.at("set-cookie").substr(0, browser.headers.at("set-cookie").find(';'));
+  ASSERT_EQ(WithCookie(port, "/api/whoami", cookie).status, 200);
 
   // Down: the REST routes that need the database answer 503 + Retry-After at once.
   ASSERT_TRUE(pg.Stop()) << pg.error();
@@ -160,6 +170,10 @@ TEST(PostgresServer, TheDatabaseRestartedUnderALiveSessionRestAnswers503ThenReco
     }
   }
   const size_t frames_while_down = viewer.Frames().size() - frames_at_stop;
+  // A browser that reconnects its viewer now, 3 s into the outage, is let in on its known cookie.
+  const WsResult rejoin = WsConnect(port, "/ws/session/" + id, {{"Cookie", cookie}});
+  EXPECT_EQ(rejoin.status, 101) << rejoin.error;
+  EXPECT_EQ(WithCookie(port, "/api/models", cookie).status, 503);
   EXPECT_FALSE(viewer.closed());
   EXPECT_GT(frames_while_down, 60u) << "frames while the database was down";
   EXPECT_LT(longest_stall_ms, 500) << "the viewer's longest wait for a frame while the database was down";
