@@ -13,7 +13,7 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libzstd-dev zlib1g-dev libssl-dev
-  libosmesa6-dev libpng-dev libsqlite3-dev
+  libosmesa6-dev libpng-dev libsqlite3-dev libpqxx-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
@@ -21,8 +21,9 @@ packages=(
   nodejs npm
 )
 # The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,
-# nats-server and haproxy for the several-servers tests (ctest -L scale).
+# postgresql, nats-server and haproxy for the several-servers tests (they start their own, ctest -L scale).
 $build_only || packages+=(
+  postgresql
   clang libclang-rt-14-dev clang-format
   gnuplot-nox hyperfine rt-tests
   curl openssl wrk

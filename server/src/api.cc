@@ -8,6 +8,8 @@
 #include <nlohmann/json.hpp>
 
 #include "idms/server/http_parse.h"
+#include "idms/server/log.h"
+#include "idms/server/storage.h"
 
 namespace idms::server {
 namespace {
@@ -75,7 +77,21 @@ ApiResponse MetricsText(ApiContext& ctx, ApiRequest& req) {
   const double uptime = std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
   ApiResponse res{http::status::ok, req.message.version()};
   res.set(http::field::content_type, "text/plain; version=0.0.4; charset=utf-8");
-  res.body() = ctx.metrics->Render(ctx.library->models().NumModels(), ctx.library->models().LibraryBytes(), uptime);
+  // The library's figures need the store; live figures do not, so /metrics still answers while
+  // the database is down (the library's as 0, and idms_store_available 0 says why).
+  int64_t models = 0, library_bytes = 0;
+  bool store_available = true;
+  try {
+    models = ctx.library->models().NumModels();
+    library_bytes = ctx.library->models().LibraryBytes();
+  } catch (const StoreUnavailable&) {
+    store_available = false;
+  }
+  res.body() = ctx.metrics->Render(models, library_bytes, uptime);
+  res.body() +=
+      "# HELP idms_store_available Whether the model and session stores answered (0: database down)\n"
+      "# TYPE idms_store_available gauge\nidms_store_available " +
+      std::string(store_available ? "1" : "0") + "\n";
   if (ctx.more_metrics) res.body() += ctx.more_metrics();
   return res;
 }
@@ -261,7 +277,14 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
     req.role = tokens->LookupDigest(req.token_digest);
     if (req.role == Role::kNone) return fail(http::status::unauthorized, "unknown token");
   } else if (const auto cookie = CookieValue(Sv(req.message[http::field::cookie]), kSessionCookie)) {
-    if (const auto digest = ctx.logins->Find(*cookie)) {
+    std::optional<Digest> digest;
+    try {
+      digest = ctx.logins->Find(*cookie);
+    } catch (const StoreUnavailable& e) {
+      a.error = StoreUnavailableResponse(req, e.what());
+      return a;
+    }
+    if (digest) {
       req.token_digest = *digest;
       req.role = tokens->LookupDigest(*digest);  // kNone once the token left the file
       req.via_cookie = req.role != Role::kNone;
@@ -300,6 +323,43 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
                   "parts fem, plg, description");
   }
   return a;
+}
+
+ApiResponse StoreUnavailableResponse(const ApiRequest& req, const std::string& what) {
+  Log(LogLevel::kWarn, "store unavailable", {{"path", req.path}, {"error", what}});
+  ApiResponse res = JsonError(req, http::status::service_unavailable,
+                              "the database is unavailable; retry shortly (live sessions are not affected)");
+  res.set(http::field::retry_after, "1");
+  return res;
+}
+
+void AnswerStoreFailures(std::vector<Route>* routes, bool stores_remote) {
+  for (Route& r : *routes) {
+    if (r.handler) {
+      r.handler = [h = std::move(r.handler)](ApiContext& ctx, ApiRequest& req) -> HandlerResponse {
+        try {
+          return h(ctx, req);
+        } catch (const StoreUnavailable& e) {
+          return StoreUnavailableResponse(req, e.what());
+        }
+      };
+      // A remote store's round trips (or its connection timeout) wait on a worker, not on an
+      // I/O thread. The health check and the viewer's files never touch a store.
+      const bool api = r.pattern.rfind("/api/", 0) == 0 || r.pattern == "/metrics";
+      if (stores_remote && api && r.pattern != "/api/health") r.blocking = true;
+    }
+    if (r.open_websocket) {
+      r.open_websocket = [open = std::move(r.open_websocket)](const ApiRequest& req,
+                                                              std::string* refusal) -> std::shared_ptr<WsEndpoint> {
+        try {
+          return open(req, refusal);
+        } catch (const StoreUnavailable& e) {
+          *refusal = std::string("the database is unavailable; retry shortly: ") + e.what();
+          return nullptr;
+        }
+      };
+    }
+  }
 }
 
 }  // namespace idms::server

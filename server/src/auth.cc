@@ -47,6 +47,12 @@ bool AppendPrivate(const std::string& path, const std::string& text, bool trunca
   return ok;
 }
 
+// A login's key: the cookie's digest, as bytes.
+std::string CookieKey(std::string_view cookie) {
+  const Digest d = DigestOf(cookie);
+  return std::string(reinterpret_cast<const char*>(d.data()), d.size());
+}
+
 }  // namespace
 
 const char* RoleName(Role role) {
@@ -195,24 +201,19 @@ bool CreateDefaultTokens(const std::string& path, std::string* error) {
   return AppendPrivate(path, text, true, error);
 }
 
-std::string LoginSessions::Key(std::string_view cookie) const {
-  const Digest d = DigestOf(cookie);
-  return std::string(reinterpret_cast<const char*>(d.data()), d.size());
-}
-
-std::string LoginSessions::Create(const Digest& token_digest) {
+std::string MemoryLoginSessions::Create(const Digest& token_digest) {
   const std::string cookie = NewToken();
   const auto now = std::chrono::steady_clock::now();
   std::lock_guard lock(mu_);
   // Expired logins go whenever a new one comes.
   std::erase_if(logins_, [&](const auto& kv) { return kv.second.expires <= now; });
-  logins_[Key(cookie)] = Login{token_digest, now + lifetime_};
+  logins_[CookieKey(cookie)] = Login{token_digest, now + lifetime()};
   return cookie;
 }
 
-std::optional<Digest> LoginSessions::Find(std::string_view cookie) {
+std::optional<Digest> MemoryLoginSessions::Find(std::string_view cookie) {
   // Looked up by digest: the map's own comparison then never touches the secret itself.
-  const std::string key = Key(cookie);
+  const std::string key = CookieKey(cookie);
   std::lock_guard lock(mu_);
   const auto it = logins_.find(key);
   if (it == logins_.end()) return std::nullopt;
@@ -223,8 +224,8 @@ std::optional<Digest> LoginSessions::Find(std::string_view cookie) {
   return it->second.token_digest;
 }
 
-void LoginSessions::Remove(std::string_view cookie) {
-  const std::string key = Key(cookie);
+void MemoryLoginSessions::Remove(std::string_view cookie) {
+  const std::string key = CookieKey(cookie);
   std::lock_guard lock(mu_);
   logins_.erase(key);
 }

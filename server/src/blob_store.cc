@@ -144,6 +144,29 @@ std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string
 }
 
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error) {
+  const std::string db = (fs::path(data_dir) / "idms.db").string();
+  std::error_code ec;
+  fs::create_directories(data_dir, ec);
+  if (ec) {
+    *error = "cannot create the data directory " + data_dir + ": " + ec.message();
+    return false;
+  }
+  std::unique_ptr<ModelStore> models = OpenSqliteModelStore(db, error);
+  if (!models) return false;
+  std::unique_ptr<SessionIndex> sessions = OpenSqliteSessionIndex(db, error);
+  if (!sessions) return false;
+  if (!OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error)) return false;
+  // A crash between a blob's rename and its row's commit leaves a blob nobody names. Only here,
+  // where this server is the library's only writer: with a shared database another server's
+  // upload may be between the two (its blob stored, its row not yet committed).
+  for (const std::string& sha : storage->blobs->List()) {
+    if (!storage->models->BlobReferenced(sha)) storage->blobs->Remove(sha);
+  }
+  return true;
+}
+
+bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error) {
   std::error_code ec;
   fs::create_directories(data_dir, ec);
   if (ec) {
@@ -151,18 +174,12 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
     return false;
   }
   Storage s;
+  s.models = std::move(models);
+  s.sessions = std::move(sessions);
   s.blobs = OpenBlobDirectory((fs::path(data_dir) / "blobs").string(), error);
   if (!s.blobs) return false;
-  s.models = OpenSqliteModelStore((fs::path(data_dir) / "idms.db").string(), error);
-  if (!s.models) return false;
-  s.sessions = OpenSqliteSessionIndex((fs::path(data_dir) / "idms.db").string(), error);
-  if (!s.sessions) return false;
   s.recordings = OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
   if (!s.recordings) return false;
-  // A crash between a blob's rename and its row's commit leaves a blob nobody names.
-  for (const std::string& sha : s.blobs->List()) {
-    if (!s.models->BlobReferenced(sha)) s.blobs->Remove(sha);
-  }
   *storage = std::move(s);
   return true;
 }

@@ -8,6 +8,7 @@
 #include "idms/server/auth.h"
 #include "idms/server/bus.h"
 #include "idms/server/log.h"
+#include "idms/server/postgres.h"
 #include "idms/server/server.h"
 
 namespace {
@@ -48,6 +49,15 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", idms::Version());
   app.add_option("--listen", listen, "HOST:PORT to listen on (port 0: any free port)")->capture_default_str();
   app.add_option("--data", o.data_dir, "Data directory: idms.db (SQLite), blobs/, tokens")->capture_default_str();
+  app.add_option("--store", o.store,
+                 "Where the model library, session index, browser logins and session leases live: a PostgreSQL "
+                 "database shared by several servers, as postgres://USER@HOST:PORT/DB or a libpq connection "
+                 "string (schema migrated at start-up). Default: SQLite in DATA/idms.db, logins in memory. Blobs "
+                 "and recordings stay in --data")
+      ->check([](const std::string& s) {
+        return idms::server::IsPostgresConninfo(s) ? std::string()
+                                                   : "expected postgres://USER@HOST:PORT/DB or 'host=... dbname=...'";
+      });
   app.add_option("--tokens", o.tokens_file,
                  "Tokens file: 'ROLE TOKEN' or 'ROLE sha256:HEX' per line, # comments (default DATA/tokens)");
   app.add_option("--tls-cert", o.tls_cert, "PEM certificate chain: serve HTTPS and WSS on the same port");

@@ -16,6 +16,7 @@
 
 #include "idms/server/bus.h"
 #include "idms/server/log.h"
+#include "idms/server/postgres.h"
 #include "render_api.h"
 #include "server_internal.h"
 #include "sessions.h"
@@ -29,7 +30,6 @@ using tcp = asio::ip::tcp;
 struct Server::Impl {
   explicit Impl(const ServerOptions& o)
       : core(o, ResolveThreads(o.threads), std::max(1, o.workers)),
-        logins(core.options.login_lifetime),
         acceptor(asio::make_strand(core.ioc)),
         accept_pause(acceptor.get_executor()),
         signals(core.ioc, SIGINT, SIGTERM, SIGHUP),
@@ -48,7 +48,8 @@ struct Server::Impl {
   std::unique_ptr<Library> library;
   std::unique_ptr<Bus> bus;  // before the hub: its sessions' subscriptions go first
   std::unique_ptr<SessionHub> hub;
-  LoginSessions logins;
+  std::unique_ptr<LoginSessions> logins;
+  std::unique_ptr<LeaseStore> leases;
   std::mutex tokens_mu;
   std::shared_ptr<const TokenTable> tokens = std::make_shared<TokenTable>();
   std::string tokens_path;
@@ -110,8 +111,23 @@ bool Server::Impl::LoadTokens(std::string* error) {
 
 bool Server::Impl::Start(std::string* error) {
   const ServerOptions& o = core.options;
-  // Storage, and the shipped library on first start.
-  if (!OpenStorage(o.data_dir, &storage, error)) return false;
+  // Storage (SQLite and files, or PostgreSQL and files with --store), and the shipped library on
+  // first start.
+  if (o.store.empty()) {
+    if (!OpenStorage(o.data_dir, &storage, error)) return false;
+    logins = std::make_unique<MemoryLoginSessions>(o.login_lifetime);
+    leases = MakeMemoryLeaseStore();
+  } else {
+    PostgresStores pg;
+    // One connection per worker and two for the I/O threads' login lookups.
+    if (!OpenPostgres(o.store, o.login_lifetime, std::max(1, o.workers) + 2, &pg, error) ||
+        !OpenStorage(o.data_dir, std::move(pg.models), std::move(pg.sessions), &storage, error))
+      return false;
+    logins = std::move(pg.logins);
+    leases = std::move(pg.leases);
+    Log(LogLevel::kInfo, "models, sessions, logins and leases in PostgreSQL; blobs and recordings in --data",
+        {{"schema_version", PostgresSchemaVersion()}});
+  }
   library = std::make_unique<Library>(storage.blobs.get(), storage.models.get());
   if (storage.models->NumModels() == 0 && o.models_dir != "none") {
     const std::string dir = o.models_dir.empty() ? FindShippedModels() : o.models_dir;
@@ -160,7 +176,8 @@ bool Server::Impl::Start(std::string* error) {
   // The API context.
   core.ctx.options = &core.options;
   core.ctx.library = library.get();
-  core.ctx.logins = &logins;
+  core.ctx.logins = logins.get();
+  core.leases = leases.get();
   core.ctx.metrics = &core.metrics;
   core.ctx.tokens = [this] {
     std::lock_guard lock(tokens_mu);
@@ -175,6 +192,7 @@ bool Server::Impl::Start(std::string* error) {
   AppendWebSocketRoutes(core, &core.routes);
   AppendSessionRoutes(core, &core.routes);
   AppendRenderRoutes(core, &core.routes);
+  AnswerStoreFailures(&core.routes, !o.store.empty());
   core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
   // Bind.
   boost::system::error_code ec;

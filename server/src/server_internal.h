@@ -17,6 +17,7 @@
 
 #include "connection_slots.h"
 #include "idms/server/api.h"
+#include "idms/server/storage.h"
 
 namespace idms::server {
 
@@ -49,6 +50,7 @@ struct ServerCore {
   std::atomic<int> uploads_in_flight{0};
   std::atomic<uint64_t> next_endpoint_id{1};  // WebSocket endpoints' ids (a session tells its connections apart)
   SessionHub* hub = nullptr;                  // live sessions (sessions.cc)
+  LeaseStore* leases = nullptr;               // session ownership (in memory, or PostgreSQL with --store)
 
   ServerCore(ServerOptions o, int io_threads, int worker_threads)
       : options(std::move(o)), workers(static_cast<size_t>(worker_threads)), ioc(io_threads) {}

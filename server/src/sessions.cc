@@ -90,6 +90,15 @@ AgentAdmission Refused(v1::SessionEvent::Kind kind, const std::string& message) 
 }  // namespace
 
 AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::string& peer) {
+  // A resume or a model's limits need the stores: while the database is down, the agent retries.
+  try {
+    return Admit(hello, peer);
+  } catch (const StoreUnavailable& e) {
+    return Refused(v1::SessionEvent::KIND_RESUME_LATER, std::string("the database is unavailable; retry: ") + e.what());
+  }
+}
+
+AgentAdmission SessionHub::Admit(const v1::Hello& hello, const std::string& peer) {
   using K = v1::SessionEvent;
   if (hello.protocol_version() != kProtocolVersion) {
     return Refused(K::KIND_ERROR, "protocol version " + std::to_string(hello.protocol_version()) +
@@ -196,7 +205,13 @@ std::shared_ptr<LiveSession> SessionHub::StartSession(const SessionRow& row, con
 void SessionHub::StoreRow(SessionRow row, std::function<void()> then) {
   asio::post(index_strand_, [this, row = std::move(row), then = std::move(then)] {
     std::string error;
-    if (!index_->Put(row, &error)) Log(LogLevel::kError, "session index", {{"session", row.id}, {"error", error}});
+    bool stored = false;
+    try {
+      stored = index_->Put(row, &error);
+    } catch (const StoreUnavailable& e) {  // the database is down: the next update stores the row
+      error = e.what();
+    }
+    if (!stored) Log(LogLevel::kError, "session index", {{"session", row.id}, {"error", error}});
     if (then) then();
   });
 }

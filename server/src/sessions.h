@@ -88,6 +88,8 @@ class SessionHub {
   std::string RelayMetrics();
 
  private:
+  // OpenForAgent's work; may throw StoreUnavailable (OpenForAgent refuses with "retry").
+  AgentAdmission Admit(const v1::Hello& hello, const std::string& peer);
   // A live session and its recorder, under mu_; continue_finished: a resume after a restart.
   std::shared_ptr<LiveSession> StartSession(const SessionRow& row, const v1::Scene& scene, bool continue_finished);
   // What a mesh frame of the scene's model can need (the library's counts), else the defaults.

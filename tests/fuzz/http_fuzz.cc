@@ -96,7 +96,7 @@ struct World {
   MemoryModels models;
   Library library{&blobs, &models};
   ServerOptions options;
-  LoginSessions logins{std::chrono::seconds(3600)};
+  MemoryLoginSessions logins{std::chrono::seconds(3600)};
   Metrics metrics;
   std::shared_ptr<const TokenTable> tokens;
   ApiContext ctx;

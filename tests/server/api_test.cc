@@ -69,7 +69,7 @@ class ApiTest : public ::testing::Test {
   std::unique_ptr<Library> library_;
   std::shared_ptr<const TokenTable> tokens_;
   ServerOptions options_;
-  LoginSessions logins_{std::chrono::seconds(3600)};
+  MemoryLoginSessions logins_{std::chrono::seconds(3600)};
   Metrics metrics_;
   ApiContext ctx_;
   std::vector<Route> routes_ = MakeRoutes();

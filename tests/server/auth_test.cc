@@ -97,7 +97,7 @@ TEST(Tokens, DefaultFileHasOneTokenPerRole) {
 }
 
 TEST(LoginSessions, CookiesStandForTheirTokenAndExpire) {
-  LoginSessions logins(std::chrono::seconds(3600));
+  MemoryLoginSessions logins(std::chrono::seconds(3600));
   const Digest d = DigestOf("some-token-value-123");
   const std::string cookie = logins.Create(d);
   ASSERT_TRUE(logins.Find(cookie));
@@ -106,7 +106,7 @@ TEST(LoginSessions, CookiesStandForTheirTokenAndExpire) {
   logins.Remove(cookie);
   EXPECT_FALSE(logins.Find(cookie));
 
-  LoginSessions short_lived(std::chrono::seconds(0));
+  MemoryLoginSessions short_lived(std::chrono::seconds(0));
   const std::string gone = short_lived.Create(d);
   EXPECT_FALSE(short_lived.Find(gone));
 }

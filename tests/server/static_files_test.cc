@@ -52,7 +52,7 @@ class StaticFilesTest : public ::testing::Test {
 
   std::string root_;
   ServerOptions options_;
-  LoginSessions logins_{std::chrono::seconds(3600)};
+  MemoryLoginSessions logins_{std::chrono::seconds(3600)};
   ApiContext ctx_;
   std::vector<Route> routes_ = MakeRoutes();
 };

@@ -1,5 +1,5 @@
-// The blob directory, the SQLite model store and session index: content addressing, crash
-// leftovers collected at start-up, version numbers never reused, deletes, the sessions' order.
+// The blob directory and the SQLite files: content addressing, crash leftovers collected at
+// start-up, an older session index brought up to date.
 #include "idms/server/storage.h"
 
 #include <gtest/gtest.h>
@@ -7,7 +7,6 @@
 
 #include <filesystem>
 #include <fstream>
-#include <thread>
 
 #include "child_process.h"
 
@@ -71,106 +70,8 @@ TEST(Storage, StartUpRemovesTemporaryFilesAndBlobsNoRowNames) {
   EXPECT_TRUE(fs::is_empty(fs::path(dir) / "blobs" / "tmp"));
 }
 
-TEST(SqliteModelStore, VersionsCountUpAndAreNeverReusedAfterDelete) {
-  const std::string dir = test::TempDir("sqlite-versions");
-  std::string error;
-  auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
-  ASSERT_TRUE(store) << error;
-  ModelVersion a = Version("m", std::string(64, '1')), b = Version("m", std::string(64, '2'));
-  ASSERT_TRUE(store->AddVersion(&a, &error));
-  ASSERT_TRUE(store->AddVersion(&b, &error));
-  EXPECT_EQ(a.version, 1);
-  EXPECT_EQ(b.version, 2);
-  ASSERT_TRUE(store->Get("m"));
-  EXPECT_EQ(store->Get("m")->versions.size(), 2u);
-  EXPECT_EQ(store->Get("m")->latest().fem_sha256, std::string(64, '2'));
-  EXPECT_EQ(store->NumModels(), 1);
-  EXPECT_EQ(store->LibraryBytes(), 20);
-  // Delete one version, then the model; the next upload is version 3, not 1.
-  EXPECT_TRUE(store->Delete("m", 2));
-  EXPECT_FALSE(store->Delete("m", 2));
-  EXPECT_EQ(store->Get("m")->latest().version, 1);
-  EXPECT_TRUE(store->BlobReferenced(std::string(64, '1')));
-  EXPECT_FALSE(store->BlobReferenced(std::string(64, '2')));
-  EXPECT_TRUE(store->Delete("m", 0));
-  EXPECT_FALSE(store->Get("m"));
-  EXPECT_TRUE(store->ListLatest().empty());
-  ModelVersion c = Version("m", std::string(64, '3'));
-  ASSERT_TRUE(store->AddVersion(&c, &error));
-  EXPECT_EQ(c.version, 3);
-}
-
-TEST(SqliteModelStore, SurvivesReopenAndListsLatestByName) {
-  const std::string dir = test::TempDir("sqlite-reopen");
-  std::string error;
-  {
-    auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
-    ASSERT_TRUE(store) << error;
-    for (const char* n : {"zeta", "alpha", "alpha"}) {
-      ModelVersion v = Version(n, std::string(64, 'a'));
-      ASSERT_TRUE(store->AddVersion(&v, &error));
-    }
-  }
-  auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
-  ASSERT_TRUE(store) << error;
-  const std::vector<ModelVersion> list = store->ListLatest();
-  ASSERT_EQ(list.size(), 2u);
-  EXPECT_EQ(list[0].name, "alpha");
-  EXPECT_EQ(list[0].version, 2);
-  EXPECT_EQ(list[1].name, "zeta");
-  EXPECT_FALSE(list[0].created.empty());
-}
-
-// Sessions started within one second (an agent restarted at once) are listed newest first: their
-// start has milliseconds, not a tie broken by the random part of their ids.
-TEST(SqliteSessionIndex, SessionsStartedWithinOneSecondAreListedNewestFirst) {
-  const std::string dir = test::TempDir("sqlite-sessions");
-  std::string error;
-  auto index = OpenSqliteSessionIndex(dir + "/idms.db", &error);
-  ASSERT_TRUE(index) << error;
-  // Ids in the opposite order to the starts, so that a tie on the start lists the older first.
-  for (const char* id : {"2026-11-27-ffffff", "2026-11-27-000000"}) {
-    SessionRow row;
-    row.id = id;
-    row.state = "live";
-    row.started = UtcNowMs();
-    ASSERT_TRUE(index->Put(row, &error)) << error;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  const std::vector<SessionRow> list = index->List();
-  ASSERT_EQ(list.size(), 2u);
-  EXPECT_EQ(list[0].id, "2026-11-27-000000") << "started " << list[0].started << " and " << list[1].started;
-  EXPECT_LT(list[1].started, list[0].started);
-}
-
-// A note added after the end is stored with its row (the notes counter in its summary) or not at
-// all: a note whose id is taken leaves the row as it was.
-TEST(SqliteSessionIndex, ANoteIsStoredWithItsRowOrNotAtAll) {
-  const std::string dir = test::TempDir("sqlite-notes");
-  std::string error;
-  auto index = OpenSqliteSessionIndex(dir + "/idms.db", &error);
-  ASSERT_TRUE(index) << error;
-  SessionRow row;
-  row.id = "s1";
-  row.state = "ended";
-  row.summary_json = R"({"notes":1})";
-  ASSERT_TRUE(
-      index->PutWithNote(row, SessionNote{1, 0.5, "first", "admin 127.0.0.1:1", "2026-11-28T01:00:00Z"}, &error))
-      << error;
-  row.summary_json = R"({"notes":2})";
-  EXPECT_FALSE(index->PutWithNote(row, SessionNote{1, 0.7, "same id", "admin", "x"}, &error));
-  EXPECT_NE(error.find("UNIQUE"), std::string::npos) << error;
-  EXPECT_EQ(index->Get("s1")->summary_json, R"({"notes":1})") << "the row rolled back with the note";
-  ASSERT_TRUE(index->PutWithNote(row, SessionNote{2, 0.25, "second", "observer", "y"}, &error)) << error;
-  const std::vector<SessionNote> notes = index->Notes("s1");
-  ASSERT_EQ(notes.size(), 2u);
-  EXPECT_EQ(notes[0].text, "first");
-  EXPECT_EQ(notes[1].time_s, 0.25);
-  EXPECT_EQ(notes[0].author, "admin 127.0.0.1:1");
-  EXPECT_TRUE(index->Notes("other").empty());
-  ASSERT_TRUE(index->Delete("s1"));
-  EXPECT_TRUE(index->Notes("s1").empty());
-}
+// The stores' contract (versions, order, notes), for SQLite and PostgreSQL alike, is in
+// pg_store_test.cc.
 
 // A database written before sessions had a trainee opens with the column added, its rows kept.
 TEST(SqliteSessionIndex, ADatabaseFromBeforeTheTraineeColumnIsBroughtUpToDate) {

@@ -120,6 +120,15 @@ ApiResponse GetModelFile(ApiContext& ctx, ApiRequest& req);
 ApiResponse PutModel(ApiContext& ctx, ApiRequest& req);
 ApiResponse DeleteModel(ApiContext& ctx, ApiRequest& req);
 
+// 503 with Retry-After: 1 and a JSON error: a store (the database) could not be reached.
+ApiResponse StoreUnavailableResponse(const ApiRequest& req, const std::string& what);
+
+// Wraps every handler of `routes` so that a StoreUnavailable it throws is answered with
+// StoreUnavailableResponse instead of a 500, and every WebSocket opener so that it is refused
+// with a reason. With `stores_remote` (PostgreSQL), every /api/ handler but the health check runs
+// on the worker pool. Call once, after the whole table is built.
+void AnswerStoreFailures(std::vector<Route>* routes, bool stores_remote);
+
 // The login cookie's name.
 inline constexpr const char* kSessionCookie = "idms_session";
 

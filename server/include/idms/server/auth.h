@@ -61,26 +61,42 @@ std::string AppendNewToken(const std::string& path, Role role, std::string* erro
 bool CreateDefaultTokens(const std::string& path, std::string* error);
 
 // Browser sessions: a random cookie value standing for the token it was made from. Keyed by the
-// cookie's digest; each remembers the token's digest, so a token removed from the file (SIGHUP)
-// ends its cookies too. Thread-safe.
+// cookie's digest (the cookie itself is never stored); each remembers the token's digest, so a
+// token removed from the file (SIGHUP) ends its cookies too. Thread-safe. Two implementations:
+// MemoryLoginSessions (the default: lost on restart) and PostgreSQL's (idms/server/postgres.h:
+// survives a restart, shared by every server on the database). Find runs during admission, on a
+// connection's strand.
 class LoginSessions {
  public:
-  explicit LoginSessions(std::chrono::seconds lifetime) : lifetime_(lifetime) {}
-  // A new cookie value for a token of `role`.
-  std::string Create(const Digest& token_digest);
-  // The token digest behind a live cookie.
-  std::optional<Digest> Find(std::string_view cookie);
-  void Remove(std::string_view cookie);
+  virtual ~LoginSessions() = default;
+  // A new cookie value for a token, valid for lifetime().
+  virtual std::string Create(const Digest& token_digest) = 0;
+  // The token digest behind a live cookie; nullopt when unknown or expired.
+  virtual std::optional<Digest> Find(std::string_view cookie) = 0;
+  virtual void Remove(std::string_view cookie) = 0;
   std::chrono::seconds lifetime() const { return lifetime_; }
+
+ protected:
+  explicit LoginSessions(std::chrono::seconds lifetime) : lifetime_(lifetime) {}
+
+ private:
+  std::chrono::seconds lifetime_;
+};
+
+// Logins in this process's memory: expired ones are dropped whenever a new one is made.
+class MemoryLoginSessions final : public LoginSessions {
+ public:
+  explicit MemoryLoginSessions(std::chrono::seconds lifetime) : LoginSessions(lifetime) {}
+  std::string Create(const Digest& token_digest) override;
+  std::optional<Digest> Find(std::string_view cookie) override;
+  void Remove(std::string_view cookie) override;
 
  private:
   struct Login {
     Digest token_digest;
     std::chrono::steady_clock::time_point expires;
   };
-  std::string Key(std::string_view cookie) const;
 
-  std::chrono::seconds lifetime_;
   std::mutex mu_;
   std::unordered_map<std::string, Login> logins_;  // key: the cookie's digest, as bytes
 };

@@ -12,6 +12,9 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 8740;  // 0: any free port (printed at start-up)
   std::string data_dir = "./idms-data";
+  // Empty: the model library and session index in DATA/idms.db (SQLite), logins and leases in
+  // memory. A postgres:// URL or libpq connection string: all four in that database.
+  std::string store;
   std::string tokens_file;                   // empty: DATA/tokens, created with one token per role
   std::string tls_cert, tls_key;             // both or neither: TLS on the same port
   std::vector<std::string> allowed_origins;  // besides the server's own, e.g. "https://lab.example"

@@ -3,9 +3,11 @@
 // PostgreSQL / object-storage pair can replace the SQLite / directory pair without touching it.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -13,6 +15,15 @@
 #include "idms/protocol/digest.h"
 
 namespace idms::server {
+
+// Thrown by any method of a store whose database cannot be reached (PostgreSQL stopped or
+// restarting): the HTTP request that needed it is answered 503 with Retry-After, never 500. The
+// next call reconnects by itself. The SQLite stores and the files never throw it. Methods that
+// return false with *error keep doing so for everything else (a taken note id, ...).
+class StoreUnavailable : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 // Content-addressed files. Thread-safe.
 class BlobStore {
@@ -104,6 +115,38 @@ class SessionIndex {
   virtual std::vector<SessionNote> Notes(const std::string& id) = 0;  // by id
 };
 
+// The owner of a live session, among several servers: a lease that its holder renews, and an
+// epoch (fencing token) that grows every time the lease is taken, so that whatever an old owner
+// still sends (stamped with its epoch) can be told from the new owner's. Expiry is judged by one
+// clock (the database's, for PostgreSQL), never by the nodes' own. Thread-safe; called from
+// worker threads, never from the 1 kHz loop (each call may be a database round trip).
+struct Lease {
+  std::string holder;                      // the node id
+  int64_t epoch = 0;                       // 1, 2, ...: strictly increasing per session, never reused
+  std::chrono::milliseconds remaining{0};  // until it expires, by the store's clock
+};
+class LeaseStore {
+ public:
+  virtual ~LeaseStore() = default;
+  // Takes the lease on `session_id` for `node_id` for `ttl` when nobody holds it, its holder's
+  // lease has expired, or `node_id` holds it already. Returns the new epoch (the previous epoch
+  // + 1, or 1 for a session never leased; a node that takes its own lease again gets a new epoch
+  // too, fencing its previous incarnation); nullopt while another node holds it.
+  virtual std::optional<int64_t> Acquire(const std::string& session_id, const std::string& node_id,
+                                         std::chrono::milliseconds ttl) = 0;
+  // Extends the lease by `ttl` from now. False when it is lost: expired (even if nobody took it
+  // since: its holder must Acquire again, for a new epoch), taken by another node, or released.
+  virtual bool Renew(const std::string& session_id, const std::string& node_id, int64_t epoch,
+                     std::chrono::milliseconds ttl) = 0;
+  // Gives the lease up at once (the epoch stays: the next Acquire gets epoch + 1). No-op unless
+  // (node_id, epoch) holds it.
+  virtual void Release(const std::string& session_id, const std::string& node_id, int64_t epoch) = 0;
+  // The holder of an unexpired lease; nullopt when nobody holds it.
+  virtual std::optional<Lease> Holder(const std::string& session_id) = 0;
+};
+// Leases in this process (the single-server default): the same rules by the steady clock.
+std::unique_ptr<LeaseStore> MakeMemoryLeaseStore();
+
 // Where the sessions' recordings are kept: each session's MCAP file is written live under one
 // name and moved into place when finished; readers get a path to read. No other code spells a
 // recording's file name. Thread-safe (the names are pure functions of the id).
@@ -138,6 +181,12 @@ struct Storage {
   std::unique_ptr<RecordingStore> recordings;
 };
 bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
+// The same with the model library and the session index given (PostgreSQL's, with --store):
+// only the blobs and recordings are opened under `data_dir`, and no idms.db is made. Blobs no row
+// names are kept: another server sharing the database (and, later, the blobs) may be between
+// storing an upload's blob and committing its row.
+bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error);
 
 // The directory store alone (tests, tools).
 std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error);
