@@ -11,21 +11,6 @@
 namespace idms::server {
 namespace {
 
-bool HexToDigest(const std::string& hex, Digest* out) {
-  if (hex.size() != 64) return false;
-  auto nibble = [](char c) -> int {
-    if (c >= '0' && c <= '9') return c - '0';
-    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-    return -1;
-  };
-  for (size_t i = 0; i < 32; ++i) {
-    const int hi = nibble(hex[2 * i]), lo = nibble(hex[2 * i + 1]);
-    if (hi < 0 || lo < 0) return false;
-    (*out)[i] = static_cast<uint8_t>(hi * 16 + lo);
-  }
-  return true;
-}
-
 // A login found in the database is trusted again without asking for this long: a page load's
 // burst of requests (each admitted on an I/O thread) costs one round trip, and a logout on another
 // server takes effect here within this time. While the database is down a login already seen

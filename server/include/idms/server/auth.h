@@ -30,6 +30,8 @@ bool Allows(Role role, Permission permission);
 
 using Digest = std::array<uint8_t, 32>;  // SHA-256
 Digest DigestOf(std::string_view token);
+// 64 hex digits (either case) into a digest; false when they are not.
+bool HexToDigest(std::string_view hex, Digest* out);
 
 // The tokens file, parsed. Immutable once built; swapped whole on reload.
 class TokenTable {
