@@ -104,7 +104,9 @@ PgCluster::~PgCluster() {
 
 bool PgCluster::Run(const std::string& command, std::string* output) {
   const std::string out_file = dir_ + "/command.out";
-  const int rc = std::system((as_user_ + "sh -c '" + command + "' >" + out_file + " 2>&1").c_str());
+  // From the cluster's own directory: the postgres user may not enter the caller's (a clone
+  // under a mode-0700 directory), and psql says so on stderr, into the output read back.
+  const int rc = std::system((as_user_ + "sh -c 'cd " + dir_ + " && " + command + "' >" + out_file + " 2>&1").c_str());
   std::ifstream in(out_file);
   std::stringstream ss;
   ss << in.rdbuf();

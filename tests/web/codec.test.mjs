@@ -162,14 +162,15 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
   const d = first.deviceSamples;
   assert.ok(d);
   assert.equal(d.count, 17);
-  assert.deepEqual(d.stats, { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true });
+  assert.deepEqual(d.stats, { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true,
+    passivityTicks: 0, passivityDissipated: 0 });
   assert.equal(d.samplesDropped, 12);
   for (let k = 0; k < 17; k++) {
     const s = d.samples[k];
     assert.deepEqual(s, { timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 }, force: k % 2 ? { x: 0.25, y: 0, z: -k } : { x: 0, y: 0, z: 0 },
       contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, forceLimited: k % 4 === 1,
       frictionForce: k === 4 ? { x: 0.3, y: -0.1, z: 0 } : { x: 0, y: 0, z: 0 }, normalForce: k === 4 ? 1.25 : 0,
-      friction: k === 4 ? 2 : 0 }, `sample ${k}`);
+      friction: k === 4 ? 2 : 0, portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0 }, `sample ${k}`);
   }
   const sample3 = d.samples[3];
   // A smaller batch without statistics: the same objects, rewritten.
