@@ -82,6 +82,26 @@ void Audience::SendToAll(const Bytes& bytes) {
   for (Viewer& v : viewers_) Send(v, bytes);
 }
 
+void Audience::Greet(uint64_t id, const Bytes& welcome, const Bytes& keyframe) {
+  SendTo(id, welcome);
+  if (keyframe) SendTo(id, keyframe), ++hub_.resyncs;
+  for (const Bytes& bytes : history_) SendTo(id, bytes);
+}
+
+void Audience::Remember(const Bytes& bytes) {
+  history_.push_back(bytes);
+  history_bytes_ += bytes->size();
+  while (history_.size() > kHistoryFrames || history_bytes_ > kHistoryBytes) {
+    history_bytes_ -= history_.front()->size();
+    history_.pop_front();
+  }
+}
+
+void Audience::ForgetHistory() {
+  history_.clear();
+  history_bytes_ = 0;
+}
+
 void Audience::Drained(uint64_t id, const std::function<Bytes()>& keyframe) {
   for (Viewer& v : viewers_) {
     if (v.id != id || !v.skipping) continue;
@@ -106,6 +126,13 @@ void Audience::CloseAll(uint16_t code, const std::string& why) {
     if (auto peer = v.peer.lock()) peer->Close(code, why);
   }
   viewers_.clear();
+}
+
+std::shared_ptr<const std::string> KeyframeOf(MeshMirror& mirror) {
+  v1::Envelope e;
+  std::string error;
+  if (!mirror.has_keyframe() || !mirror.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return nullptr;
+  return Serialized(e);
 }
 
 }  // namespace idms::server

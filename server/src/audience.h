@@ -10,6 +10,7 @@
 #include <boost/asio/strand.hpp>
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -17,6 +18,7 @@
 #include <vector>
 
 #include "idms/protocol/idms.pb.h"
+#include "idms/protocol/mesh_mirror.h"
 #include "ws_endpoint.h"
 
 namespace idms::server {
@@ -64,6 +66,13 @@ class Audience {
   // To one viewer (its Welcome, its keyframe, the history), or to every viewer, as they are.
   void SendTo(uint64_t id, const Bytes& bytes);
   void SendToAll(const Bytes& bytes);
+  // A viewer's start: its Welcome, the surface now (a keyframe; null before the first) and the
+  // events and notes so far (Remember), in that order.
+  void Greet(uint64_t id, const Bytes& welcome, const Bytes& keyframe);
+  // An event or note for viewers who join later: kept, bounded in count and bytes, oldest dropped.
+  void Remember(const Bytes& bytes);
+  void ForgetHistory();
+  const std::deque<Bytes>& history() const { return history_; }
   // The viewer `id` drained its queue: a keyframe (from `keyframe`, null when there is none yet)
   // if it was skipping.
   void Drained(uint64_t id, const std::function<Bytes()>& keyframe);
@@ -72,8 +81,10 @@ class Audience {
   void CloseAll(uint16_t code, const std::string& why);
   size_t size() const { return viewers_.size(); }
 
-  static constexpr size_t kQueueLimit = 256;              // messages queued for a viewer before it counts as behind
-  static constexpr size_t kQueueBytes = size_t{8} << 20;  // bytes queued for a viewer, likewise
+  static constexpr size_t kQueueLimit = 256;                // messages queued for a viewer before it counts as behind
+  static constexpr size_t kQueueBytes = size_t{8} << 20;    // bytes queued for a viewer, likewise
+  static constexpr size_t kHistoryFrames = 512;             // events and notes kept for late viewers
+  static constexpr size_t kHistoryBytes = size_t{1} << 20;  // likewise, in bytes
 
  private:
   struct Viewer {
@@ -90,6 +101,11 @@ class Audience {
   ServerCore& core_;
   SessionHub& hub_;
   std::vector<Viewer> viewers_;
+  std::deque<Bytes> history_;
+  size_t history_bytes_ = 0;
 };
+
+// The surface a mirror holds, as one keyframe Envelope; null before the mirror has one.
+std::shared_ptr<const std::string> KeyframeOf(MeshMirror& mirror);
 
 }  // namespace idms::server

@@ -26,8 +26,6 @@ namespace {
 // so usually less than 17 ms): the force plot's latency against one WebSocket message instead of
 // two per mesh frame, which is what a viewer costs the server.
 constexpr std::chrono::milliseconds kGatherTime{25};
-constexpr size_t kHistoryFrames = 512;             // events and notes kept for late viewers
-constexpr size_t kHistoryBytes = size_t{1} << 20;  // likewise, in bytes
 constexpr uint16_t kNormal = 1000;
 constexpr uint16_t kGoingAway = 1001;
 constexpr uint16_t kPolicyError = 1008;
@@ -106,8 +104,8 @@ void LiveSession::AnswerJoin(const std::string& reply) {
   j.set_node(core_.options.node_id);
   j.mutable_welcome()->set_session_id(id_);
   *j.mutable_welcome()->mutable_scene() = scene_;
-  if (const auto k = Keyframe()) j.set_keyframe(*k);
-  for (const auto& bytes : history_) j.add_history(*bytes);
+  if (const auto k = KeyframeOf(mirror_)) j.set_keyframe(*k);
+  for (const auto& bytes : audience_.history()) j.add_history(*bytes);
   bus->Publish(reply, j.SerializeAsString());
 }
 
@@ -182,17 +180,9 @@ void LiveSession::RecordEvent(v1::SessionEvent::Kind kind, const std::string& me
   ev->set_time_s(summary_.last_time_s);
   const auto bytes = Serialized(*e);
   Broadcast(bytes, FrameKind::kOther);
-  if (kind != v1::SessionEvent::KIND_VIEWER_JOINED && kind != v1::SessionEvent::KIND_VIEWER_LEFT) Remember(bytes);
+  if (kind != v1::SessionEvent::KIND_VIEWER_JOINED && kind != v1::SessionEvent::KIND_VIEWER_LEFT)
+    audience_.Remember(bytes);
   Record(std::move(e));
-}
-
-void LiveSession::Remember(const std::shared_ptr<const std::string>& bytes) {
-  history_.push_back(bytes);
-  history_bytes_ += bytes->size();
-  while (history_.size() > kHistoryFrames || history_bytes_ > kHistoryBytes) {
-    history_bytes_ -= history_.front()->size();
-    history_.pop_front();
-  }
 }
 
 void LiveSession::SendToAgent(const v1::Envelope& e) {
@@ -245,13 +235,6 @@ void LiveSession::Flush() {
   audience_.Offer(out);
   Publish(out.bytes, out.deltas, "");
   pending_.clear();
-}
-
-std::shared_ptr<const std::string> LiveSession::Keyframe() {
-  v1::Envelope e;
-  std::string error;
-  if (!mirror_.has_keyframe() || !mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return nullptr;
-  return Serialized(e);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -367,7 +350,7 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
   }
   if (event.has_session_event() || event.has_topology_event()) {
     Broadcast(bytes, FrameKind::kOther);
-    Remember(bytes);
+    audience_.Remember(bytes);
     return Record(std::move(envelope));
   }
   Refuse(std::string("unexpected ") + EnvelopeBodyName(event) + " from the agent");
@@ -458,10 +441,7 @@ void LiveSession::ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer_wea
   welcome->set_session_id(id_);
   *welcome->mutable_scene() = scene_;
   audience_.Add(viewer, std::move(peer_weak), admin, std::move(drain_wanted));
-  audience_.SendTo(viewer, Serialized(w));
-  if (const auto keyframe = Keyframe()) audience_.SendTo(viewer, keyframe), ++hub_.resyncs;
-  // What happened before it joined: the events and notes so far, in order.
-  for (const auto& bytes : history_) audience_.SendTo(viewer, bytes);
+  audience_.Greet(viewer, Serialized(w), KeyframeOf(mirror_));
   num_viewers_ = static_cast<int>(audience_.size());
   RecordEvent(v1::SessionEvent::KIND_VIEWER_JOINED, "a viewer joined", peer->peer());
 }
@@ -476,7 +456,7 @@ void LiveSession::ViewerDetached(uint64_t viewer) {
 void LiveSession::ViewerDrained(uint64_t viewer) {
   AssertOnStrand();
   // Caught up after skipping: a keyframe from the session's mirror puts the viewer right.
-  audience_.Drained(viewer, [this] { return Keyframe(); });
+  audience_.Drained(viewer, [this] { return KeyframeOf(mirror_); });
 }
 
 std::optional<v1::Annotation> LiveSession::ViewerAnnotation(const v1::Annotation& note, const std::string& peer) {
@@ -497,7 +477,7 @@ std::optional<v1::Annotation> LiveSession::ViewerAnnotation(const v1::Annotation
   v1::Annotation stamped = *a;
   const auto bytes = Serialized(*e);
   Broadcast(bytes, FrameKind::kOther);
-  Remember(bytes);
+  audience_.Remember(bytes);
   Record(std::move(e));
   return stamped;
 }

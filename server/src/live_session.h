@@ -75,8 +75,7 @@ class LiveSession : public WatchedSession, public std::enable_shared_from_this<L
   // To every viewer: a sample batch waits (up to kGatherTime) for the next mesh frame or event,
   // which takes everything waiting with it in one Frames message (idms.proto); the others go at once.
   void Broadcast(const std::shared_ptr<const std::string>& bytes, FrameKind kind);
-  void Flush();                                   // what is waiting, to every viewer (and to the bus), now
-  std::shared_ptr<const std::string> Keyframe();  // the mirror's surface; null before the first
+  void Flush();  // what is waiting, to every viewer (and to the bus), now
   void Record(std::shared_ptr<const v1::Envelope> envelope);
   void RecordEvent(v1::SessionEvent::Kind kind, const std::string& message, const std::string& peer);
   void SendToAgent(const v1::Envelope& e);
@@ -113,11 +112,6 @@ class LiveSession : public WatchedSession, public std::enable_shared_from_this<L
   boost::asio::steady_timer gather_timer_;
   bool gather_armed_ = false;
   void ArmGatherTimer();
-  // The events and notes so far (not viewers coming and going), for a viewer who joins late:
-  // bounded, the oldest dropped first.
-  std::deque<std::shared_ptr<const std::string>> history_;
-  size_t history_bytes_ = 0;
-  void Remember(const std::shared_ptr<const std::string>& bytes);
   SessionSummary summary_;
   uint64_t next_tick_ = 0;
   // Recordings are on the session's clock: log time = epoch + the frame's simulation time, so the

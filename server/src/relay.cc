@@ -14,8 +14,7 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 constexpr uint16_t kNormal = 1000;
-constexpr size_t kMaxWaiting = 512;     // frames held while the state they follow is on its way
-constexpr size_t kHistoryFrames = 512;  // events and notes kept for viewers who join later
+constexpr size_t kMaxWaiting = 512;  // frames held while the state they follow is on its way
 constexpr auto kAskEvery = std::chrono::seconds(1);
 constexpr auto kSilence = std::chrono::milliseconds(1500);  // no frame this long: ask the owner again
 constexpr auto kNeverSynced = std::chrono::seconds(5);      // no owner answered: no such session
@@ -119,7 +118,7 @@ void RelayedSession::OnFrame(v1::RelayFrame frame) {
   Deliver(frame);
 }
 
-void RelayedSession::Deliver(const v1::RelayFrame& frame) {
+void RelayedSession::Deliver(v1::RelayFrame& frame) {
   sequence_ = frame.sequence();
   if (!frame.close_reason().empty()) return Close(frame.close_reason());
   std::vector<v1::Envelope> frames;
@@ -131,7 +130,7 @@ void RelayedSession::Deliver(const v1::RelayFrame& frame) {
     return AskForState();
   }
   Audience::Outgoing out;
-  out.bytes = std::make_shared<const std::string>(frame.message());
+  out.bytes = std::make_shared<const std::string>(std::move(*frame.mutable_message()));  // parsed above
   out.deltas = static_cast<int>(frame.deltas());
   bool ended = false;
   for (const v1::Envelope& e : frames) {
@@ -154,8 +153,7 @@ void RelayedSession::Deliver(const v1::RelayFrame& frame) {
         e.has_session_event() && (e.session_event().kind() == v1::SessionEvent::KIND_VIEWER_JOINED ||
                                   e.session_event().kind() == v1::SessionEvent::KIND_VIEWER_LEFT);
     if ((e.has_session_event() || e.has_annotation() || e.has_topology_event()) && !comings_and_goings) {
-      history_.push_back(Serialized(e));
-      if (history_.size() > kHistoryFrames) history_.pop_front();
+      audience_.Remember(Serialized(e));
     }
     ended = ended || (e.has_session_event() && e.session_event().kind() == v1::SessionEvent::KIND_ENDED);
   }
@@ -197,8 +195,8 @@ void RelayedSession::OnJoin(const v1::RelayJoin& join) {
     }
   }
   welcome_ = join.welcome();
-  history_.clear();
-  for (const std::string& h : join.history()) history_.push_back(std::make_shared<const std::string>(h));
+  audience_.ForgetHistory();
+  for (const std::string& h : join.history()) audience_.Remember(std::make_shared<const std::string>(h));
   const bool resync = ever_synced_;
   epoch_ = join.epoch();
   sequence_ = join.sequence();
@@ -206,7 +204,7 @@ void RelayedSession::OnJoin(const v1::RelayJoin& join) {
   // The viewers watching: the surface now (they kept theirs through the gap); the ones who
   // joined while we waited: their Welcome first.
   if (resync) {
-    if (const auto k = Keyframe()) audience_.Resync(k);
+    if (const auto k = KeyframeOf(mirror_)) audience_.Resync(k);
   }
   for (const auto& [viewer, admin] : unwelcomed_) Welcome(viewer, admin);
   unwelcomed_.clear();
@@ -219,22 +217,13 @@ void RelayedSession::OnJoin(const v1::RelayJoin& join) {
   }
 }
 
-std::shared_ptr<const std::string> RelayedSession::Keyframe() {
-  v1::Envelope e;
-  std::string error;
-  if (!mirror_.has_keyframe() || !mirror_.MakeKeyframe(e.mutable_mesh_keyframe(), &error)) return nullptr;
-  return Serialized(e);
-}
-
 void RelayedSession::Welcome(uint64_t viewer, bool admin) {
   v1::Envelope w;
   *w.mutable_welcome() = welcome_;
   w.mutable_welcome()->set_protocol_version(kProtocolVersion);
   w.mutable_welcome()->set_role(admin ? v1::ROLE_ADMIN : v1::ROLE_OBSERVER);
   w.mutable_welcome()->set_identity("idms-server " + core_.options.node_id + " (relayed)");
-  audience_.SendTo(viewer, Serialized(w));
-  if (const auto k = Keyframe()) audience_.SendTo(viewer, k), ++hub_.resyncs;
-  for (const auto& bytes : history_) audience_.SendTo(viewer, bytes);
+  audience_.Greet(viewer, Serialized(w), KeyframeOf(mirror_));
 }
 
 void RelayedSession::ViewerAttached(uint64_t viewer, std::weak_ptr<WsPeer> peer_weak, bool admin,
@@ -254,7 +243,7 @@ void RelayedSession::ViewerDetached(uint64_t viewer) {
 }
 
 void RelayedSession::ViewerDrained(uint64_t viewer) {
-  audience_.Drained(viewer, [this] { return Keyframe(); });
+  audience_.Drained(viewer, [this] { return KeyframeOf(mirror_); });
 }
 
 void RelayedSession::Forward(const v1::Envelope& e, const std::string& peer, bool admin) {

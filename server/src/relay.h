@@ -53,11 +53,10 @@ class RelayedSession : public WatchedSession, public std::enable_shared_from_thi
  private:
   void OnFrame(v1::RelayFrame frame);
   void OnJoin(const v1::RelayJoin& join);
-  void Deliver(const v1::RelayFrame& frame);
+  void Deliver(v1::RelayFrame& frame);  // takes the frame's message
   void AskForState();
   void Tick();  // every 250 ms: asks again when the owner is silent; gives up after the resume window
   void Welcome(uint64_t viewer, bool admin);
-  std::shared_ptr<const std::string> Keyframe();
   void Forward(const v1::Envelope& e, const std::string& peer, bool admin);
 
   ServerCore& core_;
@@ -77,7 +76,6 @@ class RelayedSession : public WatchedSession, public std::enable_shared_from_thi
   bool ever_synced_ = false;
   uint64_t epoch_ = 0, sequence_ = 0;
   v1::Welcome welcome_;
-  std::deque<std::shared_ptr<const std::string>> history_;
   std::deque<v1::RelayFrame> waiting_;                 // frames that came before the state they follow (bounded)
   std::vector<std::pair<uint64_t, bool>> unwelcomed_;  // viewers (id, admin) who joined before the first state
   std::chrono::steady_clock::time_point last_heard_, asked_at_;

@@ -96,20 +96,7 @@ TEST(Tokens, DefaultFileHasOneTokenPerRole) {
   EXPECT_EQ(st.st_mode & 0777, 0600u);
 }
 
-TEST(LoginSessions, CookiesStandForTheirTokenAndExpire) {
-  MemoryLoginSessions logins(std::chrono::seconds(3600));
-  const Digest d = DigestOf("some-token-value-123");
-  const std::string cookie = logins.Create(d);
-  ASSERT_TRUE(logins.Find(cookie));
-  EXPECT_EQ(*logins.Find(cookie), d);
-  EXPECT_FALSE(logins.Find(cookie + "x"));
-  logins.Remove(cookie);
-  EXPECT_FALSE(logins.Find(cookie));
-
-  MemoryLoginSessions short_lived(std::chrono::seconds(0));
-  const std::string gone = short_lived.Create(d);
-  EXPECT_FALSE(short_lived.Find(gone));
-}
+// MemoryLoginSessions: the store contract (pg_store_test.cc, Stores/Sqlite) checks it.
 
 }  // namespace
 }  // namespace idms::server

@@ -12,6 +12,7 @@
 #include "idms/server/postgres.h"
 #include "idms/server/storage.h"
 #include "pg_cluster.h"
+#include "store_checks.h"
 
 namespace idms::server {
 namespace {
@@ -24,17 +25,7 @@ std::string BackendName(const testing::TestParamInfo<Backend>& info) {
   return info.param == Backend::kSqlite ? "Sqlite" : "Postgres";
 }
 
-ModelVersion Version(const std::string& name, const std::string& fem_sha) {
-  ModelVersion v;
-  v.name = name;
-  v.description = "d";
-  v.atoms = 3;
-  v.bytes = 10;
-  v.fem_sha256 = fem_sha;
-  v.plg_sha256 = std::string(64, 'b');
-  v.obj_sha256 = std::string(64, 'c');
-  return v;
-}
+using test::TestModelVersion;
 
 // One "server's" view of the stores: SQLite on a file, or a new pool on the shared database.
 struct Opened {
@@ -85,7 +76,7 @@ TEST_P(Stores, ModelVersionsCountUpAndAreNeverReusedAfterDelete) {
   ASSERT_TRUE(o.models);
   ModelStore& store = *o.models;
   std::string error;
-  ModelVersion a = Version("m", std::string(64, '1')), b = Version("m", std::string(64, '2'));
+  ModelVersion a = TestModelVersion("m", std::string(64, '1')), b = TestModelVersion("m", std::string(64, '2'));
   ASSERT_TRUE(store.AddVersion(&a, &error)) << error;
   ASSERT_TRUE(store.AddVersion(&b, &error)) << error;
   EXPECT_EQ(a.version, 1);
@@ -104,7 +95,7 @@ TEST_P(Stores, ModelVersionsCountUpAndAreNeverReusedAfterDelete) {
   EXPECT_TRUE(store.Delete("m", 0));
   EXPECT_FALSE(store.Get("m"));
   EXPECT_TRUE(store.ListLatest().empty());
-  ModelVersion c = Version("m", std::string(64, '3'));
+  ModelVersion c = TestModelVersion("m", std::string(64, '3'));
   ASSERT_TRUE(store.AddVersion(&c, &error));
   EXPECT_EQ(c.version, 3);
 }
@@ -115,7 +106,7 @@ TEST_P(Stores, ModelsSurviveReopenAndAreListedLatestByName) {
     Opened o = Open();
     ASSERT_TRUE(o.models);
     for (const char* n : {"zeta", "alpha", "alpha", "Beta"}) {
-      ModelVersion v = Version(n, std::string(64, 'a'));
+      ModelVersion v = TestModelVersion(n, std::string(64, 'a'));
       ASSERT_TRUE(o.models->AddVersion(&v, &error)) << error;
     }
   }
@@ -138,7 +129,7 @@ TEST_P(Stores, ConcurrentUploadsOfOneNameGetDistinctVersions) {
   std::vector<int64_t> got_a, got_b;
   auto upload = [](ModelStore* store, std::vector<int64_t>* got) {
     for (int i = 0; i < 20; ++i) {
-      ModelVersion v = Version("shared", std::string(64, 'e'));
+      ModelVersion v = TestModelVersion("shared", std::string(64, 'e'));
       std::string error;
       if (store->AddVersion(&v, &error)) got->push_back(v.version);
     }

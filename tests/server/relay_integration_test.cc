@@ -17,7 +17,6 @@
 #include "idms/server/bus.h"
 #include "server_process.h"
 #include "session_checks.h"
-#include "test_clients.h"
 
 namespace idms::test {
 namespace {
@@ -132,6 +131,21 @@ std::vector<std::string> AgentArgs(const ServerProcess& server, const std::strin
           "--dump-final", dir + "/final.txt"};
 }
 
+// Servers a and b on a bus (each given its own URLs), and an agent publishing a session on a
+// for `duration_s`: what every relay test starts from. `id` is empty when the session did not
+// come up.
+struct TwoServersOnABus {
+  TwoServersOnABus(const std::string& dir, const std::string& bus_a, const std::string& bus_b, double duration_s)
+      : a(dir + "/a", {"--bus", bus_a, "--node", "a"}),
+        b(dir + "/b", {"--bus", bus_b, "--node", "b"}),
+        agent(IDMS_AGENT_BIN, AgentArgs(a, dir, duration_s), dir + "/agent.log") {
+    if (a.ready() && b.ready()) id = WaitForLiveSession(a.port(), a.Token("observer"));
+  }
+  ServerProcess a, b;
+  ChildProcess agent;
+  std::string id;
+};
+
 // Every device tick a viewer got, in order.
 std::vector<uint64_t> Ticks(TestViewer& v) {
   std::vector<uint64_t> ticks;
@@ -147,13 +161,11 @@ TEST(Relay, AViewerOnAnotherServerSeesTheSessionAndItsNoteIsRecordedByTheOwner) 
   const std::string dir = TempDir("relay-watch");
   NatsServer nats(dir);
   ASSERT_GT(nats.port(), 0) << nats.Log();
-  ServerProcess a(dir + "/a", {"--bus", nats.url(), "--node", "a"}),
-      b(dir + "/b", {"--bus", nats.url(), "--node", "b"});
-  ASSERT_TRUE(a.ready()) << a.Log();
-  ASSERT_TRUE(b.ready()) << b.Log();
-  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(a, dir, 4), dir + "/agent.log");
-  const std::string id = WaitForLiveSession(a.port(), a.Token("observer"));
-  ASSERT_FALSE(id.empty()) << a.Log();
+  TwoServersOnABus servers(dir, nats.url(), nats.url(), 4);
+  ASSERT_FALSE(servers.id.empty()) << servers.a.Log() << servers.b.Log();
+  ServerProcess &a = servers.a, &b = servers.b;
+  ChildProcess& agent = servers.agent;
+  const std::string& id = servers.id;
   // B has never heard of the session: it relays it from A.
   TestViewer on_a(a.port(), id, a.Token("observer")), on_b(b.port(), id, b.Token("observer"));
   ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() >= 1; })) << b.Log();
@@ -163,13 +175,10 @@ TEST(Relay, AViewerOnAnotherServerSeesTheSessionAndItsNoteIsRecordedByTheOwner) 
   EXPECT_EQ(first[0].welcome().scene().model(), "hex_4x5_home");
   EXPECT_NE(first[0].welcome().identity().find("relayed"), std::string::npos);
   EXPECT_TRUE(first[1].has_mesh_keyframe());
-  // A note from a viewer on B (a client of its own: TestViewer reads on another thread, and a
-  // WebSocket stream must not read and write on two at once): stamped and recorded by A, seen by
-  // A's viewer.
+  // A note from B's viewer: stamped and recorded by A, seen by A's viewer.
   v1::Envelope note;
   note.mutable_annotation()->set_text("seen from b");
-  FakeAgent noting(b.port(), b.Token("observer"), "/ws/session/" + id);
-  ASSERT_TRUE(noting.Send(note));
+  on_b.Send(note);
   ASSERT_EQ(agent.Wait(seconds(60)), 0) << ReadText(dir + "/agent.log");
   // The ENDED event reached B's viewer through the bus, and B closed it.
   ASSERT_TRUE(on_b.WaitClosed(seconds(20)));
@@ -210,12 +219,11 @@ TEST(Relay, TheBusRestartedUnderASessionItsRelayedViewerIsResynchronisedNotDropp
   ASSERT_GT(nats->port(), 0) << nats->Log();
   const int nats_port = nats->port();
   const std::string url = nats->url();
-  ServerProcess a(dir + "/a", {"--bus", url, "--node", "a"}), b(dir + "/b", {"--bus", url, "--node", "b"});
-  ASSERT_TRUE(a.ready()) << a.Log();
-  ASSERT_TRUE(b.ready()) << b.Log();
-  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(a, dir, 9), dir + "/agent.log");
-  const std::string id = WaitForLiveSession(a.port(), a.Token("observer"));
-  ASSERT_FALSE(id.empty()) << a.Log();
+  TwoServersOnABus servers(dir, url, url, 9);
+  ASSERT_FALSE(servers.id.empty()) << servers.a.Log() << servers.b.Log();
+  ServerProcess& b = servers.b;
+  ChildProcess& agent = servers.agent;
+  const std::string& id = servers.id;
   TestViewer on_b(b.port(), id, b.Token("observer"));
   ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() >= 1 && Ticks(on_b).size() > 500; })) << b.Log();
   // The bus dies; frames published meanwhile are lost to B.
@@ -277,13 +285,12 @@ TEST(Relay, OneOfThreeNatsServersKilledNoViewerIsDroppedAndTheGapIsShort) {
   // A on the first, B on the second, each given only its own: the others it learns from the
   // cluster (NATS tells its clients every server's URL) and moves to when its own dies.
   const auto urls = [&](int i) { return cluster[static_cast<size_t>(i)]->url(); };
-  ServerProcess a(dir + "/a", {"--bus", urls(0), "--node", "a"}), b(dir + "/b", {"--bus", urls(1), "--node", "b"});
-  ASSERT_TRUE(a.ready()) << a.Log();
-  ASSERT_TRUE(b.ready()) << b.Log();
   // The cluster's routes up: B hears A's session.
-  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(a, dir, 8), dir + "/agent.log");
-  const std::string id = WaitForLiveSession(a.port(), a.Token("observer"));
-  ASSERT_FALSE(id.empty()) << a.Log();
+  TwoServersOnABus servers(dir, urls(0), urls(1), 8);
+  ASSERT_FALSE(servers.id.empty()) << servers.a.Log() << servers.b.Log();
+  ServerProcess &a = servers.a, &b = servers.b;
+  ChildProcess& agent = servers.agent;
+  const std::string& id = servers.id;
   TestViewer on_a(a.port(), id, a.Token("observer")), on_b(b.port(), id, b.Token("observer"));
   ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() >= 1 && Ticks(on_b).size() > 500; })) << b.Log();
   // B's NATS server dies.
@@ -325,13 +332,11 @@ TEST(Relay, AServerTooSlowForTheBusIsCutAndItsViewersResynchroniseWhenItResumes)
   std::ofstream(dir + "/nats.conf") << "max_pending: 131072\nmax_payload: 131072\nwrite_deadline: \"500ms\"\n";
   NatsServer nats(dir, -1, {"-c", dir + "/nats.conf"});
   ASSERT_GT(nats.port(), 0) << nats.Log();
-  ServerProcess a(dir + "/a", {"--bus", nats.url(), "--node", "a"}),
-      b(dir + "/b", {"--bus", nats.url(), "--node", "b"});
-  ASSERT_TRUE(a.ready()) << a.Log();
-  ASSERT_TRUE(b.ready()) << b.Log();
-  ChildProcess agent(IDMS_AGENT_BIN, AgentArgs(a, dir, 14), dir + "/agent.log");
-  const std::string id = WaitForLiveSession(a.port(), a.Token("observer"));
-  ASSERT_FALSE(id.empty()) << a.Log();
+  TwoServersOnABus servers(dir, nats.url(), nats.url(), 14);
+  ASSERT_FALSE(servers.id.empty()) << servers.a.Log() << servers.b.Log();
+  ServerProcess& b = servers.b;
+  ChildProcess& agent = servers.agent;
+  const std::string& id = servers.id;
   TestViewer on_b(b.port(), id, b.Token("observer"));
   ASSERT_TRUE(Eventually([&] { return on_b.Keyframes() >= 1 && Ticks(on_b).size() > 500; })) << b.Log();
   const int keyframes = on_b.Keyframes();

@@ -8,6 +8,7 @@
 #include <boost/beast/websocket.hpp>
 #include <cmath>
 #include <fstream>
+#include <future>
 #include <limits>
 #include <sstream>
 
@@ -122,27 +123,32 @@ TestViewer::TestViewer(uint16_t port, const std::string& session, const std::str
   }
   socket.connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
   ws_.handshake("127.0.0.1", "/ws/session/" + session);
-  thread_ = std::thread([this] { Read(); });
+  // Reads and writes are asynchronous on one thread: a WebSocket stream must never read on one
+  // thread while it writes on another.
+  work_.emplace(io_.get_executor());
+  asio::post(io_, [this] { Read(); });
+  thread_ = std::thread([this] { io_.run(); });
 }
 
 TestViewer::~TestViewer() {
-  {
-    std::lock_guard lock(mu_);
-    stopping_ = true;
-  }
-  resumed_.notify_all();
-  beast::error_code ec;
-  beast::get_lowest_layer(ws_).socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  asio::post(io_, [this] {
+    beast::error_code ec;
+    beast::get_lowest_layer(ws_).socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+    beast::get_lowest_layer(ws_).socket().close(ec);
+    work_.reset();
+  });
   thread_.join();
 }
 
 void TestViewer::Send(const v1::Envelope& e) {
-  std::string bytes;
-  SerializeEnvelope(e, &bytes);
-  std::lock_guard lock(write_mu_);
-  ws_.binary(true);
-  beast::error_code ec;
-  ws_.write(asio::buffer(bytes), ec);
+  auto bytes = std::make_shared<std::string>();
+  SerializeEnvelope(e, bytes.get());
+  std::promise<void> written;
+  asio::post(io_, [this, bytes, &written] {
+    ws_.binary(true);
+    ws_.async_write(asio::buffer(*bytes), [bytes, &written](beast::error_code, size_t) { written.set_value(); });
+  });
+  written.get_future().wait();
 }
 
 void TestViewer::Pause() {
@@ -155,7 +161,9 @@ void TestViewer::Resume() {
     std::lock_guard lock(mu_);
     paused_ = false;
   }
-  resumed_.notify_all();
+  asio::post(io_, [this] {
+    if (!reading_) Read();
+  });
 }
 
 bool TestViewer::WaitClosed(std::chrono::milliseconds timeout) {
@@ -186,19 +194,17 @@ double TestViewer::quant_step() {
 }
 
 void TestViewer::Read() {
-  beast::flat_buffer buffer;
-  while (true) {
-    {
-      std::unique_lock lock(mu_);
-      resumed_.wait(lock, [&] { return !paused_ || stopping_; });
-      if (stopping_) break;
-    }
-    beast::error_code ec;
-    ws_.read(buffer, ec);
-    if (ec) break;
+  {
+    std::lock_guard lock(mu_);
+    reading_ = !paused_;
+  }
+  if (!reading_) return;  // Resume starts again
+  ws_.async_read(buffer_, [this](beast::error_code ec, size_t) {
+    reading_ = false;
+    if (ec) return void(closed_ = true);
     std::vector<v1::Envelope> frames;
     std::string error;
-    const auto data = buffer.data();
+    const auto data = buffer_.data();
     ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), &frames, &error);
     {
       std::lock_guard lock(mu_);
@@ -209,9 +215,9 @@ void TestViewer::Read() {
         frames_.push_back(std::move(e));
       }
     }
-    buffer.consume(buffer.size());
-  }
-  closed_ = true;
+    buffer_.consume(buffer_.size());
+    Read();
+  });
 }
 
 double MaxMirrorError(TestViewer& viewer, const std::vector<double>& truth) {

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <atomic>
+#include <boost/asio/executor_work_guard.hpp>
 #include <boost/asio/io_context.hpp>
+#include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/websocket/stream.hpp>
 #include <chrono>
@@ -11,6 +13,7 @@
 #include <cstdint>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -70,14 +73,16 @@ class TestViewer {
   int gaps() const { return gaps_.load(); }  // mesh frames the mirror could not apply
 
  private:
-  void Read();
+  void Read();  // on io_'s thread: the next message, unless paused
 
   boost::asio::io_context io_;
   boost::beast::websocket::stream<boost::beast::tcp_stream> ws_{io_};
   std::thread thread_;
-  std::mutex mu_, write_mu_;
-  std::condition_variable resumed_;
-  bool paused_ = false, stopping_ = false;  // under mu_
+  std::mutex mu_;
+  bool paused_ = false;   // under mu_
+  bool reading_ = false;  // io_'s thread only: a read is outstanding
+  boost::beast::flat_buffer buffer_;
+  std::optional<boost::asio::executor_work_guard<boost::asio::io_context::executor_type>> work_;
   std::vector<v1::Envelope> frames_;
   MeshMirror mirror_;
   std::atomic<bool> closed_{false};

@@ -195,15 +195,6 @@ bool Open(Ws& ws, uint16_t port, const std::string& target, const std::string& t
   return !ec;
 }
 
-bool ReadEnvelope(Ws& ws, v1::Envelope* e, std::string* error) {
-  beast::flat_buffer buffer;
-  beast::error_code ec;
-  ws.read(buffer, ec);
-  if (ec) return *error = "read: " + ec.message(), false;
-  const auto data = buffer.data();
-  return ParseEnvelope(std::string_view(static_cast<const char*>(data.data()), data.size()), e, error);
-}
-
 // One message of a live session's viewer: an envelope, or several in a Frames.
 bool ReadFrames(Ws& ws, std::vector<v1::Envelope>* frames, std::string* error) {
   beast::flat_buffer buffer;
@@ -212,6 +203,15 @@ bool ReadFrames(Ws& ws, std::vector<v1::Envelope>* frames, std::string* error) {
   if (ec) return *error = "read: " + ec.message(), false;
   const auto data = buffer.data();
   return ParseFrames(std::string_view(static_cast<const char*>(data.data()), data.size()), frames, error);
+}
+
+// One message that carries one envelope (a replay's, a Welcome).
+bool ReadEnvelope(Ws& ws, v1::Envelope* e, std::string* error) {
+  std::vector<v1::Envelope> frames;
+  if (!ReadFrames(ws, &frames, error)) return false;
+  if (frames.size() != 1) return *error = std::to_string(frames.size()) + " envelopes in one message", false;
+  *e = std::move(frames.front());
+  return true;
 }
 
 void SendEnvelope(Ws& ws, const v1::Envelope& e) {

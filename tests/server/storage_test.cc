@@ -9,23 +9,14 @@
 #include <fstream>
 
 #include "child_process.h"
+#include "store_checks.h"
 
 namespace idms::server {
 namespace {
 
 namespace fs = std::filesystem;
 
-ModelVersion Version(const std::string& name, const std::string& fem_sha) {
-  ModelVersion v;
-  v.name = name;
-  v.description = "d";
-  v.atoms = 3;
-  v.bytes = 10;
-  v.fem_sha256 = fem_sha;
-  v.plg_sha256 = std::string(64, 'b');
-  v.obj_sha256 = std::string(64, 'c');
-  return v;
-}
+using test::TestModelVersion;
 
 TEST(BlobDirectory, StoresByContentHashAndReadsBack) {
   const std::string dir = test::TempDir("blobs");
@@ -58,7 +49,7 @@ TEST(Storage, StartUpRemovesTemporaryFilesAndBlobsNoRowNames) {
     ASSERT_TRUE(OpenStorage(dir, &s, &error)) << error;
     ASSERT_TRUE(s.blobs->Put("kept", &kept, &error));
     ASSERT_TRUE(s.blobs->Put("orphan", &orphan, &error));
-    ModelVersion v = Version("m", kept);
+    ModelVersion v = TestModelVersion("m", kept);
     ASSERT_TRUE(s.models->AddVersion(&v, &error)) << error;
   }
   // What a SIGKILL mid-upload leaves: a temporary file.
