@@ -1,5 +1,10 @@
 // The session index in PostgreSQL (--store): one row per session, upserted whole on every update
-// (a few per second per live session, from the index's worker strand); notes beside it.
+// (a few per second per live session, from the index's worker strand); notes beside it. A row
+// whose Put found the database down is kept (the newest per session) and stored by the first
+// call that reaches the database again: a session that ends during an outage is not left "live".
+#include <map>
+#include <mutex>
+
 #include "pg_database.h"
 
 namespace idms::server {
@@ -52,7 +57,13 @@ class PgSessionIndex final : public SessionIndex {
   }
 
   bool Put(const SessionRow& row, std::string* error) override {
-    return Write(error, [&](pqxx::work& w) { PutIn(w, row); });
+    try {
+      return Write(error, [&](pqxx::work& w) { PutIn(w, row); });
+    } catch (const StoreUnavailable&) {
+      std::lock_guard lock(pending_mu_);
+      pending_[row.id] = row;
+      throw;
+    }
   }
 
   bool PutWithNote(const SessionRow& row, const SessionNote& note, std::string* error) override {
@@ -64,6 +75,7 @@ class PgSessionIndex final : public SessionIndex {
   }
 
   std::optional<SessionRow> Get(const std::string& id) override {
+    FlushPending();
     return db_->Run([&](pqxx::connection& c) -> std::optional<SessionRow> {
       pqxx::read_transaction t(c);
       const pqxx::result r = t.exec_prepared("sessions_get", id);
@@ -73,6 +85,7 @@ class PgSessionIndex final : public SessionIndex {
   }
 
   std::vector<SessionRow> List() override {
+    FlushPending();
     return db_->Run([](pqxx::connection& c) {
       pqxx::read_transaction t(c);
       std::vector<SessionRow> out;
@@ -82,6 +95,11 @@ class PgSessionIndex final : public SessionIndex {
   }
 
   bool Delete(const std::string& id) override {
+    {
+      std::lock_guard lock(pending_mu_);
+      pending_.erase(id);
+    }
+    FlushPending();
     return db_->Run([&](pqxx::connection& c) {
       pqxx::work w(c);
       const bool found = w.exec_prepared("sessions_delete", id).affected_rows() > 0;
@@ -110,9 +128,43 @@ class PgSessionIndex final : public SessionIndex {
                      r.trainee);
   }
 
-  // One transaction; false with *error when a statement is refused (a taken note id, ...).
+  // Stores the rows kept while the database was down, in one transaction; a row a newer Put
+  // replaced meanwhile stays replaced. Throws StoreUnavailable while the database is still down.
+  void FlushPending() {
+    {
+      std::lock_guard lock(pending_mu_);
+      if (pending_.empty()) return;
+    }
+    std::lock_guard write(write_mu_);
+    FlushPendingLocked();
+  }
+  void FlushPendingLocked() {
+    std::map<std::string, SessionRow> rows;
+    {
+      std::lock_guard lock(pending_mu_);
+      if (pending_.empty()) return;
+      rows.swap(pending_);
+    }
+    try {
+      db_->Run([&](pqxx::connection& c) {
+        pqxx::work w(c);
+        for (const auto& [id, row] : rows) PutIn(w, row);
+        w.commit();
+      });
+    } catch (...) {
+      std::lock_guard lock(pending_mu_);
+      for (auto& [id, row] : rows) pending_.try_emplace(id, std::move(row));  // newer ones win
+      throw;
+    }
+  }
+
+  // One transaction (after the kept rows); false with *error when a statement is refused (a taken
+  // note id, ...).
   template <class F>
   bool Write(std::string* error, F&& statements) {
+    // Writes one at a time, so that a kept row never lands after a newer one.
+    std::lock_guard write(write_mu_);
+    FlushPendingLocked();
     try {
       db_->Run([&](pqxx::connection& c) {
         pqxx::work w(c);
@@ -128,6 +180,9 @@ class PgSessionIndex final : public SessionIndex {
   }
 
   std::shared_ptr<PgDatabase> db_;
+  std::mutex write_mu_;                        // held by every write and by the flush of kept rows
+  std::mutex pending_mu_;                      // pending_ alone (a Put that failed adds to it under write_mu_ too)
+  std::map<std::string, SessionRow> pending_;  // by id: rows whose Put found the database down
 };
 
 }  // namespace

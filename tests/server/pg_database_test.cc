@@ -104,8 +104,10 @@ TEST(PostgresPool, StoresThrowStoreUnavailableWhileTheDatabaseIsDownAndRecoverBy
   // unknown cookie cannot be checked.
   EXPECT_THROW(stores.logins->Find("cookie"), StoreUnavailable);
   EXPECT_THROW(stores.leases->Acquire("s", "node", 1000ms), StoreUnavailable);
+  // A session that ends during the outage: its row is kept and stored once the database is back.
   SessionRow row;
   row.id = "s";
+  row.state = "ended";
   EXPECT_THROW(stores.sessions->Put(row, &error), StoreUnavailable);
   EXPECT_LT(std::chrono::steady_clock::now() - down, 1s) << "failing takes no connection timeout";
   std::this_thread::sleep_for(2100ms);  // past the 2 s in which a login is trusted without asking
@@ -126,7 +128,12 @@ TEST(PostgresPool, StoresThrowStoreUnavailableWhileTheDatabaseIsDownAndRecoverBy
   const double recovered_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - up).count();
   std::printf("stores answered again %.0f ms after PostgreSQL was back\n", recovered_ms);
   RecordProperty("recovered_ms", static_cast<int>(recovered_ms));
-  EXPECT_TRUE(stores.sessions->Put(row, &error)) << error;
+  PostgresStores other;  // another server
+  ASSERT_TRUE(OpenPostgres(pg.Url(), 3600s, 1, &other, &error)) << error;
+  EXPECT_FALSE(other.sessions->Get("s")) << "not stored until this index reaches the database";
+  ASSERT_EQ(stores.sessions->List().size(), 1u);
+  ASSERT_TRUE(other.sessions->Get("s"));
+  EXPECT_EQ(other.sessions->Get("s")->state, "ended");
   EXPECT_EQ(stores.leases->Acquire("s", "node", 1000ms), 1);
 }
 
