@@ -376,8 +376,8 @@ void LiveSession::AgentAttached(uint64_t conn, std::weak_ptr<WsPeer> agent, bool
     const SessionRow row = Snapshot();
     v1::Envelope refusal = ErrorEvent("session " + id_ +
                                       (row.state == "ended" ? " has ended"
-                                       : live_            ? ": this server is checking that it still owns it; retry"
-                                                          : " is being closed; retry"));
+                                       : live_              ? ": this server is checking that it still owns it; retry"
+                                                            : " is being closed; retry"));
     refusal.mutable_session_event()->set_kind(row.state == "ended" ? v1::SessionEvent::KIND_ENDED
                                                                    : v1::SessionEvent::KIND_RESUME_LATER);
     peer->Send(Serialized(refusal), true);
