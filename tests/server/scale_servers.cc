@@ -50,25 +50,16 @@ std::string CreateToken(const std::string& file, const std::string& role) {
 
 Haproxy::Haproxy(const std::string& dir, const std::vector<uint16_t>& agents, const std::vector<uint16_t>& viewers)
     : port_(FreePort()) {
-  std::string cfg =
-      "global\n  maxconn 4096\n"
-      "defaults\n  mode http\n  timeout connect 1s\n  timeout client 30s\n  timeout server 30s\n"
-      "  timeout tunnel 1h\n  retries 3\n  option redispatch 1\n"
-      "  default-server inter 250ms fall 2 rise 2 on-marked-down shutdown-sessions\n"
-      "frontend idms\n  bind 127.0.0.1:" +
-      std::to_string(port_) +
-      "\n  use_backend agents if { path_beg /ws/agent }\n  default_backend viewers\n"
-      "backend agents\n  balance leastconn\n  option httpchk GET /api/health\n";
-  for (size_t i = 0; i < agents.size(); ++i) {
-    cfg += "  server a" + std::to_string(i) + " 127.0.0.1:" + std::to_string(agents[i]) + " check\n";
-  }
-  cfg +=
-      "backend viewers\n  balance uri\n  hash-type consistent\n  hash-balance-factor 150\n"
-      "  option httpchk GET /api/health\n";
-  for (size_t i = 0; i < viewers.size(); ++i) {
-    cfg += "  server v" + std::to_string(i) + " 127.0.0.1:" + std::to_string(viewers[i]) + " check\n";
-  }
-  std::ofstream(dir + "/haproxy.cfg") << cfg;
+  // The configuration the scale stack's container runs (docker/haproxy-config.sh).
+  const auto list = [](const std::vector<uint16_t>& ports) {
+    std::string s;
+    for (const uint16_t p : ports) s += (s.empty() ? "127.0.0.1:" : " 127.0.0.1:") + std::to_string(p);
+    return s;
+  };
+  ChildProcess config("/bin/sh",
+                      {IDMS_SOURCE_DIR "/docker/haproxy-config.sh", std::to_string(port_), list(agents), list(viewers)},
+                      dir + "/haproxy.cfg");
+  config.Wait(seconds(20));
   process_ = std::make_unique<ChildProcess>(
       "/usr/sbin/haproxy", std::vector<std::string>{"-db", "-f", dir + "/haproxy.cfg"}, dir + "/haproxy.log");
   // Ready once it accepts.
