@@ -25,3 +25,7 @@ set(IDMS_FUZZ_LIBS_render_params_fuzz idms_render_params)
 # The tools' --server URLs (idms_cli: idms-agent, idms-render).
 list(APPEND IDMS_FUZZ_TARGETS cli_fuzz)
 set(IDMS_FUZZ_LIBS_cli_fuzz idms_cli)
+# What a server takes from the bus between servers (relayed frames, state answers, relayed
+# viewers' notes and commands).
+list(APPEND IDMS_FUZZ_TARGETS relay_fuzz)
+set(IDMS_FUZZ_LIBS_relay_fuzz idms_server)
