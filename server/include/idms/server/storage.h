@@ -180,13 +180,21 @@ struct Storage {
   std::unique_ptr<SessionIndex> sessions;
   std::unique_ptr<RecordingStore> recordings;
 };
-bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
+// Object storage in place of DATA/blobs/ and DATA/recordings/ (--blobs, --recordings s3://...): a
+// member left null stays in the data directory.
+struct ObjectStores {
+  std::unique_ptr<BlobStore> blobs;
+  std::unique_ptr<RecordingStore> recordings;
+};
+// Blobs no row names are removed only from DATA/blobs/: a bucket may be shared by several servers.
+bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error, ObjectStores objects = {});
 // The same with the model library and the session index given (PostgreSQL's, with --store):
-// only the blobs and recordings are opened under `data_dir`, and no idms.db is made. Blobs no row
-// names are kept: another server sharing the database (and, later, the blobs) may be between
-// storing an upload's blob and committing its row.
+// only the blobs and recordings are opened under `data_dir` (unless given), and no idms.db is
+// made. Blobs no row names are kept: another server sharing the database and the blobs may be
+// between storing an upload's blob and committing its row.
 bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
-                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error);
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error,
+                 ObjectStores objects = {});
 
 // The directory store alone (tests, tools).
 std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error);
