@@ -14,6 +14,12 @@ class FileRecordingStore : public RecordingStore {
   explicit FileRecordingStore(std::string dir) : dir_(std::move(dir)) {}
   std::string LivePath(const std::string& id) const override { return dir_ + "/" + id + ".live.mcap"; }
   std::string FinishedPath(const std::string& id) const override { return dir_ + "/" + id + ".mcap"; }
+  bool Recover(const std::string& id, std::string* error) override {
+    std::error_code ec;
+    if (fs::exists(LivePath(id), ec)) return true;
+    *error = "no live recording " + LivePath(id);
+    return false;
+  }
   bool Publish(const std::string& id, std::string* error) override {
     std::error_code ec;
     fs::rename(LivePath(id), FinishedPath(id), ec);

@@ -4,8 +4,10 @@
 // stored.
 #include "live_session.h"
 
+#include <algorithm>
 #include <boost/asio/post.hpp>
 #include <cmath>
+#include <utility>
 
 #include "frame_checks.h"
 #include "idms/protocol/envelope.h"
@@ -33,7 +35,7 @@ constexpr uint16_t kPolicyError = 1008;
 }  // namespace
 
 LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::Scene scene,
-                         std::shared_ptr<Recorder> recorder, const DecodeLimits& limits)
+                         std::shared_ptr<Recorder> recorder, const DecodeLimits& limits, LeaseGrant lease)
     : core_(core),
       hub_(hub),
       id_(row.id),
@@ -49,6 +51,7 @@ LiveSession::LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::
   // A resumed session (after a restart or its resume window) carries on with the figures of all
   // it recorded before.
   summary_ = SessionSummary::FromJson(row_.summary_json);
+  lease_ = lease;
   epoch_ns_ = ParseUtcNs(row_.started);
   if (epoch_ns_ == 0) epoch_ns_ = UnixNs();
 }
@@ -57,8 +60,6 @@ LiveSession::~LiveSession() = default;
 
 void LiveSession::Start() {
   if (Bus* bus = hub_.bus()) {
-    // The epoch orders this server's ownership after any earlier owner's (its start, in ns).
-    relay_epoch_ = UnixNs();
     const std::weak_ptr<LiveSession> w = weak_from_this();
     std::string error;
     join_sub_ = bus->Subscribe(
@@ -85,7 +86,8 @@ void LiveSession::Publish(const std::shared_ptr<const std::string>& bytes, int d
   Bus* bus = hub_.bus();
   if (bus == nullptr || !join_sub_) return;
   v1::RelayFrame f;
-  f.set_epoch(relay_epoch_);
+  f.set_epoch(static_cast<uint64_t>(lease_.epoch));
+  f.set_incarnation(incarnation_);
   f.set_sequence(++relay_sequence_);
   if (bytes) f.set_message(*bytes);
   f.set_sent_unix_ns(UnixNs());
@@ -96,9 +98,10 @@ void LiveSession::Publish(const std::shared_ptr<const std::string>& bytes, int d
 
 void LiveSession::AnswerJoin(const std::string& reply) {
   Bus* bus = hub_.bus();
-  if (bus == nullptr) return;
+  if (bus == nullptr || !Owns()) return;
   v1::RelayJoin j;
-  j.set_epoch(relay_epoch_);
+  j.set_epoch(static_cast<uint64_t>(lease_.epoch));
+  j.set_incarnation(incarnation_);
   j.set_sequence(relay_sequence_);
   j.set_live(live_);
   j.set_node(core_.options.node_id);
@@ -135,6 +138,126 @@ void LiveSession::SetTrainee(const std::string& trainee) {
 
 void LiveSession::Persist(std::function<void()> then) { hub_.StoreRow(Snapshot(), std::move(then)); }
 
+// ---------------------------------------------------------------------------------------------
+// Ownership.
+
+bool LiveSession::Owns() {
+  AssertOnStrand();
+  if (!lapsed_ && Clock::now() < lease_.until) return true;
+  if (lapsed_ || !live_) return false;
+  lapsed_ = true;
+  Log(LogLevel::kWarn, "the session's lease lapsed (not renewed in time); asking whether it is still ours",
+      {{"session", id_}, {"epoch", lease_.epoch}});
+  // Nothing more is taken from the agent until the store has answered: sent away, it resumes
+  // (here once the lease is renewed, or on the server that took the session) and resends from
+  // the tick its Welcome names. Nothing waiting is published.
+  if (const std::shared_ptr<WsPeer> agent = agent_.lock()) {
+    v1::Envelope later = ErrorEvent("the server is checking that it still owns session " + id_ + "; resume");
+    later.mutable_session_event()->set_kind(v1::SessionEvent::KIND_RESUME_LATER);
+    agent->Send(Serialized(later), true);
+    agent->Close(kGoingAway, "ownership of the session in doubt; resume");
+  }
+  agent_.reset();
+  agent_conn_ = 0;
+  agent_gone_since_ = Clock::now();
+  pending_.clear();
+  CheckLease();
+  return false;
+}
+
+namespace {
+enum class LeaseOutcome { kHeld, kRetaken, kLost, kUnreachable };
+}  // namespace
+
+void LiveSession::RenewLease() {
+  AssertOnStrand();
+  if (renewing_ || lapsed_ || !live_) return;
+  renewing_ = true;
+  const auto asked = Clock::now();
+  asio::post(core_.workers, [w = weak_from_this(), asked, epoch = lease_.epoch] {
+    const auto s = w.lock();
+    if (!s) return;
+    LeaseOutcome outcome = LeaseOutcome::kLost;
+    try {
+      if (s->core_.leases->Renew(s->id_, s->core_.options.node_id, epoch, s->core_.options.lease_ttl)) {
+        outcome = LeaseOutcome::kHeld;
+      }
+    } catch (const StoreUnavailable&) {
+      outcome = LeaseOutcome::kUnreachable;
+    }
+    asio::post(s->strand_, [s, outcome, asked, epoch] {
+      s->renewing_ = false;
+      if (!s->live_ || s->lapsed_ || epoch != s->lease_.epoch) return;
+      if (outcome == LeaseOutcome::kLost) {
+        s->lease_.until = {};  // refused: lapse now, and ask
+        s->Owns();
+        return;
+      }
+      // Unreachable: nobody else can take the session from the store either; keep it.
+      if (outcome == LeaseOutcome::kUnreachable && !std::exchange(s->unreachable_logged_, true)) {
+        Log(LogLevel::kWarn, "lease not renewed: the database is unavailable; keeping the session",
+            {{"session", s->id_}});
+      }
+      if (outcome == LeaseOutcome::kHeld) s->unreachable_logged_ = false;
+      s->lease_.until = std::max(s->lease_.until, asked + s->core_.options.lease_ttl);
+    });
+  });
+}
+
+void LiveSession::CheckLease() {
+  AssertOnStrand();
+  const auto asked = Clock::now();
+  asio::post(core_.workers, [w = weak_from_this(), asked, epoch = lease_.epoch] {
+    const auto s = w.lock();
+    if (!s) return;
+    LeaseStore& leases = *s->core_.leases;
+    const std::string& node = s->core_.options.node_id;
+    const auto ttl = s->core_.options.lease_ttl;
+    LeaseOutcome outcome = LeaseOutcome::kLost;
+    int64_t now_epoch = epoch;
+    try {
+      if (leases.Renew(s->id_, node, epoch, ttl)) {
+        outcome = LeaseOutcome::kHeld;
+      } else if (const std::optional<int64_t> taken = leases.Acquire(s->id_, node, ttl)) {
+        outcome = LeaseOutcome::kRetaken;  // lapsed, and nobody took it: ours again, a new epoch
+        now_epoch = *taken;
+      }
+    } catch (const StoreUnavailable&) {
+      outcome = LeaseOutcome::kUnreachable;
+    }
+    asio::post(s->strand_, [s, outcome, asked, now_epoch] {
+      if (!s->live_) return;
+      if (outcome == LeaseOutcome::kLost) return s->GiveUp();
+      if (outcome == LeaseOutcome::kRetaken) ++s->hub_.leases_taken;
+      Log(LogLevel::kInfo, "the session is still this server's", {{"session", s->id_}, {"epoch", now_epoch}});
+      s->lease_ = LeaseGrant{now_epoch, asked + s->core_.options.lease_ttl};
+      s->lapsed_ = false;
+    });
+  });
+}
+
+void LiveSession::GiveUp() {
+  AssertOnStrand();
+  if (!live_.exchange(false)) return;
+  ++hub_.leases_lost;
+  Log(LogLevel::kWarn, "session given up: another server holds its lease (its agent resumed there)",
+      {{"session", id_}, {"epoch", lease_.epoch}});
+  timer_.cancel();
+  gather_timer_.cancel();
+  pending_.clear();
+  // Viewers reconnect (through the load balancer) and watch it relayed from its new owner.
+  audience_.CloseAll(kGoingAway, "the session moved to another server; reconnect");
+  num_viewers_ = 0;
+  join_sub_.reset();
+  viewer_sub_.reset();
+  if (const std::shared_ptr<WsPeer> agent = agent_.lock()) agent->Close(kGoingAway, "the session moved; resume");
+  agent_.reset();
+  agent_conn_ = 0;
+  // The new owner records from what this one made durable; nothing here is published or stored.
+  recorder_->Abandon();
+  hub_.Forget(id_, this);
+}
+
 void LiveSession::Tick() {
   timer_.expires_after(std::chrono::seconds(1));
   timer_.async_wait([self = shared_from_this()](boost::system::error_code ec) {
@@ -144,12 +267,13 @@ void LiveSession::Tick() {
       Log(LogLevel::kInfo, "session closed: its agent did not come back", {{"session", self->id_}});
       return self->End("interrupted", "the agent did not come back");
     }
-    // The open chunk to the file; then the agent may forget every tick before this one.
+    self->RenewLease();
+    // The open chunk to the file, made durable; then the agent may forget every tick before this one.
     const uint64_t stored = self->next_tick_;
     self->recorder_->Flush([w = std::weak_ptr<LiveSession>(self), stored](bool ok) {
       if (auto s = w.lock(); s && ok) {
         asio::post(s->strand_, [s, stored] {
-          if (!s->live_) return;
+          if (!s->live_ || !s->Owns()) return;
           v1::Envelope ack;
           ack.mutable_ack()->set_next_tick(stored);
           s->SendToAgent(ack);
@@ -213,6 +337,7 @@ void LiveSession::ArmGatherTimer() {
 void LiveSession::Flush() {
   AssertOnStrand();
   if (pending_.empty()) return;
+  if (!Owns()) return pending_.clear();  // not this server's to publish
   Audience::Outgoing out;
   for (const auto& [bytes, kind] : pending_) {
     (kind == FrameKind::kDelta ? out.deltas : kind == FrameKind::kSamples ? out.samples : out.others) += 1;
@@ -245,11 +370,14 @@ void LiveSession::AgentAttached(uint64_t conn, std::weak_ptr<WsPeer> agent, bool
   AssertOnStrand();
   const std::shared_ptr<WsPeer> peer = agent.lock();
   if (!peer) return;  // gone before it was attached: its close is on its way
-  if (!live_) {
-    // Ended (or closing) since the hub let the Hello in: the agent acts on the kind.
+  if (!live_ || !Owns()) {
+    // Ended (or closing) since the hub let the Hello in, or this server's lease is in doubt: the
+    // agent acts on the kind.
     const SessionRow row = Snapshot();
-    v1::Envelope refusal =
-        ErrorEvent("session " + id_ + (row.state == "ended" ? " has ended" : " is being closed; retry"));
+    v1::Envelope refusal = ErrorEvent("session " + id_ +
+                                      (row.state == "ended" ? " has ended"
+                                       : live_              ? ": this server is checking that it still owns it; retry"
+                                                            : " is being closed; retry"));
     refusal.mutable_session_event()->set_kind(row.state == "ended" ? v1::SessionEvent::KIND_ENDED
                                                                    : v1::SessionEvent::KIND_RESUME_LATER);
     peer->Send(Serialized(refusal), true);
@@ -293,7 +421,8 @@ void LiveSession::AgentFrame(uint64_t conn, std::shared_ptr<const v1::Envelope> 
                              std::shared_ptr<const std::string> bytes) {
   AssertOnStrand();
   // A replaced connection's frames: the new connection resends them from its Welcome's next_tick.
-  if (!live_ || conn != agent_conn_) return;
+  // Without the lease: nothing is taken (the agent, sent away, resends it wherever it resumes).
+  if (!live_ || conn != agent_conn_ || !Owns()) return;
   const v1::Envelope& e = *envelope;
   if (e.has_device_samples()) {
     const v1::DeviceSamples& ds = e.device_samples();
@@ -389,8 +518,15 @@ void LiveSession::End(const std::string& state, const std::string& why) {
   viewer_sub_.reset();
   // Once the file is closed and published: the row stored, the hub told, the agent acknowledged.
   const bool ended = state == "ended";
-  recorder_->Finish([self = shared_from_this(), ended](bool ok) {
-    self->Persist([self] { self->hub_.Forget(self->id_, self.get()); });
+  recorder_->Finish([self = shared_from_this(), ended, epoch = lease_.epoch](bool ok) {
+    self->Persist([self, epoch] {
+      self->hub_.Forget(self->id_, self.get());
+      // Stored: another server may take the session now (its agent resuming there).
+      try {
+        self->core_.leases->Release(self->id_, self->core_.options.node_id, epoch);
+      } catch (const StoreUnavailable&) {  // it lapses by itself
+      }
+    });
     asio::post(self->strand_, [self, ended, ok] {
       const std::shared_ptr<WsPeer> agent = self->agent_.lock();
       if (!agent || !ended) return;

@@ -28,11 +28,18 @@ namespace idms::server {
 class Recorder;
 class SessionHub;
 
+// A session's lease as this server took it: its epoch, and until when it holds by this server's
+// clock (counted from before it was asked for, so never later than the store's own deadline).
+struct LeaseGrant {
+  int64_t epoch = 0;
+  std::chrono::steady_clock::time_point until;
+};
+
 class LiveSession : public WatchedSession, public std::enable_shared_from_this<LiveSession> {
  public:
   // `limits`: what the session's model can need of a mesh frame (the mirror refuses more).
   LiveSession(ServerCore& core, SessionHub& hub, SessionRow row, v1::Scene scene, std::shared_ptr<Recorder> recorder,
-              const DecodeLimits& limits);
+              const DecodeLimits& limits, LeaseGrant lease);
   ~LiveSession();
   const std::string& id() const { return id_; }
   Strand& strand() override { return strand_; }
@@ -86,6 +93,21 @@ class LiveSession : public WatchedSession, public std::enable_shared_from_this<L
   void End(const std::string& state, const std::string& why);
   void Persist(std::function<void()> then = nullptr);  // the row, on the index's strand
 
+  // Ownership. The session is published, recorded and acknowledged only while this server's
+  // lease holds by its own clock (Owns, on every frame: a clock read). The lease is renewed once
+  // a second off the strand; past its deadline (a stall, a SIGSTOP, renewals refused) the session
+  // lapses: the agent is sent away to resume, nothing is published, and the store decides: the
+  // lease renewed or taken again (a new epoch), and the session goes on; another server holding
+  // it, and this one gives the session up (GiveUp). A database that cannot be reached renews
+  // nothing and takes nothing away: the owner keeps the session while it is down.
+  bool Owns();
+  void RenewLease();
+  void CheckLease();  // lapsed: ask the store whether the session is still this server's
+  void GiveUp();      // another server owns it: viewers and agent sent on, nothing stored
+  LeaseGrant lease_;
+  const uint64_t incarnation_ = UnixNs();  // when this server took the session (RelayFrame.incarnation)
+  bool renewing_ = false, lapsed_ = false, unreachable_logged_ = false;
+
   ServerCore& core_;
   SessionHub& hub_;
   std::string id_;
@@ -100,7 +122,7 @@ class LiveSession : public WatchedSession, public std::enable_shared_from_this<L
   Audience audience_;
   // With a bus: what this server, the session's owner, publishes for the other servers' viewers
   // (relay.h), and the subscriptions that answer them.
-  uint64_t relay_epoch_ = 0, relay_sequence_ = 0;
+  uint64_t relay_sequence_ = 0;
   std::unique_ptr<Bus::Subscription> join_sub_, viewer_sub_;
   void Publish(const std::shared_ptr<const std::string>& bytes, int deltas, const std::string& close_reason);
   void AnswerJoin(const std::string& reply);

@@ -144,7 +144,15 @@ int main(int argc, char** argv) {
   app.add_option("--bus", o.bus,
                  "Several servers: NATS URLs (nats://HOST:PORT, comma-separated) of the bus that carries live "
                  "sessions between them; a viewer of a session another server owns is served here");
-  app.add_option("--node", o.node_id, "This server's name on the bus (default HOST:PORT)");
+  app.add_option("--node", o.node_id,
+                 "This server's name among several (the bus, session leases); unique per server (default "
+                 "HOSTNAME:PORT)");
+  int lease_ttl_ms = static_cast<int>(o.lease_ttl.count());
+  app.add_option("--lease-ttl-ms", lease_ttl_ms,
+                 "How long a live session's ownership lasts unrenewed (renewed every second): how soon another "
+                 "server may take over a session whose owner died")
+      ->check(CLI::Range(1500, 600000))
+      ->capture_default_str();
 
   // idms-server token create ROLE --tokens FILE
   CLI::App* token = app.add_subcommand("token", "Manage tokens");
@@ -181,6 +189,7 @@ int main(int argc, char** argv) {
   o.resume_window = std::chrono::seconds(resume_window_s);
   o.viewer_stall_timeout = std::chrono::seconds(viewer_stall_timeout_s);
   o.agent_idle_timeout = std::chrono::milliseconds(agent_idle_timeout_ms);
+  o.lease_ttl = std::chrono::milliseconds(lease_ttl_ms);
   o.ws_send_buffer_bytes = ws_send_buffer_kb << 10;
   idms::server::SetLogFormat(o.log_format);
 

@@ -42,16 +42,36 @@ Recorder::Recorder(asio::thread_pool& pool, RecordingStore& store, std::string i
       bytes_counter_(bytes),
       failures_counter_(failures) {}
 
-void Recorder::Start(RecordingWriterOptions options, bool continue_finished) {
-  asio::post(strand_, [self = shared_from_this(), options = std::move(options), continue_finished] {
+void Recorder::Start(RecordingWriterOptions options, RecordingStart from) {
+  asio::post(strand_, [self = shared_from_this(), options = std::move(options), from] {
     std::string error;
-    if (!self->writer_.Open(self->store_.LivePath(self->id_), options, &error)) return self->Failed(error);
-    self->open_ = true;
-    const std::string finished = self->store_.FinishedPath(self->id_);
-    if (continue_finished && fs::exists(finished)) {
-      CopyStats stats;
-      if (!CopyRecording(finished, &self->writer_, &stats, &error)) return self->Failed(error);
+    const std::string live = self->store_.LivePath(self->id_);
+    // A takeover's recovered live file is read from beside the new one.
+    std::string source = from == RecordingStart::kContinueFinished ? self->store_.FinishedPath(self->id_) : "";
+    if (from == RecordingStart::kContinueLive) {
+      source = live + ".taken";
+      std::error_code ec;
+      fs::rename(live, source, ec);
+      if (ec) source.clear();  // nothing was recovered: the recording starts again
     }
+    if (!self->writer_.Open(live, options, &error)) return self->Failed(error);
+    self->open_ = true;
+    if (!source.empty() && fs::exists(source)) {
+      CopyStats stats;
+      if (!CopyRecording(source, &self->writer_, &stats, &error)) return self->Failed(error);
+      std::error_code ec;
+      if (from == RecordingStart::kContinueLive) fs::remove(source, ec);
+    }
+  });
+}
+
+void Recorder::Abandon() {
+  asio::post(strand_, [self = shared_from_this()] {
+    if (!self->open_) return;
+    self->open_ = false;
+    std::string error;
+    self->writer_.Close(&error);
+    self->CountBytes();
   });
 }
 
@@ -69,7 +89,10 @@ void Recorder::Flush(std::function<void(bool)> done) {
     // The open chunk too: the session acknowledges to its agent what this flush stored.
     if (self->open_ && !self->writer_.CloseChunk(&error)) self->Failed(error);
     self->CountBytes();
-    if (done) done(self->open_ && !self->failed_);
+    if (!done) return;
+    if (!self->open_ || self->failed_) return done(false);
+    // Durable before acknowledged: the store may upload it first (off this strand).
+    self->store_.Persist(self->id_, self->writer_.mcap().bytes_written(), std::move(done));
   });
 }
 

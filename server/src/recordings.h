@@ -27,6 +27,11 @@ struct CopyStats {
 // by a scan) into `writer` (null: only counts). False with *error on unreadable data.
 bool CopyRecording(const std::string& path, RecordingWriter* writer, CopyStats* stats, std::string* error);
 
+// What a session's recording starts with: nothing (a new session), the finished recording (a
+// resume after a restart or the resume window), or the live recording another server left (a
+// takeover: RecordingStore::Recover brought it here).
+enum class RecordingStart { kNew, kContinueFinished, kContinueLive };
+
 // The recording of one session. Every call posts to the recorder's strand and returns at once;
 // the writer, its file and its buffers belong to that strand alone.
 class Recorder : public std::enable_shared_from_this<Recorder> {
@@ -35,12 +40,15 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
   Recorder(boost::asio::thread_pool& pool, RecordingStore& store, std::string id, std::atomic<uint64_t>* bytes,
            std::atomic<uint64_t>* failures);
 
-  // Opens the live file; continue_finished: first copies the finished recording back in (a
-  // resume after a restart).
-  void Start(RecordingWriterOptions options, bool continue_finished);
+  // Opens the live file, and first copies into it what `from` says.
+  void Start(RecordingWriterOptions options, RecordingStart from);
+  // Closes the file without publishing it: another server owns the session now (its recording
+  // continues there); the file stays under its live name.
+  void Abandon();
   void Write(std::shared_ptr<const v1::Envelope> envelope, uint64_t log_ns, uint64_t publish_ns);
-  // Closes the open chunk, so that everything written so far is in the file; `done(ok)` then
-  // runs on the recorder's strand (ok: the recording is healthy).
+  // Closes the open chunk, so that everything written so far is in the file, and has the store
+  // make it durable (RecordingStore::Persist); `done(ok)` then runs on the recorder's strand or
+  // the store's thread (ok: durable, and the recording is healthy).
   void Flush(std::function<void(bool ok)> done = nullptr);
   // Closes the file (summary, indexes) and publishes it; `done(ok)` runs on the recorder's strand.
   void Finish(std::function<void(bool ok)> done = nullptr);

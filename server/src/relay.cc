@@ -98,18 +98,19 @@ void RelayedSession::Tick() {
 
 void RelayedSession::OnFrame(v1::RelayFrame frame) {
   if (!live_) return;
-  if (ever_synced_ && frame.epoch() < epoch_) return;  // an owner that lost the session: fenced off
+  const Owner owner{frame.epoch(), frame.incarnation()};
+  if (ever_synced_ && owner < owner_) return;  // an owner that lost the session: fenced off
   last_heard_ = Clock::now();
   if (!synced_) {
     waiting_.push_back(std::move(frame));
     if (waiting_.size() > kMaxWaiting) waiting_.pop_front();
     return;
   }
-  if (frame.epoch() == epoch_ && frame.sequence() <= sequence_) return;  // already had it
-  if (frame.epoch() != epoch_ || frame.sequence() != sequence_ + 1) {
+  if (owner == owner_ && frame.sequence() <= sequence_) return;  // already had it
+  if (owner != owner_ || frame.sequence() != sequence_ + 1) {
     // A gap (the bus dropped frames for us, or we reconnected), or a new owner: hold what comes
     // and ask for the state; the viewers keep the surface they have meanwhile.
-    frame.epoch() != epoch_ ? ++counters_.epoch_changes : ++counters_.gaps;
+    owner != owner_ ? ++counters_.epoch_changes : ++counters_.gaps;
     synced_ = false;
     waiting_.clear();
     waiting_.push_back(std::move(frame));
@@ -182,7 +183,7 @@ void RelayedSession::Deliver(v1::RelayFrame& frame) {
 
 void RelayedSession::OnJoin(const v1::RelayJoin& join) {
   if (!live_) return;
-  if (ever_synced_ && join.epoch() < epoch_) return;  // a stale owner's answer
+  if (ever_synced_ && Owner{join.epoch(), join.incarnation()} < owner_) return;  // a stale owner's answer
   last_heard_ = Clock::now();
   ++counters_.joins;
   if (!join.live()) return Close("the session has ended");
@@ -198,7 +199,7 @@ void RelayedSession::OnJoin(const v1::RelayJoin& join) {
   audience_.ForgetHistory();
   for (const std::string& h : join.history()) audience_.Remember(std::make_shared<const std::string>(h));
   const bool resync = ever_synced_;
-  epoch_ = join.epoch();
+  owner_ = {join.epoch(), join.incarnation()};
   sequence_ = join.sequence();
   synced_ = ever_synced_ = true;
   // The viewers watching: the surface now (they kept theirs through the gap); the ones who

@@ -11,6 +11,7 @@
 #include <deque>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "audience.h"
@@ -72,9 +73,12 @@ class RelayedSession : public WatchedSession, public std::enable_shared_from_thi
   std::unique_ptr<Bus::Subscription> live_sub_, inbox_sub_;
   std::string inbox_;
   MeshMirror mirror_;
-  bool synced_ = false;  // epoch_ / sequence_ / the mirror follow the owner's stream
+  bool synced_ = false;  // owner_ / sequence_ / the mirror follow the owner's stream
   bool ever_synced_ = false;
-  uint64_t epoch_ = 0, sequence_ = 0;
+  // The owner followed: (lease epoch, incarnation), ordered; a smaller one is a fenced owner.
+  using Owner = std::pair<uint64_t, uint64_t>;
+  Owner owner_{0, 0};
+  uint64_t sequence_ = 0;
   v1::Welcome welcome_;
   std::deque<v1::RelayFrame> waiting_;                 // frames that came before the state they follow (bounded)
   std::vector<std::pair<uint64_t, bool>> unwelcomed_;  // viewers (id, admin) who joined before the first state

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <boost/asio/ip/host_name.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
@@ -207,7 +208,6 @@ bool Server::Impl::Start(std::string* error) {
   core.ctx.more_metrics = [this] { return hub->MetricsText(); };
   hub = std::make_unique<SessionHub>(core, storage.sessions.get(), storage.recordings.get());
   core.hub = hub.get();
-  hub->RecoverInterrupted();
   core.routes = MakeRoutes();
   AppendWebSocketRoutes(core, &core.routes);
   AppendSessionRoutes(core, &core.routes);
@@ -231,7 +231,15 @@ bool Server::Impl::Start(std::string* error) {
     return false;
   }
   port = acceptor.local_endpoint().port();
-  if (core.options.node_id.empty()) core.options.node_id = o.host + ":" + std::to_string(port);
+  // Node names must differ between servers (they hold leases): the host's name, not the
+  // listening address (0.0.0.0 on every container).
+  if (core.options.node_id.empty()) {
+    boost::system::error_code host_ec;
+    const std::string host = asio::ip::host_name(host_ec);
+    core.options.node_id = (host_ec || host.empty() ? o.host : host) + ":" + std::to_string(port);
+  }
+  // After the node has its name: a live session another server holds is not this one's to repair.
+  hub->RecoverInterrupted();
   if (!o.bus.empty()) {
     bus = OpenNatsBus(o.bus, core.options.node_id, error);
     if (!bus) return false;

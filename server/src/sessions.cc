@@ -41,11 +41,16 @@ SessionHub::SessionHub(ServerCore& core, SessionIndex* index, RecordingStore* re
 void SessionHub::RecoverInterrupted() {
   for (SessionRow row : index_->List()) {
     if (row.state != "live") continue;
+    // Several servers on one index: a session another server holds is live there, not ours.
+    if (const std::optional<Lease> holder = core_.leases->Holder(row.id);
+        holder && holder->holder != core_.options.node_id) {
+      continue;
+    }
     const std::string live = recordings_->LivePath(row.id);
     const std::string final_path = recordings_->FinishedPath(row.id);
     std::string error;
     // Repair: read what the crash left (the reader recovers by a scan), write a finished file.
-    if (fs::exists(live)) {
+    if (recordings_->Recover(row.id, &error)) {
       RecordingReader probe;
       std::map<std::string, std::string> meta;
       if (probe.Open(live, RecordingReaderOptions{}, &error)) meta = probe.session();
@@ -127,15 +132,26 @@ AgentAdmission SessionHub::Admit(const v1::Hello& hello, const std::string& peer
     }
     // Ended: its recording is complete. Ending or closing (not yet stored): ask again shortly.
     if (row.state == "ended") return Refused(K::KIND_ENDED, "session " + row.id + " has ended");
-    if ((s && !s->live()) || (!s && row.state == "live")) {
-      return Refused(K::KIND_RESUME_LATER, "session " + row.id + " is being closed; retry");
-    }
+    if (s && !s->live()) return Refused(K::KIND_RESUME_LATER, "session " + row.id + " is being closed; retry");
     if (!s) {
+      // Interrupted (its recording finished), or live on another server: ours once its lease is.
+      const std::optional<LeaseGrant> lease = TakeLease(row.id);
+      if (!lease) {
+        const std::optional<Lease> holder = core_.leases->Holder(row.id);
+        return Refused(K::KIND_RESUME_LATER, "session " + row.id + " is live on " +
+                                                 (holder ? holder->holder : std::string("another server")) +
+                                                 "; retry (it is taken over once that server's lease lapses)");
+      }
+      RecordingStart from = RecordingStart::kContinueFinished;
+      if (row.state == "live") {
+        TakeOver(&row);
+        from = RecordingStart::kContinueLive;
+      }
       row.state = "live";
       row.recording = recordings_->NameFor(row.id, row.state);
       v1::Scene scene;
       google::protobuf::TextFormat::ParseFromString(row.scene_text, &scene);
-      s = StartSession(row, scene, /*continue_finished=*/true);
+      s = StartSession(row, scene, from, *lease);
     }
     AgentAdmission a;
     a.session = std::move(s);
@@ -161,7 +177,9 @@ AgentAdmission SessionHub::Admit(const v1::Hello& hello, const std::string& peer
   AgentAdmission a;
   a.resume_token = RandomHex(32);
   row.resume_sha256 = Sha256Hex(a.resume_token);
-  a.session = StartSession(row, hello.scene(), /*continue_finished=*/false);
+  const std::optional<LeaseGrant> lease = TakeLease(row.id);
+  if (!lease) return Refused(K::KIND_ERROR, "session id " + row.id + " is taken; retry");  // 48 random bits
+  a.session = StartSession(row, hello.scene(), RecordingStart::kNew, *lease);
   StoreRow(row);
   Log(LogLevel::kInfo, "session started", {{"session", row.id}, {"model", row.model}, {"peer", peer}});
   return a;
@@ -188,15 +206,43 @@ DecodeLimits SessionHub::LimitsFor(const v1::Scene& scene) {
   return limits;
 }
 
+std::optional<LeaseGrant> SessionHub::TakeLease(const std::string& id) {
+  // The lease runs from before it was asked for: this node's deadline is never later than the store's.
+  const auto asked = std::chrono::steady_clock::now();
+  const std::optional<int64_t> epoch = core_.leases->Acquire(id, core_.options.node_id, core_.options.lease_ttl);
+  if (!epoch) return std::nullopt;
+  ++leases_taken;
+  return LeaseGrant{*epoch, asked + core_.options.lease_ttl};
+}
+
+void SessionHub::TakeOver(SessionRow* row) {
+  ++takeovers;
+  std::string error;
+  CopyStats stats;
+  if (!recordings_->Recover(row->id, &error) ||
+      !CopyRecording(recordings_->LivePath(row->id), nullptr, &stats, &error)) {
+    // Recordings in this server's own directory cannot be reached from here: the row's figures
+    // (stored once a second by the old owner) stand, and the recording starts again.
+    Log(LogLevel::kWarn, "taking over a session without its recording so far: " + error, {{"session", row->id}});
+    return;
+  }
+  row->samples = stats.samples;
+  row->next_tick = stats.any_tick ? stats.last_tick + 1 : 0;
+  const SessionSummary& sum = stats.summary;
+  row->duration_s = sum.first_time_s < 0 ? 0 : sum.last_time_s - sum.first_time_s;
+  row->summary_json = sum.Json();
+  Log(LogLevel::kInfo, "session taken over", {{"session", row->id}, {"next_tick", row->next_tick}});
+}
+
 std::shared_ptr<LiveSession> SessionHub::StartSession(const SessionRow& row, const v1::Scene& scene,
-                                                      bool continue_finished) {
+                                                      RecordingStart from, LeaseGrant lease) {
   // Its recording (with the session's id, model and scene as metadata), then the session itself.
   auto recorder =
       std::make_shared<Recorder>(core_.recorder, *recordings_, row.id, &recording_bytes, &recording_failures);
   RecordingWriterOptions options;
   options.session = {{"session_id", row.id}, {"model", row.model}, {"scene", row.scene_text}};
-  recorder->Start(options, continue_finished);
-  auto s = std::make_shared<LiveSession>(core_, *this, row, scene, recorder, LimitsFor(scene));
+  recorder->Start(options, from);
+  auto s = std::make_shared<LiveSession>(core_, *this, row, scene, recorder, LimitsFor(scene), lease);
   s->Start();
   live_[row.id] = s;
   return s;
@@ -431,6 +477,11 @@ std::string SessionHub::MetricsText() {
          Counter("idms_recording_failures_total", "Recordings that stopped on an error (see the log).",
                  recording_failures) +
          Counter("idms_viewer_stalled_closed_total", "Viewers closed for staying stalled.", stalled_closed) +
+         Counter("idms_leases_taken_total", "Session leases this server took (new sessions, resumes, takeovers).",
+                 leases_taken) +
+         Counter("idms_session_takeovers_total", "Live sessions this server took over from another.", takeovers) +
+         Counter("idms_leases_lost_total", "Live sessions this server gave up on finding its lease lost (fenced).",
+                 leases_lost) +
          RelayMetrics() +
          "# HELP idms_session_samples Device samples received, per live session.\n"
          "# TYPE idms_session_samples gauge\n" +

@@ -17,6 +17,7 @@
 #include "idms/server/bus.h"
 #include "idms/server/storage.h"
 #include "live_session.h"
+#include "recordings.h"
 #include "relay.h"
 #include "server_internal.h"
 
@@ -82,6 +83,9 @@ class SessionHub {
   // Fan-out counters over all viewers (for /metrics and the bench).
   std::atomic<uint64_t> viewer_frames{0}, viewer_bytes{0}, deltas_skipped{0}, samples_dropped{0}, resyncs{0},
       stalled_closed{0}, recording_bytes{0}, recording_failures{0}, events_dropped{0};
+  // Session ownership: leases this node took (new sessions, resumes, takeovers), sessions taken
+  // over from another node, and sessions this node gave up on finding its lease lost (fenced).
+  std::atomic<uint64_t> leases_taken{0}, takeovers{0}, leases_lost{0};
   int live_count();
   // Prometheus lines: live sessions, viewers, and per live session its samples, tick p99 and overruns.
   std::string MetricsText();
@@ -90,8 +94,16 @@ class SessionHub {
  private:
   // OpenForAgent's work; may throw StoreUnavailable (OpenForAgent refuses with "retry").
   AgentAdmission Admit(const v1::Hello& hello, const std::string& peer);
-  // A live session and its recorder, under mu_; continue_finished: a resume after a restart.
-  std::shared_ptr<LiveSession> StartSession(const SessionRow& row, const v1::Scene& scene, bool continue_finished);
+  // The session's lease for this node (LeaseStore::Acquire): nullopt while another node holds it.
+  // May throw StoreUnavailable.
+  std::optional<LeaseGrant> TakeLease(const std::string& id);
+  // A live session and its recorder, under mu_; `from`: what its recording starts with.
+  std::shared_ptr<LiveSession> StartSession(const SessionRow& row, const v1::Scene& scene, RecordingStart from,
+                                            LeaseGrant lease);
+  // A session live on another server whose lease has lapsed (its owner died or stalled): its
+  // durable recording recovered into this server's live file and the row's figures taken from it,
+  // so that the agent resends exactly the ticks after it.
+  void TakeOver(SessionRow* row);
   // What a mesh frame of the scene's model can need (the library's counts), else the defaults.
   DecodeLimits LimitsFor(const v1::Scene& scene);
 

@@ -59,6 +59,11 @@ struct ServerOptions {
   // empty: this server alone) and this server's name on it (empty: HOST:PORT once bound).
   std::string bus;
   std::string node_id;
+  // Each live session is owned through a lease (LeaseStore) renewed once a second: the owner
+  // publishes, records and acknowledges only while it holds it, and another server can take the
+  // session over (its agent resuming there) once it has lapsed. Viewers of a dead owner freeze
+  // for about this long; the database may be down for any time without the owner letting go.
+  std::chrono::milliseconds lease_ttl{5000};
 };
 
 }  // namespace idms::server

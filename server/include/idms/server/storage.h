@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -164,6 +165,19 @@ class RecordingStore {
     const std::string path = PathFor(id, state);
     return path.substr(path.find_last_of('/') + 1);
   }
+  // Makes the first `bytes` bytes of the live file durable (they are in the file already: the
+  // writer flushed them); `done(ok)` runs once they are (on any thread), and only then may the
+  // session acknowledge the ticks they hold. Files in a directory are durable as written: done(true)
+  // at once. An object store uploads the bytes not yet uploaded as the next segment, off the
+  // caller's thread, and keeps them in the local file while it cannot. Called in order of bytes.
+  virtual void Persist(const std::string& id, uint64_t bytes, std::function<void(bool ok)> done) {
+    (void)id;
+    (void)bytes;
+    done(true);
+  }
+  // Brings the durable part of a live recording to LivePath(id) (another server taking the
+  // session over: its owner's segments). False (with *error) when there is none.
+  virtual bool Recover(const std::string& id, std::string* error) = 0;
   // The live file, closed, becomes the finished one. False with *error.
   virtual bool Publish(const std::string& id, std::string* error) = 0;
   virtual void Remove(const std::string& id) = 0;  // both files, whichever exist
