@@ -69,6 +69,13 @@ int main(int argc, char** argv) {
                  "blobs/SHA256. Credentials from the environment, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, "
                  "never on the command line. Checked at start-up. Default: DATA/blobs/")
       ->check(s3_url);
+  app.add_option("--recordings", o.recordings,
+                 "Where the sessions' recordings live: an S3 bucket (the same URL form and credentials as --blobs; "
+                 "it may be the same bucket). A live recording is written to DATA/recordings/ and uploaded in "
+                 "segments as it is written (the agent's ticks are acknowledged once their segment is stored); a "
+                 "finished one is the object recordings/ID.mcap, cached in DATA/recordings/ when read. Default: "
+                 "DATA/recordings/")
+      ->check(s3_url);
   app.add_option("--tokens", o.tokens_file,
                  "Tokens file: 'ROLE TOKEN' or 'ROLE sha256:HEX' per line, # comments (default DATA/tokens)");
   app.add_option("--tls-cert", o.tls_cert, "PEM certificate chain: serve HTTPS and WSS on the same port");

@@ -101,8 +101,8 @@ std::string FindShippedModels() {
   return {};
 }
 
-// --blobs and --recordings: S3 buckets, checked now (an unreachable store, a missing bucket or
-// refused credentials stop the start, naming the problem). Credentials from the environment.
+// --blobs and --recordings: S3 buckets (the same one may serve both), checked now (an unreachable store, a missing
+// bucket or refused credentials stop the start, naming the problem). Credentials from the environment.
 bool OpenObjectStores(const ServerOptions& o, ObjectStores* objects, std::string* error) {
   if (o.blobs.empty() && o.recordings.empty()) return true;
   S3Credentials credentials;
@@ -114,6 +114,17 @@ bool OpenObjectStores(const ServerOptions& o, ObjectStores* objects, std::string
       return false;
     }
     Log(LogLevel::kInfo, "blobs in object storage", {{"blobs", l.Describe() + "/blobs/"}});
+  }
+  if (!o.recordings.empty()) {
+    // The live files and a cache of finished ones stay in DATA/recordings/.
+    S3Location l;
+    const std::string cache = (fs::path(o.data_dir) / "recordings").string();
+    if (!ParseS3Url(o.recordings, &l, error) ||
+        !(objects->recordings = OpenS3RecordingStore(l, credentials, cache, error))) {
+      *error = "--recordings: " + *error;
+      return false;
+    }
+    Log(LogLevel::kInfo, "recordings in object storage", {{"recordings", l.Describe() + "/recordings/"}});
   }
   return true;
 }

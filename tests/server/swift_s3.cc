@@ -10,11 +10,14 @@
 #include <unistd.h>
 
 #include <array>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
+#include <set>
 #include <thread>
 
 #include "child_process.h"
@@ -29,19 +32,27 @@ using std::chrono::seconds;
 constexpr const char* kBin = "/usr/bin/";
 constexpr std::array<const char*, 4> kServers = {"account", "container", "object", "proxy"};
 
-// A port the kernel has just given out and taken back: free, barring a race with another process.
+// A free loopback port outside the kernel's ephemeral range. While the servers are stopped their
+// ports are free, and an ephemeral one could be handed to an outgoing connection (the idms-server's
+// retries to this very port connect to themselves), so that the restarted server cannot bind it.
 uint16_t FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  uint16_t port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  ::close(fd);
-  return port;
+  int low = 32768, high = 60999;
+  std::ifstream("/proc/sys/net/ipv4/ip_local_port_range") >> low >> high;
+  const bool below = low > 12000;
+  std::random_device rd;
+  std::uniform_int_distribution<int> pick(below ? 10000 : high + 1, below ? low - 1 : 65535);
+  for (int attempt = 0; attempt < 200; ++attempt) {
+    const uint16_t port = static_cast<uint16_t>(pick(rd));
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    a.sin_port = htons(port);
+    const bool free = ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+    ::close(fd);
+    if (free) return port;
+  }
+  return 0;
 }
 
 // Whether `dir` takes user extended attributes (the object server keeps its metadata in them).
@@ -106,6 +117,11 @@ SwiftS3::SwiftS3() {
   account_port_ = FreePort();
   container_port_ = FreePort();
   object_port_ = FreePort();
+  const std::set<uint16_t> ports = {proxy_port_, account_port_, container_port_, object_port_};
+  if (ports.size() != 4 || ports.count(0) != 0) {
+    error_ = "no four free loopback ports outside the ephemeral range";
+    return;
+  }
   if (!WriteConfiguration() || !Start()) return;
   // The default bucket (PUT Bucket; Swift's account is created on first use).
   if (!CreateBucket(bucket())) error_ += Log();
@@ -258,6 +274,28 @@ int SwiftS3::Request(const std::string& method, const std::string& path, std::st
   std::error_code ec;
   fs::remove(out, ec);
   return std::atoi(status.c_str());
+}
+
+std::vector<std::string> SwiftS3::Keys(const std::string& prefix) const {
+  // The query as SigV4 signs it (curl 7.88 signs it as given): the prefix percent-encoded.
+  std::string encoded;
+  for (const char ch : prefix) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (std::isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
+      encoded.push_back(ch);
+    } else {
+      char hex[4];
+      std::snprintf(hex, sizeof hex, "%%%02X", c);
+      encoded += hex;
+    }
+  }
+  std::string body;
+  std::vector<std::string> keys;
+  if (Request("GET", "/" + bucket() + "?list-type=2&prefix=" + encoded, &body, "") != 200) return keys;
+  for (size_t at = body.find("<Key>"); at != std::string::npos; at = body.find("<Key>", at + 5)) {
+    keys.push_back(body.substr(at + 5, body.find("</Key>", at) - at - 5));
+  }
+  return keys;
 }
 
 std::string SwiftS3::Log() const {

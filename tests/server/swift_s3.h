@@ -49,6 +49,9 @@ class SwiftS3 {
   int Curl(const std::string& method, const std::string& key, std::string* body = nullptr,
            const std::string& upload_file = "") const;
 
+  // The keys under `prefix` in bucket(), in order (ListObjectsV2 through the curl tool; one page).
+  std::vector<std::string> Keys(const std::string& prefix) const;
+
   std::string Log() const;  // the four servers' logs, each with its name
 
  private:
