@@ -305,5 +305,76 @@ TEST(S3Server, TheStoreStoppedFor10SecondsUnderALiveSessionLosesNoTick) {
   RecordProperty("drained_ms", static_cast<int>(drained_ms));
 }
 
+// A server killed (SIGKILL) under a live session; its agent resumes on another server, which takes
+// the session over once the lease lapses: the recording continues from the dead server's segments
+// (the ticks it acknowledged), the agent resends from there, and the recording holds every tick
+// exactly once. The dead server's data directory is never read.
+TEST(S3Server, ASessionTakenOverAfterItsServerDiedContinuesFromItsSegments) {
+  IDMS_REQUIRE_SWIFT();
+  if (!PgCluster::BinDir()) GTEST_SKIP() << "PostgreSQL is not installed (initdb, pg_ctl, postgres)";
+  PgCluster pg;
+  ASSERT_TRUE(pg.ok()) << pg.error();
+  SetCredentials(SwiftS3::access_key(), SwiftS3::secret_key());
+  const std::string dir = TempDir("s3-takeover");
+  const std::vector<std::string> shared = {
+      "--store", pg.Url(), "--recordings", swift.Url(), "--lease-ttl-ms", "1500", "--agent-idle-timeout-ms", "60000"};
+  auto a = std::make_unique<ServerProcess>(dir + "/a", shared);
+  ASSERT_TRUE(a->ready()) << a->Log();
+  const std::string observer = a->Token("observer"), agent_token = a->Token("agent");
+  std::string id, resume_token;
+  uint64_t acked = 0;
+  {
+    FakeAgent agent(a->port(), agent_token);
+    const auto welcome = agent.Hello("", "", "s3-takeover", "hex_4x5_home");
+    ASSERT_TRUE(welcome && welcome->has_welcome()) << a->Log();
+    id = welcome->welcome().session_id();
+    resume_token = welcome->welcome().resume_token();
+    for (uint64_t t = 0; t < 3000; t += 100) ASSERT_TRUE(agent.SendSamples(t, 100));
+    ASSERT_TRUE(agent.ReadUntil([](const v1::Envelope& e) { return e.has_ack() && e.ack().next_tick() == 3000; }, 10s));
+    acked = 3000;
+    // More ticks that may or may not reach a segment before the kill: the takeover says which.
+    for (uint64_t t = 3000; t < 3500; t += 100) ASSERT_TRUE(agent.SendSamples(t, 100));
+    a->process().Signal(SIGKILL);
+    ASSERT_TRUE(a->process().Wait(10s));
+  }
+  const auto killed = std::chrono::steady_clock::now();
+  std::vector<std::string> b_args = shared;
+  b_args.insert(b_args.end(), {"--tokens", dir + "/a/tokens"});
+  ServerProcess b(dir + "/b", b_args);
+  ASSERT_TRUE(b.ready()) << b.Log();
+  // The agent resumes on B: "later" while A's lease runs, then B takes the session.
+  std::unique_ptr<FakeAgent> agent;
+  std::optional<v1::Envelope> welcome;
+  ASSERT_TRUE(Eventually(
+      [&] {
+        agent = std::make_unique<FakeAgent>(b.port(), agent_token);
+        welcome = agent->Hello(id, resume_token, "s3-takeover", "hex_4x5_home");
+        return welcome && welcome->has_welcome();
+      },
+      20s))
+      << b.Log();
+  const double takeover_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
+  const uint64_t next = welcome->welcome().next_tick();
+  EXPECT_GE(next, acked) << "an acknowledged tick was lost";
+  EXPECT_LE(next, 3500u);
+  for (uint64_t t = next; t < 6000; t += 100)
+    ASSERT_TRUE(agent->SendSamples(t, static_cast<int>(std::min<uint64_t>(100, 6000 - t))));
+  const auto final_ack = agent->End(5999);
+  ASSERT_TRUE(final_ack) << b.Log();
+  EXPECT_EQ(final_ack->ack().next_tick(), 6000u);
+  const std::string path = dir + "/recording.mcap";
+  ASSERT_TRUE(DownloadRecording(b.port(), id, observer, path));
+  const std::vector<uint64_t> ticks = RecordedTicks(path);
+  ASSERT_EQ(ticks.size(), 6000u);
+  for (uint64_t t = 0; t < 6000; ++t) ASSERT_EQ(ticks[t], t) << "every tick exactly once, in order";
+  IndependentReaderAccepts(path, 6000);
+  // Published: one object, no segment of either generation left.
+  ASSERT_TRUE(Eventually([&] { return swift.Keys("recordings/" + id).size() == 1; }, 10s));
+  std::printf(
+      "taken over %.1f s after the kill (lease 1.5 s); the new owner continued from tick %llu (%llu acknowledged "
+      "before the kill)\n",
+      takeover_s, static_cast<unsigned long long>(next), static_cast<unsigned long long>(acked));
+}
+
 }  // namespace
 }  // namespace idms::test
