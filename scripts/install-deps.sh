@@ -17,11 +17,12 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
-  libnats-dev
+  libnats-dev libcurl4-openssl-dev
   nodejs npm
 )
 # The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,
-# postgresql, nats-server and haproxy for the several-servers tests (they start their own, ctest -L scale).
+# postgresql, nats-server, haproxy and OpenStack Swift (its s3api is the tests' S3 server) for the
+# several-servers tests (they start their own, ctest -L scale).
 $build_only || packages+=(
   postgresql
   clang libclang-rt-14-dev clang-format
@@ -31,6 +32,7 @@ $build_only || packages+=(
   docker.io docker-compose debootstrap
   chromium
   nats-server haproxy
+  swift-proxy swift-account swift-container swift-object
 )
 # The viewer's build needs viewer-web's packages; the tests need the others.
 npm_dirs=(viewer-web)

@@ -327,8 +327,10 @@ Admission Admit(ApiContext& ctx, const std::vector<Route>& routes, ApiRequest& r
 
 ApiResponse StoreUnavailableResponse(const ApiRequest& req, const std::string& what) {
   Log(LogLevel::kWarn, "store unavailable", {{"path", req.path}, {"error", what}});
-  ApiResponse res = JsonError(req, http::status::service_unavailable,
-                              "the database is unavailable; retry shortly (live sessions are not affected)");
+  ApiResponse res =
+      JsonError(req, http::status::service_unavailable,
+                "a store (the database or the object storage) is unavailable; retry shortly (live sessions are not "
+                "affected)");
   res.set(http::field::retry_after, "1");
   return res;
 }
@@ -354,7 +356,7 @@ void AnswerStoreFailures(std::vector<Route>* routes, bool stores_remote) {
         try {
           return open(req, refusal);
         } catch (const StoreUnavailable& e) {
-          *refusal = std::string("the database is unavailable; retry shortly: ") + e.what();
+          *refusal = std::string("a store is unavailable; retry shortly: ") + e.what();
           return nullptr;
         }
       };

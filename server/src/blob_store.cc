@@ -143,7 +143,7 @@ std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string
   return store;
 }
 
-bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error) {
+bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error, ObjectStores objects) {
   const std::string db = (fs::path(data_dir) / "idms.db").string();
   std::error_code ec;
   fs::create_directories(data_dir, ec);
@@ -155,10 +155,12 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
   if (!models) return false;
   std::unique_ptr<SessionIndex> sessions = OpenSqliteSessionIndex(db, error);
   if (!sessions) return false;
-  if (!OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error)) return false;
+  const bool own_blobs = objects.blobs == nullptr;
+  if (!OpenStorage(data_dir, std::move(models), std::move(sessions), storage, error, std::move(objects))) return false;
   // A crash between a blob's rename and its row's commit leaves a blob nobody names. Only here,
-  // where this server is the library's only writer: with a shared database another server's
-  // upload may be between the two (its blob stored, its row not yet committed).
+  // where this server is the library's only writer: with a shared database or bucket another
+  // server's upload may be between the two (its blob stored, its row not yet committed).
+  if (!own_blobs) return true;
   for (const std::string& sha : storage->blobs->List()) {
     if (!storage->models->BlobReferenced(sha)) storage->blobs->Remove(sha);
   }
@@ -166,7 +168,7 @@ bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* err
 }
 
 bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
-                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error) {
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error, ObjectStores objects) {
   std::error_code ec;
   fs::create_directories(data_dir, ec);
   if (ec) {
@@ -176,9 +178,11 @@ bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models
   Storage s;
   s.models = std::move(models);
   s.sessions = std::move(sessions);
-  s.blobs = OpenBlobDirectory((fs::path(data_dir) / "blobs").string(), error);
+  s.blobs =
+      objects.blobs ? std::move(objects.blobs) : OpenBlobDirectory((fs::path(data_dir) / "blobs").string(), error);
   if (!s.blobs) return false;
-  s.recordings = OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
+  s.recordings = objects.recordings ? std::move(objects.recordings)
+                                    : OpenRecordingDirectory((fs::path(data_dir) / "recordings").string(), error);
   if (!s.recordings) return false;
   *storage = std::move(s);
   return true;

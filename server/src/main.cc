@@ -10,6 +10,7 @@
 #include "idms/server/log.h"
 #include "idms/server/postgres.h"
 #include "idms/server/server.h"
+#include "s3_client.h"
 
 namespace {
 
@@ -52,12 +53,29 @@ int main(int argc, char** argv) {
   app.add_option("--store", o.store,
                  "Where the model library, session index, browser logins and session leases live: a PostgreSQL "
                  "database shared by several servers, as postgres://USER@HOST:PORT/DB or a libpq connection "
-                 "string (schema migrated at start-up). Default: SQLite in DATA/idms.db, logins in memory. Blobs "
-                 "and recordings stay in --data")
+                 "string (schema migrated at start-up). Default: SQLite in DATA/idms.db, logins in memory")
       ->check([](const std::string& s) {
         return idms::server::IsPostgresConninfo(s) ? std::string()
                                                    : "expected postgres://USER@HOST:PORT/DB or 'host=... dbname=...'";
       });
+  const auto s3_url = [](const std::string& s) {
+    idms::server::S3Location l;
+    std::string error;
+    return idms::server::ParseS3Url(s, &l, &error) ? std::string() : error;
+  };
+  app.add_option("--blobs", o.blobs,
+                 "Where the model library's files live: an S3 bucket several servers share, "
+                 "s3://HOST:PORT/BUCKET[?region=REGION] (region default us-east-1; &tls=1 for HTTPS), as objects "
+                 "blobs/SHA256. Credentials from the environment, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, "
+                 "never on the command line. Checked at start-up. Default: DATA/blobs/")
+      ->check(s3_url);
+  app.add_option("--recordings", o.recordings,
+                 "Where the sessions' recordings live: an S3 bucket (the same URL form and credentials as --blobs; "
+                 "it may be the same bucket). A live recording is written to DATA/recordings/ and uploaded in "
+                 "segments as it is written (the agent's ticks are acknowledged once their segment is stored); a "
+                 "finished one is the object recordings/ID.mcap, cached in DATA/recordings/ when read. Default: "
+                 "DATA/recordings/")
+      ->check(s3_url);
   app.add_option("--tokens", o.tokens_file,
                  "Tokens file: 'ROLE TOKEN' or 'ROLE sha256:HEX' per line, # comments (default DATA/tokens)");
   app.add_option("--tls-cert", o.tls_cert, "PEM certificate chain: serve HTTPS and WSS on the same port");

@@ -97,22 +97,39 @@ void Recorder::Flush(std::function<void(bool)> done) {
 }
 
 void Recorder::Finish(std::function<void(bool)> done) {
-  asio::post(strand_, [self = shared_from_this(), done = std::move(done)] {
+  asio::post(strand_, [self = shared_from_this(), done = std::move(done)]() mutable {
     std::string error;
-    bool ok = false;
-    if (self->open_) {
-      self->open_ = false;
-      if (!self->writer_.Close(&error)) {
-        self->Failed(error);
-      } else if (!self->store_.Publish(self->id_, &error)) {
-        // The finished file stays under its live name; the next start-up repairs and indexes it.
-        self->Failed(error);
-      } else {
-        ok = !self->failed_;
-      }
-      self->CountBytes();
+    if (!self->open_) {
+      if (done) done(false);
+      return;
     }
-    if (done) done(ok);
+    self->open_ = false;
+    if (!self->writer_.Close(&error)) {
+      self->Failed(error);
+      self->CountBytes();
+      if (done) done(false);
+      return;
+    }
+    self->CountBytes();
+    // Every byte of the closed file durable (an object store uploads its last segment), then
+    // published: the agent's final acknowledgement follows `done`.
+    self->store_.Persist(self->id_, self->writer_.mcap().bytes_written(),
+                         [self, done = std::move(done)](bool durable) mutable {
+                           asio::post(self->strand_, [self, done = std::move(done), durable] {
+                             std::string publish_error;
+                             bool ok = false;
+                             if (!durable) {
+                               self->Failed("the finished recording could not be made durable");
+                             } else if (!self->store_.Publish(self->id_, &publish_error)) {
+                               // The finished file stays under its live name; the next start-up
+                               // repairs and indexes it.
+                               self->Failed(publish_error);
+                             } else {
+                               ok = !self->failed_;
+                             }
+                             if (done) done(ok);
+                           });
+                         });
   });
 }
 

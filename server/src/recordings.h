@@ -50,7 +50,9 @@ class Recorder : public std::enable_shared_from_this<Recorder> {
   // make it durable (RecordingStore::Persist); `done(ok)` then runs on the recorder's strand or
   // the store's thread (ok: durable, and the recording is healthy).
   void Flush(std::function<void(bool ok)> done = nullptr);
-  // Closes the file (summary, indexes) and publishes it; `done(ok)` runs on the recorder's strand.
+  // Closes the file (summary, indexes), has the store make all of it durable (Persist) and
+  // publishes it; `done(ok)` runs on the recorder's strand once it is (it waits while an object
+  // store is down).
   void Finish(std::function<void(bool ok)> done = nullptr);
 
  private:

@@ -19,6 +19,7 @@
 #include "idms/server/log.h"
 #include "idms/server/postgres.h"
 #include "render_api.h"
+#include "s3_stores.h"
 #include "server_internal.h"
 #include "sessions.h"
 
@@ -100,6 +101,34 @@ std::string FindShippedModels() {
   return {};
 }
 
+// --blobs and --recordings: S3 buckets (the same one may serve both), checked now (an unreachable store, a missing
+// bucket or refused credentials stop the start, naming the problem). Credentials from the environment.
+bool OpenObjectStores(const ServerOptions& o, ObjectStores* objects, std::string* error) {
+  if (o.blobs.empty() && o.recordings.empty()) return true;
+  S3Credentials credentials;
+  if (!S3CredentialsFromEnvironment(&credentials, error)) return false;
+  if (!o.blobs.empty()) {
+    S3Location l;
+    if (!ParseS3Url(o.blobs, &l, error) || !(objects->blobs = OpenS3BlobStore(l, credentials, error))) {
+      *error = "--blobs: " + *error;
+      return false;
+    }
+    Log(LogLevel::kInfo, "blobs in object storage", {{"blobs", l.Describe() + "/blobs/"}});
+  }
+  if (!o.recordings.empty()) {
+    // The live files and a cache of finished ones stay in DATA/recordings/.
+    S3Location l;
+    const std::string cache = (fs::path(o.data_dir) / "recordings").string();
+    if (!ParseS3Url(o.recordings, &l, error) ||
+        !(objects->recordings = OpenS3RecordingStore(l, credentials, cache, error))) {
+      *error = "--recordings: " + *error;
+      return false;
+    }
+    Log(LogLevel::kInfo, "recordings in object storage", {{"recordings", l.Describe() + "/recordings/"}});
+  }
+  return true;
+}
+
 }  // namespace
 
 bool Server::Impl::LoadTokens(std::string* error) {
@@ -114,19 +143,21 @@ bool Server::Impl::Start(std::string* error) {
   const ServerOptions& o = core.options;
   // Storage (SQLite and files, or PostgreSQL and files with --store), and the shipped library on
   // first start.
+  ObjectStores objects;
+  if (!OpenObjectStores(o, &objects, error)) return false;
   if (o.store.empty()) {
-    if (!OpenStorage(o.data_dir, &storage, error)) return false;
+    if (!OpenStorage(o.data_dir, &storage, error, std::move(objects))) return false;
     logins = std::make_unique<MemoryLoginSessions>(o.login_lifetime);
     leases = MakeMemoryLeaseStore();
   } else {
     PostgresStores pg;
     // One connection per worker and two for the I/O threads' login lookups.
     if (!OpenPostgres(o.store, o.login_lifetime, std::max(1, o.workers) + 2, &pg, error) ||
-        !OpenStorage(o.data_dir, std::move(pg.models), std::move(pg.sessions), &storage, error))
+        !OpenStorage(o.data_dir, std::move(pg.models), std::move(pg.sessions), &storage, error, std::move(objects)))
       return false;
     logins = std::move(pg.logins);
     leases = std::move(pg.leases);
-    Log(LogLevel::kInfo, "models, sessions, logins and leases in PostgreSQL; blobs and recordings in --data",
+    Log(LogLevel::kInfo, "models, sessions, logins and leases in PostgreSQL",
         {{"schema_version", PostgresSchemaVersion()}});
   }
   library = std::make_unique<Library>(storage.blobs.get(), storage.models.get());
@@ -192,7 +223,7 @@ bool Server::Impl::Start(std::string* error) {
   AppendWebSocketRoutes(core, &core.routes);
   AppendSessionRoutes(core, &core.routes);
   AppendRenderRoutes(core, &core.routes);
-  AnswerStoreFailures(&core.routes, !o.store.empty());
+  AnswerStoreFailures(&core.routes, !o.store.empty() || !o.blobs.empty() || !o.recordings.empty());
   core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
   // Bind.
   boost::system::error_code ec;

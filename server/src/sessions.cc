@@ -50,7 +50,17 @@ void SessionHub::RecoverInterrupted() {
     const std::string final_path = recordings_->FinishedPath(row.id);
     std::string error;
     // Repair: read what the crash left (the reader recovers by a scan), write a finished file.
-    if (recordings_->Recover(row.id, &error)) {
+    bool recovered = false;
+    try {
+      recovered = recordings_->Recover(row.id, &error);
+    } catch (const StoreUnavailable& e) {
+      // Its segments cannot be read now: the session stays live in the index, and the agent's
+      // resume (a takeover) or the next start repairs it.
+      Log(LogLevel::kWarn, "session left as live: the object store is unavailable",
+          {{"session", row.id}, {"error", e.what()}});
+      continue;
+    }
+    if (recovered) {
       RecordingReader probe;
       std::map<std::string, std::string> meta;
       if (probe.Open(live, RecordingReaderOptions{}, &error)) meta = probe.session();
@@ -60,10 +70,13 @@ void SessionHub::RecoverInterrupted() {
       CopyStats stats;
       const std::string tmp = final_path + ".repair";
       error.clear();
+      // The repaired file replaces the live one and is published as a finished recording would
+      // be (an object store uploads it and deletes the segments).
       if (writer.Open(tmp, options, &error) && CopyRecording(live, &writer, &stats, &error) && writer.Close(&error)) {
         std::error_code ec;
-        fs::rename(tmp, final_path, ec);
-        fs::remove(live, ec);
+        fs::rename(tmp, live, ec);
+        if (!recordings_->Publish(row.id, &error))
+          Log(LogLevel::kError, "repaired recording not published", {{"session", row.id}, {"error", error}});
         row.samples = stats.samples;
         row.next_tick = stats.any_tick ? stats.last_tick + 1 : 0;
         // The figures of the whole recording: the row may have been stored a second before the
@@ -99,7 +112,7 @@ AgentAdmission SessionHub::OpenForAgent(const v1::Hello& hello, const std::strin
   try {
     return Admit(hello, peer);
   } catch (const StoreUnavailable& e) {
-    return Refused(v1::SessionEvent::KIND_RESUME_LATER, std::string("the database is unavailable; retry: ") + e.what());
+    return Refused(v1::SessionEvent::KIND_RESUME_LATER, std::string("a store is unavailable; retry: ") + e.what());
   }
 }
 
@@ -150,6 +163,9 @@ AgentAdmission SessionHub::Admit(const v1::Hello& hello, const std::string& peer
       if (row.state == "live") {
         TakeOver(&row);
         from = RecordingStart::kContinueLive;
+      } else if (!recordings_->Fetch(row.id, &error)) {
+        // Continued from its finished recording, which may be in the object store only.
+        Log(LogLevel::kWarn, "resuming without the recording so far: " + error, {{"session", row.id}});
       }
       row.state = "live";
       row.recording = recordings_->NameFor(row.id, row.state);
@@ -368,6 +384,15 @@ std::optional<SessionNote> SessionHub::AddNote(const std::string& id, double tim
   return note;
 }
 
+std::string SessionHub::RecordingPath(const SessionRow& row) const {
+  if (row.state != "live") {
+    std::string error;
+    if (!recordings_->Fetch(row.id, &error))
+      Log(LogLevel::kWarn, "recording not fetched", {{"session", row.id}, {"error", error}});
+  }
+  return recordings_->PathFor(row.id, row.state);
+}
+
 bool SessionHub::Delete(const std::string& id, std::string* error) {
   if (FindLive(id)) {
     *error = "session " + id + " is live";
@@ -486,7 +511,7 @@ std::string SessionHub::MetricsText() {
          Counter("idms_session_takeovers_total", "Live sessions this server took over from another.", takeovers) +
          Counter("idms_leases_lost_total", "Live sessions this server gave up on finding its lease lost (fenced).",
                  leases_lost) +
-         RelayMetrics() +
+         RelayMetrics() + recordings_->MetricsText() +
          "# HELP idms_session_samples Device samples received, per live session.\n"
          "# TYPE idms_session_samples gauge\n" +
          samples + "# HELP idms_session_viewers Viewers, per live session.\n# TYPE idms_session_viewers gauge\n" +

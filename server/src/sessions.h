@@ -62,7 +62,9 @@ class SessionHub {
   void Forget(const std::string& id, const LiveSession* session);
   std::vector<SessionRow> List();  // live first (their current figures), then the index
   std::optional<SessionRow> Get(const std::string& id);
-  std::string RecordingPath(const SessionRow& row) const { return recordings_->PathFor(row.id, row.state); }
+  // The file to read a session's recording from; a finished one is fetched from the object store
+  // first when it is not in the cache. May throw StoreUnavailable: a worker's call.
+  std::string RecordingPath(const SessionRow& row) const;
   bool Delete(const std::string& id, std::string* error);  // not while live
   // An admin's correction of who was at the device. False with *error for an unknown session.
   bool SetTrainee(const std::string& id, const std::string& trainee, std::string* error);

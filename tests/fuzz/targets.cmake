@@ -29,3 +29,6 @@ set(IDMS_FUZZ_LIBS_cli_fuzz idms_cli)
 # viewers' notes and commands).
 list(APPEND IDMS_FUZZ_TARGETS relay_fuzz)
 set(IDMS_FUZZ_LIBS_relay_fuzz idms_server)
+# What the S3 client reads: a store's XML replies (listings, errors) and s3:// URLs.
+list(APPEND IDMS_FUZZ_TARGETS s3_parse_fuzz)
+set(IDMS_FUZZ_LIBS_s3_parse_fuzz idms_server_api)

@@ -1,5 +1,5 @@
-// The blob directory and the SQLite files: content addressing, crash leftovers collected at
-// start-up, an older session index brought up to date.
+// The data directory's stores: crash leftovers collected at start-up, an older session index
+// brought up to date.
 #include "idms/server/storage.h"
 
 #include <gtest/gtest.h>
@@ -18,28 +18,8 @@ namespace fs = std::filesystem;
 
 using test::TestModelVersion;
 
-TEST(BlobDirectory, StoresByContentHashAndReadsBack) {
-  const std::string dir = test::TempDir("blobs");
-  std::string error, sha;
-  auto blobs = OpenBlobDirectory(dir, &error);
-  ASSERT_TRUE(blobs) << error;
-  ASSERT_TRUE(blobs->Put("hello", &sha, &error)) << error;
-  EXPECT_EQ(sha, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");  // sha256("hello")
-  std::string back;
-  ASSERT_TRUE(blobs->Get(sha, &back));
-  EXPECT_EQ(back, "hello");
-  EXPECT_TRUE(blobs->Has(sha));
-  EXPECT_EQ(blobs->List(), std::vector<std::string>{sha});
-  // A second Put of the same bytes is the same blob.
-  std::string again;
-  ASSERT_TRUE(blobs->Put("hello", &again, &error));
-  EXPECT_EQ(again, sha);
-  EXPECT_EQ(blobs->List().size(), 1u);
-  blobs->Remove(sha);
-  EXPECT_FALSE(blobs->Has(sha));
-  // Not a hash: never a path.
-  EXPECT_FALSE(blobs->Get("../../etc/passwd", &back));
-}
+// The BlobStore contract (content addressing, idempotent puts, listing) on the directory and on S3
+// is in s3_blob_store_test.cc.
 
 TEST(Storage, StartUpRemovesTemporaryFilesAndBlobsNoRowNames) {
   const std::string dir = test::TempDir("storage-gc");

@@ -94,25 +94,44 @@ std::optional<v1::Envelope> FakeAgent::Read(std::chrono::milliseconds timeout) {
     return e;
   }
   if (closed_) return std::nullopt;
-  beast::get_lowest_layer(ws_).expires_after(timeout);
-  beast::flat_buffer buffer;
-  beast::error_code ec;
-  ws_.read(buffer, ec);
-  beast::get_lowest_layer(ws_).expires_never();
-  if (ec) {
-    if (ec != beast::error::timeout) closed_ = true;
+  // A synchronous read would ignore the stream's expiry and wait forever for a frame that never
+  // comes; an asynchronous one runs for `timeout` at most and stays pending after it.
+  if (!reading_) {
+    reading_ = true;
+    read_done_ = false;
+    read_buffer_.clear();
+    ws_.async_read(read_buffer_, [this](beast::error_code ec, size_t) {
+      read_ec_ = ec;
+      read_done_ = true;
+      reading_ = false;
+    });
+  }
+  io_.restart();
+  io_.run_for(timeout);
+  if (!read_done_) return std::nullopt;
+  read_done_ = false;
+  if (read_ec_) {
+    closed_ = true;
     return std::nullopt;
   }
   std::vector<v1::Envelope> frames;
   std::string error;
-  if (!ParseFrames(beast::buffers_to_string(buffer.data()), &frames, &error) || frames.empty()) return std::nullopt;
+  if (!ParseFrames(beast::buffers_to_string(read_buffer_.data()), &frames, &error) || frames.empty())
+    return std::nullopt;
   unread_.insert(unread_.end(), std::make_move_iterator(frames.begin() + 1), std::make_move_iterator(frames.end()));
   return std::move(frames.front());
 }
 
 void FakeAgent::Close() {
   beast::error_code ec;
-  ws_.close(websocket::close_code::normal, ec);
+  if (reading_) {
+    // The pending read takes the server's close frame.
+    ws_.async_close(websocket::close_code::normal, [](beast::error_code) {});
+    io_.restart();
+    io_.run_for(std::chrono::seconds(5));
+  } else {
+    ws_.close(websocket::close_code::normal, ec);
+  }
   closed_ = true;
 }
 

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/verb.hpp>
 #include <boost/beast/websocket/stream.hpp>
@@ -62,6 +63,11 @@ class FakeAgent {
   boost::beast::websocket::stream<boost::beast::tcp_stream> ws_{io_};
   bool connected_ = false, closed_ = false;
   std::deque<v1::Envelope> unread_;  // the rest of a Frames message (a live session's viewers get them)
+  // A read runs asynchronously and io_ is run until it completes or the caller's timeout passes; a
+  // read that timed out stays pending for the next Read (the stream itself never times out).
+  bool reading_ = false, read_done_ = false;
+  boost::beast::error_code read_ec_;
+  boost::beast::flat_buffer read_buffer_;
 };
 
 // A TCP proxy on a free loopback port to `target_port`, pumping bytes both ways on its own

@@ -15,6 +15,10 @@ struct ServerOptions {
   // Empty: the model library and session index in DATA/idms.db (SQLite), logins and leases in
   // memory. A postgres:// URL or libpq connection string: all four in that database.
   std::string store;
+  // Empty: the library's blobs in DATA/blobs/, the recordings in DATA/recordings/. An
+  // s3://HOST:PORT/BUCKET[?region=R] URL: in that bucket (credentials from AWS_ACCESS_KEY_ID and
+  // AWS_SECRET_ACCESS_KEY), under blobs/ and recordings/ (the same bucket may serve both).
+  std::string blobs, recordings;
   std::string tokens_file;                   // empty: DATA/tokens, created with one token per role
   std::string tls_cert, tls_key;             // both or neither: TLS on the same port
   std::vector<std::string> allowed_origins;  // besides the server's own, e.g. "https://lab.example"

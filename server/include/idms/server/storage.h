@@ -178,9 +178,21 @@ class RecordingStore {
   // Brings the durable part of a live recording to LivePath(id) (another server taking the
   // session over: its owner's segments). False (with *error) when there is none.
   virtual bool Recover(const std::string& id, std::string* error) = 0;
-  // The live file, closed, becomes the finished one. False with *error.
+  // The live file, closed, becomes the finished one. False with *error. An object store uploads
+  // it off the caller's thread (Recorder::Finish has made every byte durable with Persist first).
   virtual bool Publish(const std::string& id, std::string* error) = 0;
-  virtual void Remove(const std::string& id) = 0;  // both files, whichever exist
+  // Brings a finished recording to FinishedPath(id) before it is read: files in a directory are
+  // there already (true; a missing one is the reader's error); an object store downloads it into
+  // its cache (a recording another server made, or one its bounded cache let go). False with
+  // *error when there is none. May throw StoreUnavailable; call it from a worker.
+  virtual bool Fetch(const std::string& id, std::string* error) {
+    (void)id;
+    (void)error;
+    return true;
+  }
+  virtual void Remove(const std::string& id) = 0;  // both files, whichever exist, and any copy in a store
+  // Prometheus lines about the store itself (an object store's uploads); empty for files.
+  virtual std::string MetricsText() const { return ""; }
 };
 // Recordings as files in `dir` (created): ID.live.mcap while live, ID.mcap once finished.
 std::unique_ptr<RecordingStore> OpenRecordingDirectory(const std::string& dir, std::string* error);
@@ -194,13 +206,21 @@ struct Storage {
   std::unique_ptr<SessionIndex> sessions;
   std::unique_ptr<RecordingStore> recordings;
 };
-bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error);
+// Object storage in place of DATA/blobs/ and DATA/recordings/ (--blobs, --recordings s3://...): a
+// member left null stays in the data directory.
+struct ObjectStores {
+  std::unique_ptr<BlobStore> blobs;
+  std::unique_ptr<RecordingStore> recordings;
+};
+// Blobs no row names are removed only from DATA/blobs/: a bucket may be shared by several servers.
+bool OpenStorage(const std::string& data_dir, Storage* storage, std::string* error, ObjectStores objects = {});
 // The same with the model library and the session index given (PostgreSQL's, with --store):
-// only the blobs and recordings are opened under `data_dir`, and no idms.db is made. Blobs no row
-// names are kept: another server sharing the database (and, later, the blobs) may be between
-// storing an upload's blob and committing its row.
+// only the blobs and recordings are opened under `data_dir` (unless given), and no idms.db is
+// made. Blobs no row names are kept: another server sharing the database and the blobs may be
+// between storing an upload's blob and committing its row.
 bool OpenStorage(const std::string& data_dir, std::unique_ptr<ModelStore> models,
-                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error);
+                 std::unique_ptr<SessionIndex> sessions, Storage* storage, std::string* error,
+                 ObjectStores objects = {});
 
 // The directory store alone (tests, tools).
 std::unique_ptr<BlobStore> OpenBlobDirectory(const std::string& dir, std::string* error);
