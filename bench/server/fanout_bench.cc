@@ -191,8 +191,12 @@ int RunLoad(const std::vector<uint16_t>& ports, uint16_t owner, const std::strin
   const int probe_every = std::max(1, n / 32);
   int connected = 0;
   for (int i = 0; i < n; ++i) {
+    // Round-robin over the servers; the probes too (every probe_every-th round), so that each
+    // server has its share of them.
+    const size_t round = static_cast<size_t>(i) / ports.size();
     const uint16_t port = ports[static_cast<size_t>(i) % ports.size()];
-    viewers.push_back(std::make_shared<Viewer>(io, tally, i % probe_every == 0, port != owner));
+    viewers.push_back(
+        std::make_shared<Viewer>(io, tally, round % static_cast<size_t>(probe_every) == 0, port != owner));
     connected += viewers.back()->Start(port, session, token) ? 1 : 0;
   }
   // Pings every 5 s (the server drops a viewer silent for 15 s).
