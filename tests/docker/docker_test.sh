@@ -102,12 +102,13 @@ uid=$("${compose[@]}" exec -T server id -u)
 observer=$("${compose[@]}" exec -T server awk '$1 == "observer" {print $2}' /var/lib/idms/tokens)
 [ -n "$observer" ] || fail "no observer token in the server's data volume"
 
-ended_id() {
-  curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep '"state":"ended"' |
+# STATE: the id of the newest session in that state at $url, or nothing.
+session_in() {
+  curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep "\"state\":\"$1\"" |
     sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1
 }
-eventually 120 test -n "$(ended_id)" || fail "no recorded session"
-id=$(ended_id)
+eventually 120 test -n "$(session_in ended)" || fail "no recorded session"
+id=$(session_in ended)
 curl -fsS -H "Authorization: Bearer $observer" -o "$work/session.mcap" "$url/api/sessions/$id/recording.mcap"
 node "$src/tests/mcap-js/check_recording.mjs" "$work/session.mcap" --expect-ticks 3000 ||
   fail "the recording of session $id is not whole"
@@ -150,12 +151,8 @@ eventually 60 curl -fsS "$url/api/health" || fail "no /api/health through HAProx
 echo "scale: 3 servers healthy, HAProxy answering, $(( $(date +%s) - start )) s after up"
 observer=$("${compose[@]}" exec -T server-1 awk '$1 == "observer" {print $2}' /var/lib/idms/tokens)
 [ -n "$observer" ] || fail "no observer token on the shared volume"
-live_id() {
-  curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep '"state":"live"' |
-    sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1
-}
-eventually 120 test -n "$(live_id)" || fail "no live session (the agent through HAProxy)"
-id=$(live_id)
+eventually 120 test -n "$(session_in live)" || fail "no live session (the agent through HAProxy)"
+id=$(session_in live)
 # Its owner: the server where it is live.
 owner=""
 live_on() { curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$1/metrics" | grep -qx 'idms_live_sessions 1'; }

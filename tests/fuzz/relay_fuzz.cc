@@ -77,30 +77,12 @@ struct World : ServerWorld {
   }
 };
 
-struct FuzzConnection {
-  std::shared_ptr<FuzzPeer> peer;
-  std::shared_ptr<server::WsEndpoint> endpoint;
-  void Close() {
-    if (endpoint) endpoint->OnClose();
-    endpoint.reset();
-  }
-};
-
-FuzzConnection Open(World& world, const std::string& pattern, std::vector<std::string> params, server::Role role) {
-  FuzzConnection c;
-  c.endpoint = world.Open(pattern, std::move(params), role);
-  if (!c.endpoint) return c;
-  c.peer = std::make_shared<FuzzPeer>(pattern);
-  c.endpoint->OnOpen(c.peer);
-  return c;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static World* world = new World();
   // A session owned here: an agent's Hello.
-  FuzzConnection agent = Open(*world, "/ws/agent", {}, server::Role::kAgent);
+  FuzzConnection agent = OpenConnection(*world, "/ws/agent", {}, server::Role::kAgent);
   v1::Envelope hello;
   hello.mutable_hello()->set_protocol_version(kProtocolVersion);
   hello.mutable_hello()->set_role(v1::ROLE_AGENT);
@@ -110,7 +92,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string owned = agent.peer->welcome_session;
   // A session owned elsewhere, watched here.
   const std::string relayed = "elsewhere";
-  FuzzConnection viewer = Open(*world, "/ws/session/{id}", {relayed}, server::Role::kAdmin);
+  FuzzConnection viewer = OpenConnection(*world, "/ws/session/{id}", {relayed}, server::Role::kAdmin);
   world->RunPosted();
   size_t at = 0;
   while (at + 3 <= size) {

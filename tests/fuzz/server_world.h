@@ -99,6 +99,27 @@ struct ServerWorld {
   }
 };
 
+// A WebSocket connection on a route: its endpoint and the peer that checks what it is sent.
+struct FuzzConnection {
+  std::shared_ptr<FuzzPeer> peer;
+  std::shared_ptr<server::WsEndpoint> endpoint;
+  void Close() {
+    if (endpoint) endpoint->OnClose();
+    endpoint.reset();
+  }
+};
+
+// Opens `pattern` as an admitted upgrade would (no endpoint: refused).
+inline FuzzConnection OpenConnection(ServerWorld& world, const std::string& pattern, std::vector<std::string> params,
+                                     server::Role role) {
+  FuzzConnection c;
+  c.endpoint = world.Open(pattern, std::move(params), role);
+  if (!c.endpoint) return c;
+  c.peer = std::make_shared<FuzzPeer>(pattern);
+  c.endpoint->OnOpen(c.peer);
+  return c;
+}
+
 inline std::string Frame(const v1::Envelope& e) {
   std::string bytes;
   SerializeEnvelope(e, &bytes);

@@ -32,29 +32,11 @@ struct World : ServerWorld {
   }
 };
 
-struct FuzzConnection {
-  std::shared_ptr<FuzzPeer> peer;
-  std::shared_ptr<server::WsEndpoint> endpoint;
-  void Close() {
-    if (endpoint) endpoint->OnClose();
-    endpoint.reset();
-  }
-};
-
-FuzzConnection Open(World& world, const std::string& pattern, std::vector<std::string> params, server::Role role) {
-  FuzzConnection c;
-  c.endpoint = world.Open(pattern, std::move(params), role);
-  if (!c.endpoint) return c;
-  c.peer = std::make_shared<FuzzPeer>(pattern);
-  c.endpoint->OnOpen(c.peer);
-  return c;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static World* world = new World();
-  FuzzConnection agent = Open(*world, "/ws/agent", {}, server::Role::kAgent), viewer;
+  FuzzConnection agent = OpenConnection(*world, "/ws/agent", {}, server::Role::kAgent), viewer;
   std::vector<FuzzConnection> lingering;  // replaced agent connections not yet closed
   size_t at = 0;
   while (at + 3 <= size) {
@@ -64,11 +46,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     at += 3 + length;
     // A viewer joins the agent's session once it has one.
     if ((to & 1) && !viewer.endpoint && agent.peer && !agent.peer->welcome_session.empty()) {
-      viewer = Open(*world, "/ws/session/{id}", {agent.peer->welcome_session}, server::Role::kAdmin);
+      viewer = OpenConnection(*world, "/ws/session/{id}", {agent.peer->welcome_session}, server::Role::kAdmin);
     }
     // The agent resumes on a new connection, its old one closed or lingering.
     if ((to & 4) && agent.peer && !agent.peer->welcome_session.empty()) {
-      FuzzConnection resumed = Open(*world, "/ws/agent", {}, server::Role::kAgent);
+      FuzzConnection resumed = OpenConnection(*world, "/ws/agent", {}, server::Role::kAgent);
       v1::Envelope hello;
       hello.mutable_hello()->set_protocol_version(kProtocolVersion);
       hello.mutable_hello()->set_role(v1::ROLE_AGENT);
