@@ -6,9 +6,13 @@
 // the agent's sample batch (DeviceSamples.sent_unix_ns, stamped just after its last tick) to a
 // viewer's receipt (p50 / p99 over the probe viewers, which decode whole messages; the others
 // only walk the tags to count mesh frames), and the deltas the server skipped for slow viewers.
-// Prints a table; never fails on time.
+// With --servers K (K > 1), K servers on one NATS bus (a nats-server the bench starts): the agent
+// on the first, the viewers spread evenly over all K (or, --viewers-on relays, over the K - 1 that
+// relay it); the latency is then also given for the relayed viewers alone: what a second server
+// adds. Prints a table; never fails on time.
 //   idms-fanout-bench [--viewers 1,10,100,200] [--seconds 10] [--model hex_4x5_home]
-//                     [--device scripted:palpate] [--pin] [--csv FILE]
+//                     [--device scripted:palpate] [--pin] [--csv FILE] [--servers K]
+//                     [--viewers-on all|relays]
 #include <sched.h>
 #include <signal.h>
 #include <unistd.h>
@@ -50,7 +54,7 @@ uint64_t UnixNs() {
 // What the viewers saw in the window (one thread: no locks).
 struct Tally {
   bool counting = false;
-  std::vector<double> latency_ms;
+  std::vector<double> latency_ms, relayed_latency_ms;  // all probes; those on a relaying server
   uint64_t bytes = 0, probe_bytes = 0, probe_messages = 0;
   int probes = 0;
   std::vector<char> scratch = std::vector<char>(size_t{1} << 16);  // what the counting viewers read into
@@ -62,7 +66,8 @@ struct Tally {
 // ping through Beast every few seconds so the server does not drop them as silent.
 class Viewer : public std::enable_shared_from_this<Viewer> {
  public:
-  Viewer(asio::io_context& io, Tally& tally, bool probe) : ws_(io), tally_(tally), probe_(probe) {}
+  Viewer(asio::io_context& io, Tally& tally, bool probe, bool relayed)
+      : ws_(io), tally_(tally), probe_(probe), relayed_(relayed) {}
   bool Start(uint16_t port, const std::string& session, const std::string& token) {
     ws_.set_option(websocket::stream_base::decorator(
         [token](websocket::request_type& req) { req.set("Authorization", "Bearer " + token); }));
@@ -95,8 +100,10 @@ class Viewer : public std::enable_shared_from_this<Viewer> {
         for (const auto& e : frames) {
           if (e.has_mesh_keyframe() || e.has_mesh_delta()) ++self->mesh_frames;
           if (e.has_device_samples() && e.device_samples().sent_unix_ns() > 0) {
-            t.latency_ms.push_back((static_cast<double>(now) - static_cast<double>(e.device_samples().sent_unix_ns())) *
-                                   1e-6);
+            const double ms =
+                (static_cast<double>(now) - static_cast<double>(e.device_samples().sent_unix_ns())) * 1e-6;
+            t.latency_ms.push_back(ms);
+            if (self->relayed_) t.relayed_latency_ms.push_back(ms);
           }
         }
       }
@@ -115,7 +122,7 @@ class Viewer : public std::enable_shared_from_this<Viewer> {
   websocket::stream<beast::tcp_stream> ws_;
   beast::flat_buffer buffer_;
   Tally& tally_;
-  bool probe_;
+  bool probe_, relayed_;
   bool open_ = true;
 };
 
@@ -168,7 +175,9 @@ double SelfCpuSeconds() { return CpuSeconds(static_cast<int>(getpid())); }
 
 // The viewers, in this process (--load): one line "counting" once they are connected and settled,
 // then one JSON line with what they saw in the window.
-int RunLoad(uint16_t port, const std::string& session, const std::string& token, int n, double seconds, int cpu) {
+// `ports`: the servers the viewers are spread over, the session's owner first when it is one of them.
+int RunLoad(const std::vector<uint16_t>& ports, uint16_t owner, const std::string& session, const std::string& token,
+            int n, double seconds, int cpu) {
   if (cpu >= 0) {
     cpu_set_t set;
     CPU_ZERO(&set);
@@ -182,7 +191,8 @@ int RunLoad(uint16_t port, const std::string& session, const std::string& token,
   const int probe_every = std::max(1, n / 32);
   int connected = 0;
   for (int i = 0; i < n; ++i) {
-    viewers.push_back(std::make_shared<Viewer>(io, tally, i % probe_every == 0));
+    const uint16_t port = ports[static_cast<size_t>(i) % ports.size()];
+    viewers.push_back(std::make_shared<Viewer>(io, tally, i % probe_every == 0, port != owner));
     connected += viewers.back()->Start(port, session, token) ? 1 : 0;
   }
   // Pings every 5 s (the server drops a viewer silent for 15 s).
@@ -222,6 +232,8 @@ int RunLoad(uint16_t port, const std::string& session, const std::string& token,
       {"mesh_fps_min", Percentile(fps, 0)},
       {"latency_p50_ms", Percentile(tally.latency_ms, 0.5)},
       {"latency_p99_ms", Percentile(tally.latency_ms, 0.99)},
+      {"relayed_p50_ms", Percentile(tally.relayed_latency_ms, 0.5)},
+      {"relayed_p99_ms", Percentile(tally.relayed_latency_ms, 0.99)},
       {"load_cpu_percent", (SelfCpuSeconds() - cpu0) / wall * 100}};
   std::printf("%s\n", out.dump().c_str());
   std::fflush(stdout);
@@ -234,7 +246,10 @@ int main(int argc, char** argv) {
   std::string viewers_list = "1,10,100,200", model = "hex_4x5_home", device = "scripted:palpate", csv;
   double seconds = 10;
   bool pin = false;
-  uint16_t load_port = 0;
+  int servers_n = 1;
+  std::string viewers_on = "all";
+  std::string load_ports;
+  uint16_t load_owner = 0;
   std::string load_session, load_token;
   int load_viewers = 0, load_cpu = -1;
   CLI::App app{"idms-server fan-out: one agent at 1 kHz, N viewers on loopback in a separate process"};
@@ -245,14 +260,29 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--pin", pin, "The server on CPU 0 with one I/O thread; the agent and the viewers on CPU 1");
   app.add_option("--csv", csv, "Also write the table as CSV");
+  app.add_option("--servers", servers_n, "Servers on one NATS bus (the agent on the first)")
+      ->check(CLI::Range(1, 8))
+      ->capture_default_str();
+  app.add_option("--viewers-on", viewers_on, "With --servers > 1: the viewers on all servers, or on the relays alone")
+      ->check(CLI::IsMember({"all", "relays"}))
+      ->capture_default_str();
   // The viewers' process (started by the bench itself).
-  app.add_option("--load-port", load_port)->group("");
+  app.add_option("--load-ports", load_ports)->group("");
+  app.add_option("--load-owner", load_owner)->group("");
   app.add_option("--load-session", load_session)->group("");
   app.add_option("--load-token", load_token)->group("");
   app.add_option("--load-viewers", load_viewers)->group("");
   app.add_option("--load-cpu", load_cpu)->group("");
   CLI11_PARSE(app, argc, argv);
-  if (load_port != 0) return RunLoad(load_port, load_session, load_token, load_viewers, seconds, load_cpu);
+  if (!load_ports.empty()) {
+    std::vector<uint16_t> ports;
+    for (std::stringstream ss(load_ports); ss.good();) {
+      std::string item;
+      std::getline(ss, item, ',');
+      if (!item.empty()) ports.push_back(static_cast<uint16_t>(std::stoi(item)));
+    }
+    return RunLoad(ports, load_owner, load_session, load_token, load_viewers, seconds, load_cpu);
+  }
   std::vector<int> counts;
   for (std::stringstream ss(viewers_list); ss.good();) {
     std::string item;
@@ -263,9 +293,14 @@ int main(int argc, char** argv) {
       "idms-server fan-out: one agent (%s, %s at 1 kHz, 60 Hz mesh), %.0f s per row, viewers in their own process, "
       "%s\n",
       model.c_str(), device.c_str(), seconds,
-      pin ? "server pinned to CPU 0 (1 I/O thread), agent and viewers to CPU 1" : "nothing pinned");
-  std::printf("%8s %9s %10s %11s %10s %9s %9s %9s %9s %8s %8s %8s\n", "viewers", "server %", "MB/viewer", "kB/s/viewer",
-              "msg/s/vwr", "mesh fps", "p50 ms", "p99 ms", "skipped", "resyncs", "load %", "agent %");
+      pin ? "servers pinned to CPU 0 (1 I/O thread each), agent and viewers to CPU 1" : "nothing pinned");
+  if (servers_n > 1) {
+    std::printf("%d servers on one NATS bus, the agent on the first, viewers on %s; server %% is all of them\n",
+                servers_n, viewers_on == "all" ? "all of them" : "the relays alone");
+  }
+  std::printf("%8s %9s %10s %11s %10s %9s %9s %9s %9s %8s %8s %8s %9s %9s\n", "viewers", "server %", "MB/viewer",
+              "kB/s/viewer", "msg/s/vwr", "mesh fps", "p50 ms", "p99 ms", "skipped", "resyncs", "load %", "agent %",
+              "relay p50", "relay p99");
   std::ofstream out;
   if (!csv.empty()) {
     out.open(csv);
@@ -275,30 +310,61 @@ int main(int argc, char** argv) {
   const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
   for (int n : counts) {
     const std::string dir = idms::test::TempDir("fanout-" + std::to_string(n));
-    std::vector<std::string> server_args = {"--listen",
-                                            "127.0.0.1:0",
-                                            "--data",
-                                            dir + "/data",
-                                            "--max-connections",
-                                            std::to_string(n + 64),
-                                            "--max-connections-per-address",
-                                            std::to_string(n + 64)};
+    // With several servers, the bus first.
+    std::unique_ptr<idms::test::ChildProcess> nats;
+    std::string bus;
+    if (servers_n > 1) {
+      nats = std::make_unique<idms::test::ChildProcess>(
+          "/usr/sbin/nats-server", std::vector<std::string>{"-a", "127.0.0.1", "-p", "-1"}, dir + "/nats.log");
+      const std::string marker = "Listening for client connections on 127.0.0.1:";
+      for (int i = 0; i < 1000 && bus.empty(); ++i) {
+        const std::string log = idms::test::ReadText(dir + "/nats.log");
+        if (const size_t at = log.find(marker); at != std::string::npos) {
+          bus = "nats://127.0.0.1:" + std::to_string(std::stoi(log.substr(at + marker.size())));
+        } else {
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+      }
+      if (bus.empty()) return std::fprintf(stderr, "nats-server did not start\n"), 1;
+    }
     std::string server_bin = IDMS_SERVER_BIN, agent_bin = IDMS_AGENT_BIN;
     std::vector<std::string> agent_prefix;
     if (pin) {
-      server_args.insert(server_args.begin(), {"-c", "0", server_bin});
-      server_args.insert(server_args.end(), {"--threads", "1", "--workers", "1"});
-      server_bin = "/usr/bin/taskset";
       agent_prefix = {"-c", "1", agent_bin};
       agent_bin = "/usr/bin/taskset";
     }
-    idms::test::ChildProcess server(server_bin, server_args, dir + "/server.log", true);
-    const auto line = server.ReadLine(std::chrono::seconds(60));
-    if (!line) return std::fprintf(stderr, "server did not start: %s\n", server.Log().c_str()), 1;
-    const uint16_t port = static_cast<uint16_t>(std::stoi(line->substr(line->rfind(':') + 1)));
+    std::vector<std::unique_ptr<idms::test::ChildProcess>> servers;
+    std::vector<uint16_t> ports;
+    for (int k = 0; k < servers_n; ++k) {
+      std::vector<std::string> args = {"--listen",
+                                       "127.0.0.1:0",
+                                       "--data",
+                                       dir + "/data" + std::to_string(k),
+                                       "--max-connections",
+                                       std::to_string(n + 64),
+                                       "--max-connections-per-address",
+                                       std::to_string(n + 64)};
+      if (servers_n > 1) {
+        args.insert(args.end(), {"--bus", bus, "--node", "s" + std::to_string(k)});
+        if (k > 0) args.insert(args.end(), {"--tokens", dir + "/data0/tokens"});
+      }
+      std::string bin = server_bin;
+      if (pin) {
+        args.insert(args.begin(), {"-c", "0", bin});
+        args.insert(args.end(), {"--threads", "1", "--workers", "1"});
+        bin = "/usr/bin/taskset";
+      }
+      servers.push_back(
+          std::make_unique<idms::test::ChildProcess>(bin, args, dir + "/server" + std::to_string(k) + ".log", true));
+      const auto line = servers.back()->ReadLine(std::chrono::seconds(60));
+      if (!line) return std::fprintf(stderr, "server did not start: %s\n", servers.back()->Log().c_str()), 1;
+      ports.push_back(static_cast<uint16_t>(std::stoi(line->substr(line->rfind(':') + 1))));
+    }
+    idms::test::ChildProcess& server = *servers[0];
+    const uint16_t port = ports[0];
     std::string agent_token, observer_token;
     {
-      std::istringstream t(idms::test::ReadText(dir + "/data/tokens"));
+      std::istringstream t(idms::test::ReadText(dir + "/data0/tokens"));
       std::string role, token;
       while (t >> role) {
         if (role[0] == '#') {
@@ -324,36 +390,51 @@ int main(int argc, char** argv) {
     }
     if (session.empty()) return std::fprintf(stderr, "no session\n"), 1;
     const double rss0 = RssBytes(server.pid());
-    idms::test::ChildProcess load(
-        self,
-        {"--load-port", std::to_string(port), "--load-session", session, "--load-token", observer_token,
-         "--load-viewers", std::to_string(n), "--load-cpu", pin ? "1" : "-1", "--seconds", std::to_string(seconds)},
-        dir + "/load.log", true);
+    // The servers the viewers go to.
+    std::string load_list;
+    for (size_t k = servers_n > 1 && viewers_on == "relays" ? 1 : 0; k < ports.size(); ++k) {
+      load_list += (load_list.empty() ? "" : ",") + std::to_string(ports[k]);
+    }
+    const auto all_cpu = [&] {
+      double sum = 0;
+      for (const auto& s : servers) sum += CpuSeconds(s->pid());
+      return sum;
+    };
+    idms::test::ChildProcess load(self,
+                                  {"--load-ports", load_list, "--load-owner", std::to_string(port), "--load-session",
+                                   session, "--load-token", observer_token, "--load-viewers", std::to_string(n),
+                                   "--load-cpu", pin ? "1" : "-1", "--seconds", std::to_string(seconds)},
+                                  dir + "/load.log", true);
     const auto counting = load.ReadLine(std::chrono::seconds(120));
     if (!counting) return std::fprintf(stderr, "the viewers did not start: %s\n", load.Log().c_str()), 1;
-    const std::string m0 = HttpGet(port, "/metrics", observer_token);
-    const double cpu0 = CpuSeconds(server.pid()), agent_cpu0 = CpuSeconds(agent.pid());
+    // A counter summed over the servers.
+    const auto total = [&](const std::string& name) {
+      double sum = 0;
+      for (const uint16_t p : ports) sum += MetricValue(HttpGet(p, "/metrics", observer_token), name);
+      return sum;
+    };
+    const double skipped0 = total("idms_viewer_deltas_skipped_total"), resyncs0 = total("idms_viewer_resyncs_total");
+    const double cpu0 = all_cpu(), agent_cpu0 = CpuSeconds(agent.pid());
     const auto t0 = Clock::now();
     const auto result = load.ReadLine(std::chrono::seconds(static_cast<int>(seconds) + 120));
     const double wall = std::chrono::duration<double>(Clock::now() - t0).count();
-    const double cpu = (CpuSeconds(server.pid()) - cpu0) / wall * 100;
+    const double cpu = (all_cpu() - cpu0) / wall * 100;
     const double agent_cpu = (CpuSeconds(agent.pid()) - agent_cpu0) / wall * 100;
     const double rss1 = RssBytes(server.pid());
-    const std::string m1 = HttpGet(port, "/metrics", observer_token);
     if (!result) return std::fprintf(stderr, "the viewers did not report: %s\n", load.Log().c_str()), 1;
     const auto r = nlohmann::json::parse(*result);
-    const double skipped =
-        MetricValue(m1, "idms_viewer_deltas_skipped_total") - MetricValue(m0, "idms_viewer_deltas_skipped_total");
-    const double resyncs = MetricValue(m1, "idms_viewer_resyncs_total") - MetricValue(m0, "idms_viewer_resyncs_total");
+    const double skipped = total("idms_viewer_deltas_skipped_total") - skipped0;
+    const double resyncs = total("idms_viewer_resyncs_total") - resyncs0;
     const double mb_per_viewer = (rss1 - rss0) / 1e6 / n;
     const double kbps =
         r["probes"].get<int>() == n ? r["probe_kbytes_per_s"].get<double>() : r["kbytes_per_s"].get<double>();
     const double mps = r["probe_messages_per_s"].get<double>();
     if (r["connected"].get<int>() != n)
       std::printf("(only %d of %d viewers connected)\n", r["connected"].get<int>(), n);
-    std::printf("%8d %9.1f %10.3f %11.1f %10.1f %9.1f %9.2f %9.2f %9.0f %8.0f %8.1f %8.1f\n", n, cpu, mb_per_viewer,
-                kbps, mps, r["mesh_fps_median"].get<double>(), r["latency_p50_ms"].get<double>(),
-                r["latency_p99_ms"].get<double>(), skipped, resyncs, r["load_cpu_percent"].get<double>(), agent_cpu);
+    std::printf("%8d %9.1f %10.3f %11.1f %10.1f %9.1f %9.2f %9.2f %9.0f %8.0f %8.1f %8.1f %9.2f %9.2f\n", n, cpu,
+                mb_per_viewer, kbps, mps, r["mesh_fps_median"].get<double>(), r["latency_p50_ms"].get<double>(),
+                r["latency_p99_ms"].get<double>(), skipped, resyncs, r["load_cpu_percent"].get<double>(), agent_cpu,
+                r["relayed_p50_ms"].get<double>(), r["relayed_p99_ms"].get<double>());
     std::fflush(stdout);
     if (out) {
       out << n << "," << cpu << "," << mb_per_viewer << "," << kbps << "," << mps << ","
@@ -364,8 +445,8 @@ int main(int argc, char** argv) {
     load.Wait(std::chrono::seconds(30));
     agent.Signal(SIGTERM);
     agent.Wait(std::chrono::seconds(30));
-    server.Signal(SIGTERM);
-    server.Wait(std::chrono::seconds(30));
+    for (const auto& s : servers) s->Signal(SIGTERM);
+    for (const auto& s : servers) s->Wait(std::chrono::seconds(30));
   }
   return 0;
 }

@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <deque>
+#include <optional>
 #include <random>
 #include <thread>
 
@@ -292,7 +293,10 @@ struct Uplink::Impl final : ConnectionHandler {
         envelope.has_session_event() ? envelope.session_event().kind() : v1::SessionEvent::KIND_UNSPECIFIED;
     if (refusal == v1::SessionEvent::KIND_RESUME_LATER) {
       // The session is being closed on the server (its recording finishing): ask again shortly.
-      return Retry(asio::error::try_again, "resume (" + envelope.session_event().message() + ")");
+      // When the server says when to ask again (another server's lease lapsing), then.
+      const uint32_t after_ms = envelope.session_event().retry_after_ms();
+      return Retry(asio::error::try_again, "resume (" + envelope.session_event().message() + ")",
+                   after_ms > 0 ? std::optional<double>(std::min(1e-3 * after_ms, opt.backoff_max_s)) : std::nullopt);
     }
     if (refusal == v1::SessionEvent::KIND_ENDED) {
       // The session is complete. After our ENDED that is the final word we were waiting for (its
@@ -393,16 +397,24 @@ struct Uplink::Impl final : ConnectionHandler {
 
   // Drops the connection and schedules the next attempt after the backoff; a connection that
   // never got its Welcome counts as a connect failure.
-  void Retry(const beast::error_code& ec, const std::string& what) {
+  // `after_s`: the server named the time (the backoff starts again from its first step after it).
+  void Retry(const beast::error_code& ec, const std::string& what, std::optional<double> after_s = std::nullopt) {
     const bool was_online = phase == Phase::kOnline || phase == Phase::kClosing;
     if (phase == Phase::kConnecting || phase == Phase::kHello) ++stats.connect_failures;
     DropConnection();
     phase = Phase::kIdle;
+    const double wait_s = after_s.value_or(backoff_s);
     std::fprintf(stderr, "idms-agent: server %s:%s: %s%s: %s; retrying in %.2f s\n", opt.host.c_str(), opt.port.c_str(),
-                 was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(), backoff_s);
+                 was_online ? "connection lost during " : "", what.c_str(), ec.message().c_str(), wait_s);
     std::uniform_real_distribution<double> jitter(0.8, 1.2);
-    retry_timer.expires_after(Seconds(backoff_s * jitter(rng)));
-    backoff_s = std::min(2 * backoff_s, opt.backoff_max_s);
+    if (after_s) {
+      // Not earlier than named (it would be refused again), a little later at most.
+      retry_timer.expires_after(Seconds(wait_s + 0.05 * jitter(rng)));
+      backoff_s = opt.backoff_initial_s;
+    } else {
+      retry_timer.expires_after(Seconds(backoff_s * jitter(rng)));
+      backoff_s = std::min(2 * backoff_s, opt.backoff_max_s);
+    }
     retry_timer.async_wait([this](const beast::error_code& e) {
       if (!e && phase == Phase::kIdle && stats.fatal_error.empty()) Connect();
     });

@@ -89,7 +89,9 @@ class NatsBus : public Bus {
     if (s == NATS_OK) s = natsOptions_SetPingInterval(opts_, 1000);  // a dead link noticed in ~2 s
     if (s == NATS_OK) s = natsOptions_SetMaxPingsOut(opts_, 2);
     if (s == NATS_OK) s = natsOptions_SetTimeout(opts_, 2000);
-    if (s == NATS_OK) s = natsOptions_SetNoEcho(opts_, true);  // a server never relays to itself
+    // Echo stays on: a server that takes a session over while it relays it to viewers of its own
+    // hears its new LiveSession through the bus like any other owner (an owner subscribes to no
+    // subject it publishes on, so echo costs nothing otherwise).
     if (s == NATS_OK) s = natsOptions_SetDisconnectedCB(opts_, &NatsBus::Disconnected, callbacks_);
     if (s == NATS_OK) s = natsOptions_SetReconnectedCB(opts_, &NatsBus::Reconnected, callbacks_);
     if (s == NATS_OK) s = natsOptions_SetErrorHandler(opts_, &NatsBus::Error, callbacks_);

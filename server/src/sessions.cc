@@ -151,9 +151,13 @@ AgentAdmission SessionHub::Admit(const v1::Hello& hello, const std::string& peer
       const std::optional<LeaseGrant> lease = TakeLease(row.id);
       if (!lease) {
         const std::optional<Lease> holder = core_.leases->Holder(row.id);
-        return Refused(K::KIND_RESUME_LATER, "session " + row.id + " is live on " +
-                                                 (holder ? holder->holder : std::string("another server")) +
-                                                 "; retry (it is taken over once that server's lease lapses)");
+        AgentAdmission later =
+            Refused(K::KIND_RESUME_LATER, "session " + row.id + " is live on " +
+                                              (holder ? holder->holder : std::string("another server")) +
+                                              "; retry (it is taken over once that server's lease lapses)");
+        // Asked again just after the lease would lapse, not on the agent's doubling backoff.
+        if (holder) later.refusal.set_retry_after_ms(static_cast<uint32_t>(holder->remaining.count()) + 50);
+        return later;
       }
       RecordingStart from = RecordingStart::kContinueFinished;
       if (row.state == "live") {

@@ -3,6 +3,9 @@
 # server, the agent and the renderer up on the host's network, and checks through the server's
 # port: /api/health and the container's own HEALTHCHECK, a non-root server, a recorded session
 # read back whole by the independent MCAP reader, the renderer's screenshot and the server's.
+# Then the several-servers stack (docker/compose.scale.yaml: PostgreSQL, three NATS, three
+# idms-servers, HAProxy, an agent) from a clean start: every server healthy, a live session
+# watched through HAProxy, and watched on a server that does not own it (relayed over NATS).
 # Exit 77 (CTest: skipped) only where dockerd cannot run, saying why.
 # Usage: tests/docker/docker_test.sh SOURCE_DIR WORK_DIR [BUILD_DIR]
 # With BUILD_DIR (as CTest runs it) the images take the programs built there (the Dockerfile's
@@ -36,7 +39,7 @@ if [ "$programs" = host ]; then
   context=$work/context
   mkdir -p "$context/docker" "$context/programs/bin"
   cp -r "$src/models" "$context/models"
-  cp "$src/docker/agent-entrypoint.sh" "$src/docker/render-entrypoint.sh" "$context/docker/"
+  cp "$src/docker/"*-entrypoint.sh "$src/docker/haproxy-config.sh" "$context/docker/"
   for p in idms-server idms-agent idms-render; do
     [ -x "$build_dir/bin/$p" ] || { echo "FAIL: no $build_dir/bin/$p (build it first)"; exit 1; }
     strip -o "$context/programs/bin/$p" "$build_dir/bin/$p"
@@ -44,22 +47,27 @@ if [ "$programs" = host ]; then
   [ -f "$build_dir/web/index.html" ] || { echo "FAIL: no web viewer in $build_dir/web"; exit 1; }
   cp -r "$build_dir/web" "$context/programs/web"
 fi
-for target in server agent render; do
+for target in server agent render postgres nats haproxy; do
   "$docker" build -q --network host "${secret[@]}" -f "$src/docker/Dockerfile" --target "$target" \
     --build-arg "PROGRAMS=$programs" -t "idms-$target:local" "$context" \
     > "$work/build-$target.log" 2>&1 || { tail -40 "$work/build-$target.log"; exit 1; }
 done
 echo "images built in $(( $(date +%s) - start )) s (programs: $programs)"
 
-# A free loopback port (nothing answers a connect there), below the kernel's ephemeral range: a
-# port there may be the local end of some other program's connection, and the server's bind fails.
+# Free loopback ports (nothing answers a connect there), below the kernel's ephemeral range: a
+# port there may be the local end of some other program's connection, and a server's bind fails.
 ephemeral_low=$(cut -f1 /proc/sys/net/ipv4/ip_local_port_range 2>/dev/null || echo 32768)
-port=""
-for _ in $(seq 50); do
-  p=$(( 10000 + RANDOM % (ephemeral_low - 10000) ))
-  if ! (exec 3<> "/dev/tcp/127.0.0.1/$p") 2>/dev/null; then port=$p; break; fi
-done
-[ -n "$port" ] || { echo "no free port"; exit 1; }
+taken=" "
+free_port() {  # VAR: a free port, never one handed out before, into VAR
+  local p
+  for _ in $(seq 200); do
+    p=$(( 10000 + RANDOM % (ephemeral_low - 10000) ))
+    case "$taken" in *" $p "*) continue ;; esac
+    if ! (exec 3<> "/dev/tcp/127.0.0.1/$p") 2>/dev/null; then taken="$taken$p "; printf -v "$1" %s "$p"; return; fi
+  done
+  echo "no free port" >&2; exit 1
+}
+free_port port
 
 project="idms-test-$$"
 compose=(docker-compose -p "$project" -f "$src/docker/compose.yaml")
@@ -113,3 +121,61 @@ code=$(curl -s -o "$work/server-shot.png" -w '%{http_code}' -H "Authorization: B
 [ "$code" = 200 ] || fail "GET screenshot.png: HTTP $code"
 [ "$(png_size "$work/server-shot.png")" = "640 x 360" ] || fail "the server's screenshot: $(png_size "$work/server-shot.png")"
 echo "docker: health, non-root, session $id recorded whole, screenshots from idms-render and the server"
+
+# ---- several servers (docker/compose.scale.yaml), from a clean start ---------------------------
+down
+trap - EXIT
+for v in IDMS_PORT IDMS_PG_PORT IDMS_SERVER_PORT_1 IDMS_SERVER_PORT_2 IDMS_SERVER_PORT_3 IDMS_NATS_PORT_1 \
+  IDMS_NATS_PORT_2 IDMS_NATS_PORT_3 IDMS_NATS_ROUTE_1 IDMS_NATS_ROUTE_2 IDMS_NATS_ROUTE_3; do
+  free_port "$v"
+  export "$v"
+done
+export IDMS_AGENT_SECONDS=120
+compose=(docker-compose -p "$project-scale" -f "$src/docker/compose.scale.yaml")
+work_log=$work/compose-scale.log
+down() {
+  "${compose[@]}" logs --no-color > "$work_log" 2>&1 || true
+  "${compose[@]}" down -v > /dev/null 2>&1 || true
+}
+fail() { echo "FAIL: $*"; down; tail -40 "$work_log"; exit 1; }
+trap down EXIT
+start=$(date +%s)
+"${compose[@]}" up -d --no-build > "$work/up-scale.log" 2>&1 || fail "up: $(tail -20 "$work/up-scale.log")"
+servers=("$IDMS_SERVER_PORT_1" "$IDMS_SERVER_PORT_2" "$IDMS_SERVER_PORT_3")
+for p in "${servers[@]}"; do
+  eventually 120 curl -fsS "http://127.0.0.1:$p/api/health" || fail "no /api/health on server port $p"
+done
+url="http://127.0.0.1:$IDMS_PORT"
+eventually 60 curl -fsS "$url/api/health" || fail "no /api/health through HAProxy ($url)"
+echo "scale: 3 servers healthy, HAProxy answering, $(( $(date +%s) - start )) s after up"
+observer=$("${compose[@]}" exec -T server-1 awk '$1 == "observer" {print $2}' /var/lib/idms/tokens)
+[ -n "$observer" ] || fail "no observer token on the shared volume"
+live_id() {
+  curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep '"state":"live"' |
+    sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1
+}
+eventually 120 test -n "$(live_id)" || fail "no live session (the agent through HAProxy)"
+id=$(live_id)
+# Its owner: the server where it is live.
+owner=""
+live_on() { curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$1/metrics" | grep -qx 'idms_live_sessions 1'; }
+for p in "${servers[@]}"; do live_on "$p" && owner=$p; done
+[ -n "$owner" ] || fail "session $id is live on no server"
+# Watched through HAProxy (idms-render as a live viewer), then on a server that does not own it.
+render=("$build_dir/bin/idms-render")
+[ -x "${render[0]}" ] || render=("$docker" run --rm --network host -v "$work/shots:/out" --entrypoint idms-render idms-render:local)
+out_dir=$work/shots
+[ -x "$build_dir/bin/idms-render" ] || out_dir=/out
+IDMS_TOKEN=$observer "${render[@]}" --server "$url" --session "$id" --out "$out_dir/scale-haproxy.png" --size 320x180 \
+  > "$work/render-haproxy.log" 2>&1 || fail "idms-render through HAProxy: $(tail -5 "$work/render-haproxy.log")"
+[ "$(png_size "$work/shots/scale-haproxy.png")" = "320 x 180" ] || fail "no screenshot of the live session through HAProxy"
+other=""
+for p in "${servers[@]}"; do [ "$p" != "$owner" ] && other=$p; done
+IDMS_TOKEN=$observer "${render[@]}" --server "http://127.0.0.1:$other" --session "$id" \
+  --out "$out_dir/scale-relayed.png" --size 320x180 > "$work/render-relayed.log" 2>&1 ||
+  fail "idms-render on server $other (not the owner $owner): $(tail -5 "$work/render-relayed.log")"
+[ "$(png_size "$work/shots/scale-relayed.png")" = "320 x 180" ] || fail "no screenshot of the session relayed"
+relayed=$(curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$other/metrics" |
+  sed -n 's/^idms_relay_frames_relayed_total \([0-9]*\).*/\1/p')
+[ "${relayed:-0}" -gt 0 ] || fail "server $other relayed no frame of session $id"
+echo "docker scale: session $id owned by :$owner, watched through HAProxy and relayed by :$other ($relayed frames)"

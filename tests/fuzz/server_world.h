@@ -51,6 +51,7 @@ struct ServerWorld {
   server::Storage storage;
   std::unique_ptr<server::Library> library;
   server::ServerCore core{server::ServerOptions{}, 1, 1};
+  std::unique_ptr<server::LeaseStore> leases = server::MakeMemoryLeaseStore();
   std::unique_ptr<server::SessionHub> hub;
   std::vector<server::Route> routes;
 
@@ -63,6 +64,8 @@ struct ServerWorld {
     core.ctx.options = &core.options;
     core.ctx.library = library.get();
     core.ctx.metrics = &core.metrics;
+    core.leases = leases.get();
+    core.options.node_id = "fuzz";
     hub = std::make_unique<server::SessionHub>(core, storage.sessions.get(), storage.recordings.get());
     core.hub = hub.get();
     server::AppendWebSocketRoutes(core, &routes);

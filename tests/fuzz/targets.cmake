@@ -25,6 +25,10 @@ set(IDMS_FUZZ_LIBS_render_params_fuzz idms_render_params)
 # The tools' --server URLs (idms_cli: idms-agent, idms-render).
 list(APPEND IDMS_FUZZ_TARGETS cli_fuzz)
 set(IDMS_FUZZ_LIBS_cli_fuzz idms_cli)
+# What a server takes from the bus between servers (relayed frames, state answers, relayed
+# viewers' notes and commands).
+list(APPEND IDMS_FUZZ_TARGETS relay_fuzz)
+set(IDMS_FUZZ_LIBS_relay_fuzz idms_server)
 # What the S3 client reads: a store's XML replies (listings, errors) and s3:// URLs.
 list(APPEND IDMS_FUZZ_TARGETS s3_parse_fuzz)
 set(IDMS_FUZZ_LIBS_s3_parse_fuzz idms_server_api)

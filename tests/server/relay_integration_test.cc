@@ -15,111 +15,13 @@
 
 #include "idms/protocol/envelope.h"
 #include "idms/server/bus.h"
-#include "server_process.h"
-#include "session_checks.h"
+#include "scale_servers.h"
 
 namespace idms::test {
 namespace {
 
 using std::chrono::milliseconds;
 using std::chrono::seconds;
-
-// nats-server on 127.0.0.1: a free port (or `port`), its log in DIR/nats-N.log.
-class NatsServer {
- public:
-  // `extra`: more arguments (a cluster's --cluster and --routes).
-  explicit NatsServer(const std::string& dir, int port = -1, const std::vector<std::string>& extra = {}) {
-    static int n = 0;
-    log_ = dir + "/nats-" + std::to_string(++n) + ".log";
-    std::vector<std::string> args = {"-a", "127.0.0.1", "-p", std::to_string(port)};
-    args.insert(args.end(), extra.begin(), extra.end());
-    process_ = std::make_unique<ChildProcess>("/usr/sbin/nats-server", args, log_);
-    const std::regex listening("Listening for client connections on 127\\.0\\.0\\.1:([0-9]+)");
-    Eventually(
-        [&] {
-          std::smatch m;
-          const std::string text = ReadText(log_);
-          if (!std::regex_search(text, m, listening)) return false;
-          port_ = std::stoi(m[1]);
-          return true;
-        },
-        seconds(20));
-  }
-  int port() const { return port_; }
-  std::string url() const { return "nats://127.0.0.1:" + std::to_string(port_); }
-  void Kill() { process_->Signal(SIGKILL), process_->Wait(seconds(10)); }
-  std::string Log() const { return ReadText(log_); }
-
- private:
-  std::string log_;
-  std::unique_ptr<ChildProcess> process_;
-  int port_ = 0;
-};
-
-uint16_t FreePort();
-
-bool HaveNats() { return std::ifstream("/usr/sbin/nats-server").good(); }
-bool HaveHaproxy() { return std::ifstream("/usr/sbin/haproxy").good(); }
-
-// A port no one listens on now (bound and released: haproxy cannot say which port it took).
-uint16_t FreePort() {
-  boost::asio::io_context io;
-  boost::asio::ip::tcp::acceptor a(io, {boost::asio::ip::make_address("127.0.0.1"), 0});
-  return a.local_endpoint().port();
-}
-
-// A new token of `role` appended to `file` (idms-server token create), as several servers share.
-std::string CreateToken(const std::string& file, const std::string& role) {
-  ChildProcess p(IDMS_SERVER_BIN, {"token", "create", role, "--tokens", file}, file + "." + role + ".log", true);
-  const auto line = p.ReadLine(seconds(20));
-  p.Wait(seconds(20));
-  return line.value_or("");
-}
-
-// HAProxy in front of the servers: agents to `agents`, viewers hashed by their URL (the session
-// id) over `viewers`, consistently and with bounded load, health-checked on /api/health.
-class Haproxy {
- public:
-  Haproxy(const std::string& dir, const std::vector<uint16_t>& agents, const std::vector<uint16_t>& viewers)
-      : port_(FreePort()) {
-    std::string cfg =
-        "global\n  maxconn 4096\n"
-        "defaults\n  mode http\n  timeout connect 1s\n  timeout client 30s\n  timeout server 30s\n"
-        "  timeout tunnel 1h\n  retries 3\n  option redispatch 1\n"
-        "  default-server inter 250ms fall 2 rise 2 on-marked-down shutdown-sessions\n"
-        "frontend idms\n  bind 127.0.0.1:" +
-        std::to_string(port_) +
-        "\n  use_backend agents if { path_beg /ws/agent }\n  default_backend viewers\n"
-        "backend agents\n  balance leastconn\n  option httpchk GET /api/health\n";
-    for (size_t i = 0; i < agents.size(); ++i) {
-      cfg += "  server a" + std::to_string(i) + " 127.0.0.1:" + std::to_string(agents[i]) + " check\n";
-    }
-    cfg +=
-        "backend viewers\n  balance uri\n  hash-type consistent\n  hash-balance-factor 150\n"
-        "  option httpchk GET /api/health\n";
-    for (size_t i = 0; i < viewers.size(); ++i) {
-      cfg += "  server v" + std::to_string(i) + " 127.0.0.1:" + std::to_string(viewers[i]) + " check\n";
-    }
-    std::ofstream(dir + "/haproxy.cfg") << cfg;
-    process_ = std::make_unique<ChildProcess>(
-        "/usr/sbin/haproxy", std::vector<std::string>{"-db", "-f", dir + "/haproxy.cfg"}, dir + "/haproxy.log");
-    // Ready once it accepts.
-    Eventually(
-        [&] {
-          boost::asio::io_context io;
-          boost::asio::ip::tcp::socket socket(io);
-          boost::system::error_code ec;
-          socket.connect({boost::asio::ip::make_address("127.0.0.1"), port_}, ec);
-          return !ec;
-        },
-        seconds(20));
-  }
-  uint16_t port() const { return port_; }
-
- private:
-  uint16_t port_;
-  std::unique_ptr<ChildProcess> process_;
-};
 
 std::vector<std::string> AgentArgs(const ServerProcess& server, const std::string& dir, double duration) {
   return {"--server",     "ws://127.0.0.1:" + server.port_string(),
@@ -145,16 +47,6 @@ struct TwoServersOnABus {
   ChildProcess agent;
   std::string id;
 };
-
-// Every device tick a viewer got, in order.
-std::vector<uint64_t> Ticks(TestViewer& v) {
-  std::vector<uint64_t> ticks;
-  for (const v1::Envelope& e : v.Frames()) {
-    if (!e.has_device_samples()) continue;
-    for (const auto& s : e.device_samples().samples()) ticks.push_back(s.tick());
-  }
-  return ticks;
-}
 
 TEST(Relay, AViewerOnAnotherServerSeesTheSessionAndItsNoteIsRecordedByTheOwner) {
   if (!HaveNats()) GTEST_SKIP() << "nats-server is not installed (scripts/install-deps.sh installs it)";
