@@ -254,6 +254,14 @@ class S3RecordingStore final : public RecordingStore {
     // The finished object; until its upload is done (or if it failed), the segments, which hold
     // the whole closed file (Finish made it durable before publishing).
     const std::string tmp = dir_ + "/" + id + ".mcap.fetch-" + std::to_string(Random());
+    // The temporary file goes whatever happens (a refusal, the store going down mid-way).
+    struct Remover {
+      const std::string& path;
+      ~Remover() {
+        std::error_code ignored;
+        fs::remove(path, ignored);
+      }
+    } remover{tmp};
     const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
     if (fd < 0) {
       *error = "cannot create " + tmp + ": " + std::strerror(errno);
@@ -265,7 +273,6 @@ class S3RecordingStore final : public RecordingStore {
       r = s3_->GetToFile(FinalKey(id), fd, &size, error);
     } catch (...) {
       ::close(fd);
-      fs::remove(tmp, ec);
       throw;
     }
     ::close(fd);
@@ -281,9 +288,10 @@ class S3RecordingStore final : public RecordingStore {
         }
       }
     }
-    if (ok) fs::rename(tmp, FinishedPath(id), ec);
-    if (!ok || ec) {
-      fs::remove(tmp, ec);
+    if (!ok) return false;
+    fs::rename(tmp, FinishedPath(id), ec);
+    if (ec) {
+      *error = "rename " + tmp + " -> " + FinishedPath(id) + ": " + ec.message();
       return false;
     }
     TrimCache();
