@@ -105,7 +105,7 @@ observer=$("${compose[@]}" exec -T server awk '$1 == "observer" {print $2}' /var
 # STATE: the id of the newest session in that state at $url, or nothing.
 session_in() {
   curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep "\"state\":\"$1\"" |
-    sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | head -1
+    sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | awk 'NR == 1'
 }
 eventually 120 test -n "$(session_in ended)" || fail "no recorded session"
 id=$(session_in ended)
@@ -155,7 +155,12 @@ eventually 120 test -n "$(session_in live)" || fail "no live session (the agent 
 id=$(session_in live)
 # Its owner: the server where it is live.
 owner=""
-live_on() { curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$1/metrics" | grep -qx 'idms_live_sessions 1'; }
+# The whole body first: `curl | grep -q` fails under pipefail when grep stops reading early.
+live_on() {
+  local metrics
+  metrics=$(curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$1/metrics") || return 1
+  grep -qx 'idms_live_sessions 1' <<< "$metrics"
+}
 for p in "${servers[@]}"; do live_on "$p" && owner=$p; done
 [ -n "$owner" ] || fail "session $id is live on no server"
 # Watched through HAProxy (idms-render as a live viewer), then on a server that does not own it.
