@@ -482,6 +482,14 @@ struct Uplink::Impl final : ConnectionHandler {
       waiting.events = control.size();
       waiting.surface = pending_mesh >= 0 || resend_surface;
       waiting.samples = backlog.num_unsent();
+      if (pending_mesh >= 0) {
+        // At most a batch and one more are looked at: FrameOrder only needs to know whether
+        // they fit in one batch.
+        const uint64_t surface_tick = loop.slot(pending_mesh).tick;
+        const size_t limit = std::min(waiting.samples, order.batch() + 1);
+        while (waiting.samples_to_surface < limit && backlog.unsent(waiting.samples_to_surface).tick <= surface_tick)
+          ++waiting.samples_to_surface;
+      }
       waiting.loop_finished = loop_finished;
       const NextFrame next = order.Next(waiting);
       switch (next.kind) {

@@ -80,7 +80,9 @@ class LiveSession : public WatchedSession, public std::enable_shared_from_this<L
   // sample batches and everything else dropped (and counted).
   enum class FrameKind { kSamples, kDelta, kOther };
   // To every viewer: a sample batch waits (up to kGatherTime) for the next mesh frame or event,
-  // which takes everything waiting with it in one Frames message (idms.proto); the others go at once.
+  // which takes everything waiting with it in one Frames message (idms.proto); the others go at
+  // once. The agent sends each mesh period's samples just before its surface, so in a live stream
+  // the wait is microseconds; the timer is for samples without surfaces (and older agents).
   void Broadcast(const std::shared_ptr<const std::string>& bytes, FrameKind kind);
   void Flush();  // what is waiting, to every viewer (and to the bus), now
   void Record(std::shared_ptr<const v1::Envelope> envelope);

@@ -1,5 +1,5 @@
-// The uplink's frame order: events, then the newest surface, then full sample batches; a short
-// batch and ENDED only once the loop has finished.
+// The uplink's frame order: events, then the newest surface (the samples up to it just before
+// it), then full sample batches; other short batches and ENDED only once the loop has finished.
 #include "frame_order.h"
 
 #include <gtest/gtest.h>
@@ -26,6 +26,30 @@ TEST(FrameOrder, EventsThenSurfaceThenSamples) {
   EXPECT_EQ(order.Next(Make(0, true, 100, false)).kind, FrameKind::kSurface);
   EXPECT_EQ(order.Next(Make(0, false, 100, false)).kind, FrameKind::kSamples);
   EXPECT_EQ(order.Next(Make(0, false, 100, false)).num_samples, 20u) << "at most one batch per frame";
+}
+
+// Live: the samples of the mesh period go as a short batch right before their surface, so the
+// server can forward both to viewers together without waiting for the next surface.
+TEST(FrameOrder, TheSamplesUpToASurfaceGoJustBeforeIt) {
+  const FrameOrder order(20);
+  Waiting w = Make(0, true, 17, false);
+  w.samples_to_surface = 17;
+  EXPECT_EQ(order.Next(w).kind, FrameKind::kSamples);
+  EXPECT_EQ(order.Next(w).num_samples, 17u);
+  w.events = 1;
+  EXPECT_EQ(order.Next(w).kind, FrameKind::kEvent) << "events still first";
+  // Written; one more sample came meanwhile, after the surface: the surface goes, never starved
+  // by samples that keep arriving.
+  w = Make(0, true, 1, false);
+  w.samples_to_surface = 0;
+  EXPECT_EQ(order.Next(w).kind, FrameKind::kSurface);
+  // Catching up after a resume (more than a batch before the surface): the surface first.
+  w = Make(0, true, 500, false);
+  w.samples_to_surface = 21;
+  EXPECT_EQ(order.Next(w).kind, FrameKind::kSurface);
+  w.samples_to_surface = 20;
+  EXPECT_EQ(order.Next(w).kind, FrameKind::kSamples);
+  EXPECT_EQ(order.Next(w).num_samples, 20u);
 }
 
 TEST(FrameOrder, PartialBatchWaitsUntilTheLoopHasFinished) {
