@@ -3,9 +3,10 @@
 # server, the agent and the renderer up on the host's network, and checks through the server's
 # port: /api/health and the container's own HEALTHCHECK, a non-root server, a recorded session
 # read back whole by the independent MCAP reader, the renderer's screenshot and the server's.
-# Then the several-servers stack (docker/compose.scale.yaml: PostgreSQL, three NATS, three
-# idms-servers, HAProxy, an agent) from a clean start: every server healthy, a live session
-# watched through HAProxy, and watched on a server that does not own it (relayed over NATS).
+# Then the several-servers stack (docker/compose.scale.yaml: PostgreSQL, three NATS, Swift, three
+# idms-servers, HAProxy, an agent) from a clean start: every server healthy, the library's blobs
+# and the live session's recording in Swift's bucket, the session watched through HAProxy, and
+# watched on a server that does not own it (relayed over NATS).
 # Exit 77 (CTest: skipped) only where dockerd cannot run, saying why.
 # Usage: tests/docker/docker_test.sh SOURCE_DIR WORK_DIR [BUILD_DIR]
 # With BUILD_DIR (as CTest runs it) the images take the programs built there (the Dockerfile's
@@ -39,7 +40,7 @@ if [ "$programs" = host ]; then
   context=$work/context
   mkdir -p "$context/docker" "$context/programs/bin"
   cp -r "$src/models" "$context/models"
-  cp "$src/docker/"*-entrypoint.sh "$src/docker/haproxy-config.sh" "$context/docker/"
+  cp "$src/docker/"*-entrypoint.sh "$src/docker/"*-config.sh "$context/docker/"
   for p in idms-server idms-agent idms-render; do
     [ -x "$build_dir/bin/$p" ] || { echo "FAIL: no $build_dir/bin/$p (build it first)"; exit 1; }
     strip -o "$context/programs/bin/$p" "$build_dir/bin/$p"
@@ -47,7 +48,7 @@ if [ "$programs" = host ]; then
   [ -f "$build_dir/web/index.html" ] || { echo "FAIL: no web viewer in $build_dir/web"; exit 1; }
   cp -r "$build_dir/web" "$context/programs/web"
 fi
-for target in server agent render postgres nats haproxy; do
+for target in server agent render postgres nats haproxy swift; do
   "$docker" build -q --network host "${secret[@]}" -f "$src/docker/Dockerfile" --target "$target" \
     --build-arg "PROGRAMS=$programs" -t "idms-$target:local" "$context" \
     > "$work/build-$target.log" 2>&1 || { tail -40 "$work/build-$target.log"; exit 1; }
@@ -107,7 +108,9 @@ session_in() {
   curl -fsS -H "Authorization: Bearer $observer" "$url/api/sessions" | tr '{' '\n' | grep "\"state\":\"$1\"" |
     sed -n 's/.*"id":"\([^"]*\)".*/\1/p' | awk 'NR == 1'
 }
-eventually 120 test -n "$(session_in ended)" || fail "no recorded session"
+# Whether there is a session in STATE (evaluated on every attempt of `eventually`).
+has_session() { [ -n "$(session_in "$1")" ]; }
+eventually 120 has_session ended || fail "no recorded session"
 id=$(session_in ended)
 curl -fsS -H "Authorization: Bearer $observer" -o "$work/session.mcap" "$url/api/sessions/$id/recording.mcap"
 node "$src/tests/mcap-js/check_recording.mjs" "$work/session.mcap" --expect-ticks 3000 ||
@@ -127,11 +130,16 @@ echo "docker: health, non-root, session $id recorded whole, screenshots from idm
 down
 trap - EXIT
 for v in IDMS_PORT IDMS_PG_PORT IDMS_SERVER_PORT_1 IDMS_SERVER_PORT_2 IDMS_SERVER_PORT_3 IDMS_NATS_PORT_1 \
-  IDMS_NATS_PORT_2 IDMS_NATS_PORT_3 IDMS_NATS_ROUTE_1 IDMS_NATS_ROUTE_2 IDMS_NATS_ROUTE_3; do
+  IDMS_NATS_PORT_2 IDMS_NATS_PORT_3 IDMS_NATS_ROUTE_1 IDMS_NATS_ROUTE_2 IDMS_NATS_ROUTE_3 IDMS_S3_PORT \
+  IDMS_SWIFT_ACCOUNT_PORT IDMS_SWIFT_CONTAINER_PORT IDMS_SWIFT_OBJECT_PORT; do
   free_port "$v"
   export "$v"
 done
 export IDMS_AGENT_SECONDS=120
+# Credentials of the test's own, so that the stack is seen to take them from the environment.
+export IDMS_S3_ACCESS_KEY="idms:test-$$" IDMS_S3_SECRET_KEY="secret-$RANDOM$RANDOM"
+# curl's (its --user splits at the first colon, and the key holds one).
+(umask 077 && echo "machine 127.0.0.1 login $IDMS_S3_ACCESS_KEY password $IDMS_S3_SECRET_KEY" > "$work/netrc")
 compose=(docker-compose -p "$project-scale" -f "$src/docker/compose.scale.yaml")
 work_log=$work/compose-scale.log
 down() {
@@ -149,9 +157,25 @@ done
 url="http://127.0.0.1:$IDMS_PORT"
 eventually 60 curl -fsS "$url/api/health" || fail "no /api/health through HAProxy ($url)"
 echo "scale: 3 servers healthy, HAProxy answering, $(( $(date +%s) - start )) s after up"
+# S3 through Swift's API as any client reaches it, signed by curl itself (SigV4).
+s3() {  # CURL_ARGS... PATH: curl on the stack's bucket
+  local path=${*: -1}
+  curl -fsS --max-time 10 --aws-sigv4 aws:amz:us-east-1:s3 --netrc-file "$work/netrc" \
+    -H 'x-amz-content-sha256: UNSIGNED-PAYLOAD' "${@:1:$#-1}" "http://127.0.0.1:$IDMS_S3_PORT/idms$path"
+}
+s3_keys() {  # PREFIX (letters, digits, -, /): the keys under PREFIX, one a line (ListObjectsV2)
+  # The query as SigV4 signs it, canonical (curl 7.88 signs it as given): the prefix's / encoded.
+  local listing
+  listing=$(s3 "?list-type=2&prefix=${1//\//%2F}") || return 1
+  { grep -o '<Key>[^<]*</Key>' <<< "$listing" || true; } | sed 's/<[^>]*>//g'
+}
+has_keys() { [ -n "$(s3_keys "$1")" ]; }
+blob_keys=$(s3_keys blobs/) || fail "no listing of Swift's bucket on :$IDMS_S3_PORT"
+blobs=$(grep -c . <<< "$blob_keys" || true)
+[ "$blobs" -gt 0 ] || fail "no model blob in Swift's bucket (the library seeded with --blobs)"
 observer=$("${compose[@]}" exec -T server-1 awk '$1 == "observer" {print $2}' /var/lib/idms/tokens)
 [ -n "$observer" ] || fail "no observer token on the shared volume"
-eventually 120 test -n "$(session_in live)" || fail "no live session (the agent through HAProxy)"
+eventually 120 has_session live || fail "no live session (the agent through HAProxy)"
 id=$(session_in live)
 # Its owner: the server where it is live.
 owner=""
@@ -163,6 +187,14 @@ live_on() {
 }
 for p in "${servers[@]}"; do live_on "$p" && owner=$p; done
 [ -n "$owner" ] || fail "session $id is live on no server"
+# Its recording in the bucket: segments uploaded every second while live (recordings/ID/...), or
+# the whole file once ended (recordings/ID.mcap); the first key is its start, an MCAP file's.
+eventually 60 has_keys "recordings/$id" || fail "no recording of session $id in Swift's bucket"
+keys=$(s3_keys "recordings/$id") || fail "no listing of Swift's bucket on :$IDMS_S3_PORT"
+first=$(head -1 <<< "$keys")
+s3 -o "$work/segment" "/$first" || fail "GET $first from Swift"
+[ "$(od -An -tx1 -N8 "$work/segment" | tr -d ' \n')" = 894d434150300d0a ] ||
+  fail "$first does not begin as an MCAP file"
 # Watched through HAProxy (idms-render as a live viewer), then on a server that does not own it.
 render=("$build_dir/bin/idms-render")
 [ -x "${render[0]}" ] || render=("$docker" run --rm --network host -v "$work/shots:/out" --entrypoint idms-render idms-render:local)
@@ -180,4 +212,6 @@ IDMS_TOKEN=$observer "${render[@]}" --server "http://127.0.0.1:$other" --session
 relayed=$(curl -fsS -H "Authorization: Bearer $observer" "http://127.0.0.1:$other/metrics" |
   sed -n 's/^idms_relay_frames_relayed_total \([0-9]*\).*/\1/p')
 [ "${relayed:-0}" -gt 0 ] || fail "server $other relayed no frame of session $id"
-echo "docker scale: session $id owned by :$owner, watched through HAProxy and relayed by :$other ($relayed frames)"
+echo "docker scale: session $id owned by :$owner, watched through HAProxy and relayed by :$other ($relayed frames);" \
+  "in Swift: $blobs blobs; recording objects so far: $(wc -l <<< "$keys"), the first an MCAP file's start" \
+  "($first, $(stat -c %s "$work/segment") bytes)"

@@ -1,9 +1,8 @@
-// SwiftS3: configuration files, rings (swift-ring-builder) and four Swift servers as child
-// processes; the S3 API checked and the bucket made with the curl tool's own SigV4 signing.
+// SwiftS3: the scale stack's configuration and rings (docker/swift-config.sh) and four Swift servers
+// as child processes; the S3 API checked and the bucket made with the curl tool's own SigV4 signing.
 #include "swift_s3.h"
 
 #include <netinet/in.h>
-#include <pwd.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/xattr.h>
@@ -76,13 +75,6 @@ bool Accepts(uint16_t port) {
   return ok;
 }
 
-bool RunQuiet(const std::string& command, std::string* error) {
-  const int rc = std::system((command + " >/dev/null 2>&1").c_str());
-  if (rc == 0) return true;
-  *error = "'" + command + "' failed (status " + std::to_string(rc) + ")";
-  return false;
-}
-
 }  // namespace
 
 bool SwiftS3::Installed() {
@@ -134,61 +126,19 @@ SwiftS3::~SwiftS3() {
 }
 
 bool SwiftS3::WriteConfiguration() {
-  // swift.conf: this cluster's hash salt and its one storage policy (read from swift_dir).
-  std::ofstream(dir_ + "/swift.conf") << "[swift-hash]\nswift_hash_path_suffix = idms-test\n"
-                                         "swift_hash_path_prefix = idms-test\n"
-                                         "[storage-policy:0]\nname = Policy-0\ndefault = yes\n";
-  std::error_code ec;
-  fs::create_directories(dir_ + "/devices/d1", ec);
-  const passwd* pw = ::getpwuid(::geteuid());
-  const std::string user = pw != nullptr ? pw->pw_name : "root";
-  // Each server in one process (workers = 0), on loopback, as this user, no mount check: the
-  // "device" is a plain directory.
-  const auto common = [&](uint16_t port) {
-    return "[DEFAULT]\nbind_ip = 127.0.0.1\nbind_port = " + std::to_string(port) + "\nworkers = 0\nuser = " + user +
-           "\nswift_dir = " + dir_ + "\ndevices = " + dir_ + "/devices\nmount_check = false\n" +
-           "disable_fallocate = true\nlog_level = INFO\n";
-  };
-  const std::array<std::pair<const char*, uint16_t>, 3> storage = {
-      {{"account", account_port_}, {"container", container_port_}, {"object", object_port_}}};
-  for (const auto& [name, port] : storage) {
-    std::ofstream(dir_ + "/" + name + "-server.conf")
-        << common(port) << "[pipeline:main]\npipeline = " << name << "-server\n[app:" << name
-        << "-server]\nuse = egg:swift#" << name << "\n";
+  // The configuration, rings and curl's netrc the scale stack's container runs
+  // (docker/swift-config.sh), the device under the directory.
+  const std::string log = dir_ + "/swift-config.log";
+  ChildProcess config("/bin/sh",
+                      {IDMS_SOURCE_DIR "/docker/swift-config.sh", dir_, dir_ + "/devices", std::to_string(proxy_port_),
+                       std::to_string(account_port_), std::to_string(container_port_), std::to_string(object_port_),
+                       access_key(), secret_key()},
+                      log);
+  if (const auto status = config.Wait(seconds(60)); status != 0) {
+    error_ = "docker/swift-config.sh failed (" + (status ? "status " + std::to_string(*status) : "timed out") + "):\n" +
+             ReadText(log);
+    return false;
   }
-  // A ring per server of one partition, one replica, one device: everything on that server. Built
-  // with Swift's RingBuilder in one interpreter (what swift-ring-builder's create, add and
-  // rebalance do, in a third of the time: three rings cost 7 s through the command).
-  std::string script = "from swift.common.ring import RingBuilder\n";
-  for (const auto& [name, port] : storage) {
-    script += "b = RingBuilder(0, 1, 1)\nb.add_dev({'region': 1, 'zone': 1, 'ip': '127.0.0.1', 'port': " +
-              std::to_string(port) + ", 'device': 'd1', 'weight': 1})\nb.rebalance()\nb.get_ring().save('" + dir_ +
-              "/" + name + ".ring.gz')\n";
-  }
-  std::ofstream(dir_ + "/rings.py") << script;
-  if (!RunQuiet("/usr/bin/python3 " + dir_ + "/rings.py", &error_)) return false;
-  // The proxy: s3api just before tempauth (s3api checks the SigV4 signature's form and hands
-  // tempauth the key to verify), slo after them as s3api expects. tempauth keeps its tokens in
-  // memcache, which these tests do not run: the cache middleware finds none and tempauth checks
-  // every S3 signature itself. location: the region the signatures are scoped to.
-  std::ofstream(dir_ + "/proxy-server.conf")
-      << common(proxy_port_)
-      << "[pipeline:main]\npipeline = catch_errors gatekeeper proxy-logging cache s3api tempauth slo "
-         "proxy-logging proxy-server\n"
-         "[app:proxy-server]\nuse = egg:swift#proxy\naccount_autocreate = true\n"
-         "[filter:catch_errors]\nuse = egg:swift#catch_errors\n"
-         "[filter:gatekeeper]\nuse = egg:swift#gatekeeper\n"
-         "[filter:proxy-logging]\nuse = egg:swift#proxy_logging\n"
-         "[filter:cache]\nuse = egg:swift#memcache\nmemcache_servers = 127.0.0.1:1\n"
-         "[filter:s3api]\nuse = egg:swift#s3api\nlocation = us-east-1\n"
-         "[filter:tempauth]\nuse = egg:swift#tempauth\nuser_idms_tester = "
-      << secret_key()
-      << " .admin\n"
-         "[filter:slo]\nuse = egg:swift#slo\n";
-  // The curl tool's credentials: in a netrc file, as its --user splits at the first colon and
-  // tempauth's access keys are ACCOUNT:USER.
-  std::ofstream(dir_ + "/netrc") << "machine 127.0.0.1 login " << access_key() << " password " << secret_key() << "\n";
-  fs::permissions(dir_ + "/netrc", fs::perms::owner_read | fs::perms::owner_write, ec);
   return true;
 }
 

@@ -1,6 +1,7 @@
 // A throwaway S3 server for the tests: OpenStack Swift all-in-one (proxy with the s3api and
 // tempauth middlewares, one account, container and object server, rings of one replica) on free
-// loopback ports, its configuration, rings and disk in a fresh directory removed at the end.
+// loopback ports, its configuration and rings (docker/swift-config.sh, as the scale stack's) and
+// its disk in a fresh directory removed at the end.
 #pragma once
 
 #include <cstdint>
