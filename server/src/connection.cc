@@ -2,7 +2,7 @@
 // DoWrite/OnWrite on the connection's strand, one request at a time, one write in flight, the
 // header admitted (route, auth, Origin, size) before any of the body is read, handlers run on the
 // worker pool. A WebSocket upgrade hands the stream to a WebSocket session with a bounded
-// send queue. The same code serves plain TCP and TLS (Stream = tcp_stream or ssl_stream).
+// send queue. The same code serves plain TCP and TLS (Stream = TcpStream or ssl_stream of it).
 #include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/ssl/stream.hpp>
@@ -37,8 +37,11 @@ constexpr size_t kMaxQueuedBytes = size_t{32} << 20;  // likewise in bytes (a ke
 // so neither its queue nor the close frame can go out) loses its TCP connection.
 constexpr auto kCloseGrace = std::chrono::seconds(5);
 
+// A TCP stream on the connection's strand (server_internal.h: why the executor's type is spelled out).
+using TcpStream = beast::basic_stream<tcp, ConnectionStrand>;
+
 template <class Stream>
-constexpr bool kIsTls = !std::is_same_v<Stream, beast::tcp_stream>;
+constexpr bool kIsTls = !std::is_same_v<Stream, TcpStream>;
 
 // Errors that mean "the peer went away or we closed it": not worth a warning. A browser tab
 // closed while its socket reads ends with ENOTCONN (Beast's teardown after the peer's close frame
@@ -491,13 +494,13 @@ std::string BusyResponse(const std::string& message) {
 }
 
 // Beyond a connection limit: a canned 503 (plain) or a close (TLS), without a session.
-void RejectBusy(ServerCore& core, tcp::socket socket, ConnectionSlots::Refusal refusal) {
+void RejectBusy(ServerCore& core, AcceptedSocket socket, ConnectionSlots::Refusal refusal) {
   const bool per_address = refusal == ConnectionSlots::Refusal::kAddress;
   ++(per_address ? core.metrics.rejected_per_address : core.metrics.rejected_connections);
   if (core.tls) return;
   static const std::string kTotal = BusyResponse("too many connections; retry");
   static const std::string kAddress = BusyResponse("too many connections from your address; retry");
-  auto s = std::make_shared<tcp::socket>(std::move(socket));
+  auto s = std::make_shared<AcceptedSocket>(std::move(socket));
   asio::async_write(*s, asio::buffer(per_address ? kAddress : kTotal), [s](beast::error_code, size_t) {
     beast::error_code ignored;
     s->shutdown(tcp::socket::shutdown_both, ignored);
@@ -506,7 +509,7 @@ void RejectBusy(ServerCore& core, tcp::socket socket, ConnectionSlots::Refusal r
 
 }  // namespace
 
-void Launch(ServerCore& core, tcp::socket socket) {
+void Launch(ServerCore& core, AcceptedSocket socket) {
   beast::error_code ec;
   const tcp::endpoint remote = socket.remote_endpoint(ec);
   if (ec) return;  // gone already
@@ -515,11 +518,11 @@ void Launch(ServerCore& core, tcp::socket socket) {
   if (!slot) return RejectBusy(core, std::move(socket), refusal);
   std::string peer = remote.address().to_string() + ":" + std::to_string(remote.port());
   if (core.tls) {
-    std::make_shared<HttpSession<beast::ssl_stream<beast::tcp_stream>>>(core, std::move(slot), std::move(peer),
-                                                                        std::move(socket), *core.tls)
+    std::make_shared<HttpSession<beast::ssl_stream<TcpStream>>>(core, std::move(slot), std::move(peer),
+                                                                TcpStream(std::move(socket)), *core.tls)
         ->Run();
   } else {
-    std::make_shared<HttpSession<beast::tcp_stream>>(core, std::move(slot), std::move(peer), std::move(socket))->Run();
+    std::make_shared<HttpSession<TcpStream>>(core, std::move(slot), std::move(peer), std::move(socket))->Run();
   }
 }
 

@@ -262,7 +262,7 @@ bool Server::Impl::Start(std::string* error) {
 }
 
 void Server::Impl::DoAccept() {
-  acceptor.async_accept(asio::make_strand(core.ioc), [this](boost::system::error_code ec, tcp::socket socket) {
+  acceptor.async_accept(asio::make_strand(core.ioc), [this](boost::system::error_code ec, AcceptedSocket socket) {
     if (ec == asio::error::operation_aborted || !acceptor.is_open()) return;
     if (!ec) {
       accept_paused = false;
