@@ -173,7 +173,7 @@ has_keys() { [ -n "$(s3_keys "$1")" ]; }
 blob_keys=$(s3_keys blobs/) || fail "no listing of Swift's bucket on :$IDMS_S3_PORT"
 blobs=$(grep -c . <<< "$blob_keys" || true)
 [ "$blobs" -gt 0 ] || fail "no model blob in Swift's bucket (the library seeded with --blobs)"
-observer=$("${compose[@]}" exec -T server-1 awk '$1 == "observer" {print $2}' /var/lib/idms/tokens)
+observer=$("${compose[@]}" exec -T server-1 awk '$1 == "observer" {print $2}' /var/lib/idms/server-1/tokens)
 [ -n "$observer" ] || fail "no observer token on the shared volume"
 eventually 120 has_session live || fail "no live session (the agent through HAProxy)"
 id=$(session_in live)
@@ -187,6 +187,16 @@ live_on() {
 }
 for p in "${servers[@]}"; do live_on "$p" && owner=$p; done
 [ -n "$owner" ] || fail "session $id is live on no server"
+# Each server writes in its own data directory on the shared volume: the session's local files
+# are the owner's alone (a server that lost a session must not touch the new owner's file).
+owner_dir=""
+for n in 1 2 3; do [ "${servers[n - 1]}" = "$owner" ] && owner_dir=/var/lib/idms/server-$n; done
+local_files=$("${compose[@]}" exec -T server-1 find /var/lib/idms -name "$id*")
+[ -n "$local_files" ] || fail "no local file of session $id on the volume"
+while read -r f; do
+  case $f in "$owner_dir"/*) ;; *) fail "session $id has a file outside its owner's directory $owner_dir: $f" ;; esac
+done <<< "$local_files"
+echo "scale: session $id's local files all in its owner's $owner_dir: $(tr '\n' ' ' <<< "$local_files")"
 # Its recording in the bucket: segments uploaded every second while live (recordings/ID/...), or
 # the whole file once ended (recordings/ID.mcap); the first key is its start, an MCAP file's.
 eventually 60 has_keys "recordings/$id" || fail "no recording of session $id in Swift's bucket"
