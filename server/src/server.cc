@@ -35,7 +35,7 @@ struct Server::Impl {
         acceptor(asio::make_strand(core.ioc)),
         accept_pause(acceptor.get_executor()),
         signals(core.ioc, SIGINT, SIGTERM, SIGHUP),
-        grace(core.ioc) {}
+        grace(acceptor.get_executor()) {}
 
   static int ResolveThreads(int n) { return n > 0 ? n : std::max(1u, std::thread::hardware_concurrency()); }
 
@@ -59,7 +59,7 @@ struct Server::Impl {
   asio::steady_timer accept_pause;  // on the acceptor's strand
   bool accept_paused = false;       // logged once per run of failures
   asio::signal_set signals;
-  asio::steady_timer grace;
+  asio::steady_timer grace;  // on the acceptor's strand
   uint16_t port = 0;
   int threads = 1;
 };
@@ -224,7 +224,9 @@ bool Server::Impl::Start(std::string* error) {
   AppendSessionRoutes(core, &core.routes);
   AppendRenderRoutes(core, &core.routes);
   AnswerStoreFailures(&core.routes, !o.store.empty() || !o.blobs.empty() || !o.recordings.empty());
-  core.on_last_connection_closed = [this] { asio::post(core.ioc, [this] { grace.cancel(); }); };
+  // On the acceptor's strand, where Stop arms the timer: a connection's last close on another
+  // I/O thread must not cancel it while Stop is setting it (a race TSan found).
+  core.on_last_connection_closed = [this] { asio::post(acceptor.get_executor(), [this] { grace.cancel(); }); };
   // Bind.
   boost::system::error_code ec;
   const auto address = asio::ip::make_address(o.host, ec);

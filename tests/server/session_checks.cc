@@ -220,6 +220,13 @@ void TestViewer::Read() {
   });
 }
 
+const v1::Envelope* FirstMeshFrame(const std::vector<v1::Envelope>& frames) {
+  for (const v1::Envelope& e : frames) {
+    if (e.has_mesh_keyframe() || e.has_mesh_delta()) return &e;
+  }
+  return nullptr;
+}
+
 double MaxMirrorError(TestViewer& viewer, const std::vector<double>& truth) {
   const std::vector<float> seen = viewer.Positions();
   if (seen.size() != truth.size()) return std::numeric_limits<double>::infinity();

@@ -89,6 +89,10 @@ class TestViewer {
   std::atomic<int> gaps_{0};
 };
 
+// The first mesh frame (keyframe or delta) among a viewer's frames, or nullptr. A relayed
+// viewer's keyframe may come with the samples sent just before it (one Frames message).
+const v1::Envelope* FirstMeshFrame(const std::vector<v1::Envelope>& frames);
+
 // max |mirror - truth| over a viewer's surface (truth: x y z per vertex); infinity when the sizes differ.
 double MaxMirrorError(TestViewer& viewer, const std::vector<double>& truth);
 
