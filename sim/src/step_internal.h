@@ -69,6 +69,29 @@ double FrictionEnergy(const State& state, const ActiveTool& tool, const double c
 // friction fields, the anchor back to State; contact lost clears it.
 void CommitFriction(State& state, Workspace& ws, StepReport* report);
 
+// needle.cc — the straight needle (the model is described there).
+// The command's axis and parameters are valid (a zero axis or a bad parameter is bad input).
+bool ValidNeedleCommand(const ToolCommand& command);
+// In ResolveTools: the unit axis, parameters with their defaults, the State's needle, the tip's
+// faded stiffness, and the inserted shaft's length at the tick's start.
+void ResolveNeedle(const State& state, const ToolState& tool_state, const ToolCommand& command, double dt,
+                   ActiveTool& tool);
+// Some needle is inside the tissue this tick.
+bool NeedleInside(const Workspace& ws);
+// The inserted shaft's far end (the tip is the tool's pos).
+void NeedleShaft(const ActiveTool& tool, double tail[3]);
+// In ToolStiffness: each punctured needle's captured atoms (active atoms near the inserted shaft),
+// their spring stiffness and the axial spring's on the entry atoms into atom_extra_k.
+void BeginNeedles(const State& state, Workspace& ws, StepReport* report);
+// In ToolForces, after the tip's contact loop: the lateral and axial forces of a punctured needle
+// on the atoms' accumulator and eval_force.
+void AddNeedle(const State& state, Workspace& ws, ActiveTool& tool, Real* force, int stride);
+// A punctured needle's lateral and axial-friction potentials at the State's positions.
+double NeedleEnergy(const State& state, const ActiveTool& tool, double dt);
+// After the accepted attempt: puncture (tip axial force above the threshold), axial stick or slip,
+// withdrawal, the tip's fade; the report's needle fields; the needle back to State.
+void CommitNeedles(State& state, Workspace& ws, StepReport* report);
+
 // active_set.cc — stage 2: active atoms (ws.active, copied to State), contact candidates, and
 // the active element list; immobilises atoms that left the window and settled.
 void BuildActiveSet(const Model& model, State& state, Workspace& ws);
