@@ -224,7 +224,7 @@ void BeginNeedles(const State& s, Workspace& ws, StepReport* report) {
         ++report->tools[t].needle_overflow;
         continue;
       }
-      at.needle_atoms[at.num_needle_atoms++] = a;
+      ws.needle_atoms[t][at.num_needle_atoms++] = a;
       // Gershgorin: the spring and the damper (as k + b / T, as friction.cc counts its damper).
       ws.atom_extra_k[a] += k_lat;
     }
@@ -238,7 +238,8 @@ void BeginNeedles(const State& s, Workspace& ws, StepReport* report) {
   }
 }
 
-void AddNeedle(const State& s, Workspace& ws, ActiveTool& at, Real* force, int stride) {
+void AddNeedle(const State& s, Workspace& ws, int32_t t, Real* force, int stride) {
+  ActiveTool& at = ws.tools[t];
   at.eval_axial = at.eval_normal_needle = 0;
   if (!Inside(at)) return;
   const double dt = ws.options.dt_s;
@@ -247,7 +248,7 @@ void AddNeedle(const State& s, Workspace& ws, ActiveTool& at, Real* force, int s
   // Lateral: each captured atom toward the axis, its perpendicular velocity relative to the needle damped.
   double fn = 0;
   for (int32_t i = 0; i < at.num_needle_atoms; ++i) {
-    const int32_t a = at.needle_atoms[i];
+    const int32_t a = ws.needle_atoms[t][i];
     const Real* p = &s.atom_pos[3 * a];
     const Real* v = &s.atom_vel[3 * a];
     const double r[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
@@ -281,11 +282,13 @@ void AddNeedle(const State& s, Workspace& ws, ActiveTool& at, Real* force, int s
   }
 }
 
-double NeedleEnergy(const State& s, const ActiveTool& at, double dt) {
+double NeedleEnergy(const State& s, const Workspace& ws, int32_t t) {
+  const ActiveTool& at = ws.tools[t];
   if (!Inside(at)) return 0;
+  const double dt = ws.options.dt_s;
   double energy = 0, fn = 0;
   for (int32_t i = 0; i < at.num_needle_atoms; ++i) {
-    const Real* p = &s.atom_pos[3 * at.needle_atoms[i]];
+    const Real* p = &s.atom_pos[3 * ws.needle_atoms[t][i]];
     const double r[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
     const Lateral lat = LateralAt(at, r);
     energy += lat.energy;

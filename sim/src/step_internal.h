@@ -85,9 +85,9 @@ void NeedleShaft(const ActiveTool& tool, double tail[3]);
 void BeginNeedles(const State& state, Workspace& ws, StepReport* report);
 // In ToolForces, after the tip's contact loop: the lateral and axial forces of a punctured needle
 // on the atoms' accumulator and eval_force.
-void AddNeedle(const State& state, Workspace& ws, ActiveTool& tool, Real* force, int stride);
+void AddNeedle(const State& state, Workspace& ws, int32_t tool, Real* force, int stride);
 // A punctured needle's lateral and axial-friction potentials at the State's positions.
-double NeedleEnergy(const State& state, const ActiveTool& tool, double dt);
+double NeedleEnergy(const State& state, const Workspace& ws, int32_t tool);
 // After the accepted attempt: puncture (tip axial force above the threshold), axial stick or slip,
 // withdrawal, the tip's fade; the report's needle fields; the needle back to State.
 void CommitNeedles(State& state, Workspace& ws, StepReport* report);

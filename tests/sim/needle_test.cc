@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "alloc_counter.h"
@@ -250,6 +251,33 @@ TEST(Needle, IsDeterministic) {
   EXPECT_EQ(test::HashState(s), test::HashState(snapshot));
   EXPECT_EQ(s.tools[0].needle.axial_offset, snapshot.tools[0].needle.axial_offset);
 }
+
+// Every scheme, and full mode (whose fused pass hands the ticks with a needle inside to the general
+// kernel), gives the same bits twice and takes the needle in.
+class NeedleSchemes : public ::testing::TestWithParam<std::pair<Integrator, bool>> {};
+
+TEST_P(NeedleSchemes, SameInputsSameBits) {
+  const Model model = Hex();
+  StepOptions options;
+  options.integrator = GetParam().first;
+  options.full = GetParam().second;
+  Path path;
+  State a = MakeState(model), b = MakeState(model);
+  Workspace wa = MakeWorkspace(model, options), wb = MakeWorkspace(model, options);
+  const std::vector<Tick> ta = RunNeedle(model, a, wa, path, 0.5), tb = RunNeedle(model, b, wb, path, 0.5);
+  EXPECT_GT(FirstPuncture(ta), 0);
+  EXPECT_EQ(test::HashState(a), test::HashState(b));
+  for (size_t i = 0; i < ta.size(); ++i) {
+    for (int c = 0; c < 3; ++c) ASSERT_EQ(ta[i].force[c], tb[i].force[c]) << i;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Schemes, NeedleSchemes,
+                         ::testing::Values(std::pair{Integrator::kExplicitEuler, false},
+                                           std::pair{Integrator::kSymplecticEuler, false},
+                                           std::pair{Integrator::kRk4, false},
+                                           std::pair{Integrator::kImplicitEuler, false},
+                                           std::pair{Integrator::kSymplecticEuler, true}));
 
 // Inside the tissue the step allocates nothing.
 TEST(Needle, StepAllocatesNothingInside) {

@@ -55,15 +55,14 @@ struct ActiveTool {
   double eval_fn = 0;                   // |contact force|, last evaluation
   double tick_fn = 0;                   // ... weighted over the tick's evaluations
   // Needle (needle.cc): the unit axis, the resolved parameters, and, once punctured, the tick's
-  // entry point, shaft and captured atoms (found at the tick's start, at most kNeedleAtoms, in
-  // active-list order) and what the evaluations found.
+  // entry point, shaft and number of captured atoms (Workspace::needle_atoms) and what the
+  // evaluations found.
   double axis[3] = {0, 0, -1};
   NeedleParams needle;
   NeedleState needle_state;
   double entry_start[3] = {0, 0, 0};  // entry point at the tick's start
   double shaft_len = 0;               // inserted length of shaft the capture runs along, model units
   int32_t num_needle_atoms = 0;
-  std::array<int32_t, kNeedleAtoms> needle_atoms{};
   double eval_axial = 0;          // axial friction force on the atoms (along the axis), last evaluation
   double eval_normal_needle = 0;  // the grip it was bounded by, last evaluation
   double tick_axial = 0;          // ... weighted over the tick's evaluations
@@ -182,6 +181,10 @@ struct Workspace {
 
   std::array<ActiveTool, kMaxTools> tools{};
   int32_t num_tools = 0;
+  // A punctured needle's captured atoms per tool slot, found at the tick's start (active-list
+  // order; the first ActiveTool::num_needle_atoms are meaningful). Kept outside ActiveTool, which
+  // ResolveTools resets every tick, so that a scene without a needle never touches them.
+  std::array<std::array<int32_t, kNeedleAtoms>, kMaxTools> needle_atoms{};
 };
 
 // Sizes everything for `model` and `options` (validated: IDMS_CHECK on nonsense such as
