@@ -98,14 +98,10 @@ constexpr double kMaxTipFadeS = 0.25;
 
 inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-// The entry point: sum of w_i p_i. False when there is none or it is not finite.
+// The entry point (friction.cc's AnchorPoint over the entry atoms). False when there is none or it
+// is not finite.
 bool EntryPoint(const State& s, const NeedleState& ns, double out[3]) {
-  out[0] = out[1] = out[2] = 0;
-  if (ns.entry_atoms[0] < 0) return false;
-  for (int i = 0; i < kAnchorAtoms && ns.entry_atoms[i] >= 0; ++i) {
-    for (int c = 0; c < 3; ++c) out[c] += ns.entry_w[i] * s.atom_pos[3 * ns.entry_atoms[i] + c];
-  }
-  return Finite3(out);
+  return AnchorPoint(s, ns.entry_atoms, ns.entry_w, out) && ns.entry_atoms[0] >= 0;
 }
 
 // The tip's depth past the entry point along the axis (NaN without one).
@@ -324,13 +320,7 @@ void CommitNeedles(State& s, Workspace& ws, StepReport* report) {
       ns.tip_axial = axial;
       if (axial > at.needle.puncture_force && at.strong_atoms[0] >= 0) {
         // Puncture: the entry on the tick's strongest contacts, the needle sticking where it is.
-        double total = 0;
-        for (int i = 0; i < kAnchorAtoms && at.strong_atoms[i] >= 0; ++i) total += at.strong_f[i];
-        for (int i = 0; i < kAnchorAtoms; ++i) {
-          const bool used = at.strong_atoms[i] >= 0 && total > 0;
-          ns.entry_atoms[i] = used ? at.strong_atoms[i] : -1;
-          ns.entry_w[i] = used ? at.strong_f[i] / total : 0.0;
-        }
+        SpreadOverStrongest(at, ns.entry_atoms, ns.entry_w);
         at.needle_state = ns;
         const double depth = Depth(s, at);
         if (std::isfinite(depth)) {

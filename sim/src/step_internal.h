@@ -54,6 +54,12 @@ void ResolveTools(const Model& model, State& state, Workspace& ws, const ToolInp
 void UpdateGrasps(const Model& model, State& state, Workspace& ws, StepReport* report);
 
 // friction.cc — Coulomb friction with stiction (thesis 7.2.4; the law is described there).
+// AnchorPoint: sum of w_i p_i over up to kAnchorAtoms atoms (-1 ends the list); false when it is not
+// finite. The friction anchor, and a needle's entry point.
+bool AnchorPoint(const State& state, const int32_t* atoms, const double* w, double out[3]);
+// SpreadOverStrongest: the tick's strongest contacts with weights by contact force (summing to 1;
+// -1 / 0 in unused slots): a new friction anchor, a needle's entry.
+void SpreadOverStrongest(const ActiveTool& tool, int32_t* atoms, double* w);
 // RankContact: keeps the tool's kAnchorAtoms strongest contacts of the tick (ToolStiffness).
 void RankContact(ActiveTool& tool, int32_t atom, double force);
 // At the tick's start, after the contacts were ranked: anchors a tool that touches and has none,

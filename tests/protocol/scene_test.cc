@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 
 namespace idms {
 namespace {
@@ -218,14 +219,18 @@ TEST(SceneTest, NeedleParametersAreCheckedByField) {
       << error;
   EXPECT_EQ(scene.tools(0).kind(), v1::Tool::KIND_NEEDLE);
   EXPECT_EQ(scene.tools(0).needle().puncture_force(), 2);
-  EXPECT_EQ(LoadError(needle + "  needle { puncture_force: 0 }\n}\n"),
-            "test.scene:6:12: tools[0].needle.puncture_force: must be in (0, inf), got 0");
-  EXPECT_EQ(LoadError(needle + "  needle { length: -1 }\n}\n"),
-            "test.scene:6:12: tools[0].needle.length: must be in (0, inf), got -1");
-  EXPECT_EQ(LoadError(needle + "  needle { axial_friction: nan }\n}\n"),
-            "test.scene:6:12: tools[0].needle.axial_friction: must be in [0, inf), got nan");
-  EXPECT_EQ(LoadError(needle + "  needle { capture_radius: 0 }\n}\n"),
-            "test.scene:6:12: tools[0].needle.capture_radius: must be in (0, inf), got 0");
+  // Each bad value, refused at its own column.
+  const std::pair<const char*, const char*> bad[] = {
+      {"puncture_force: 0", "puncture_force: must be in (0, inf), got 0"},
+      {"length: -1", "length: must be in (0, inf), got -1"},
+      {"axial_friction: nan", "axial_friction: must be in [0, inf), got nan"},
+      {"capture_radius: 0", "capture_radius: must be in (0, inf), got 0"},
+      {"lateral_damping: -1", "lateral_damping: must be in [0, inf), got -1"},
+  };
+  for (const auto& [field, message] : bad) {
+    EXPECT_EQ(LoadError(needle + "  needle { " + field + " }\n}\n"),
+              std::string("test.scene:6:12: tools[0].needle.") + message);
+  }
   EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n  stiffness: 1\n"
                       "  needle { length: 5 }\n}\n"),
             "test.scene:6:3: tools[0].needle: applies to KIND_NEEDLE only");

@@ -12,21 +12,13 @@
 #include <vector>
 
 #include "alloc_counter.h"
-#include "idms/sim/model_io.h"
+#include "idms/sim/generate.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
 #include "step_test_util.h"
 
 namespace idms {
 namespace {
-
-Model Hex() {
-  Model model;
-  LoadError error;
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &model, &error)) << error.ToString();
-  return model;
-}
 
 // Above atom 10 of the hex fragment, (1.5, 1.732, 0): an inner atom of the top surface.
 constexpr double kX = 1.5, kY = 1.732;
@@ -103,10 +95,22 @@ double Step3(const double* a, const double* b) {
   return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
 }
 
+// The hex fragment of thesis figure 3-1 (generated: GenerateSlab's defaults), at rest, stepped in
+// local mode with the default options.
+class NeedleTest : public ::testing::Test {
+ protected:
+  std::vector<Tick> Insert(const Path& path, double puncture_force, double seconds = -1) {
+    return RunNeedle(model_, state_, ws_, path, puncture_force, seconds);
+  }
+  const Model model_ = GenerateSlab(SlabOptions{});
+  State state_ = MakeState(model_);
+  Workspace ws_ = MakeWorkspace(model_, StepOptions{});
+};
+
 // Below the threshold the tip presses like a small MIO and never enters; with the threshold under
 // the force that press reached, the needle enters in the very tick its tip force passes it.
-TEST(Needle, PuncturesOnlyAboveTheThresholdAndWithinTheTick) {
-  const Model model = Hex();
+TEST_F(NeedleTest, PuncturesOnlyAboveTheThresholdAndWithinTheTick) {
+  const Model& model = model_;
   Path press;
   press.z_low = 0.1;  // a press of the surface, not through it
   {
@@ -123,30 +127,23 @@ TEST(Needle, PuncturesOnlyAboveTheThresholdAndWithinTheTick) {
     EXPECT_GT(ticks.back().force[2], 1.0);
     EXPECT_EQ(state.warnings.bad_tool_input, 0);
   }
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
   const double threshold = 0.5;
-  const std::vector<Tick> ticks = RunNeedle(model, state, ws, press, threshold, 1.0);
+  const std::vector<Tick> ticks = Insert(press, threshold, 1.0);
   const int p = FirstPuncture(ticks);
   ASSERT_GT(p, 0);
   EXPECT_GT(ticks[p].report.tip_axial_force, threshold);
   EXPECT_LE(ticks[p - 1].report.tip_axial_force, threshold);
-  EXPECT_EQ(TotalWarnings(state.warnings), 0);
+  EXPECT_EQ(TotalWarnings(state_.warnings), 0);
 }
 
 // Sliding in, the axial friction is mu times the grip and resists the motion; held still, the
-// needle sticks (below mu f_n, no creep of its depth). Without the grip there is nothing to slide
-// against, so the insertion feels no axial drag.
-TEST(Needle, AxialFrictionSlidesAtMuTimesTheGripAndSticksBelowIt) {
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+// needle sticks (below mu f_n, no creep of its depth).
+TEST_F(NeedleTest, AxialFrictionSlidesAtMuTimesTheGripAndSticksBelowIt) {
   Path path;
-  const std::vector<Tick> ticks =
-      RunNeedle(model, state, ws, path, 0.5, (path.z0 - path.z_low) / path.speed + path.hold_s);
+  const std::vector<Tick> ticks = Insert(path, 0.5, (path.z0 - path.z_low) / path.speed + path.hold_s);
   const int p = FirstPuncture(ticks);
   ASSERT_GT(p, 0);
-  const int down_end = static_cast<int>(std::llround((path.z0 - path.z_low) / path.speed / ws.options.dt_s)) - 1;
+  const int down_end = static_cast<int>(std::llround((path.z0 - path.z_low) / path.speed / ws_.options.dt_s)) - 1;
   // Sliding: the last 100 ticks of the insertion.
   int slipping = 0;
   for (int i = down_end - 100; i < down_end; ++i) {
@@ -166,36 +163,30 @@ TEST(Needle, AxialFrictionSlidesAtMuTimesTheGripAndSticksBelowIt) {
   const double depth_mid = ticks[ticks.size() - 100].report.inserted;
   EXPECT_NEAR(held.inserted, depth_mid, 1e-3);
   EXPECT_GT(held.inserted, 0.5);
-  EXPECT_EQ(TotalWarnings(state.warnings), 0);
+  EXPECT_EQ(TotalWarnings(state_.warnings), 0);
 }
 
 // Pulled back out past its entry the needle is free again, and the hand feels nothing once the
 // tip has left the surface.
-TEST(Needle, WithdrawalFreesIt) {
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+TEST_F(NeedleTest, WithdrawalFreesIt) {
   Path path;
-  std::vector<Tick> ticks = RunNeedle(model, state, ws, path, 0.5);
+  std::vector<Tick> ticks = Insert(path, 0.5);
   ASSERT_GT(FirstPuncture(ticks), 0);
   EXPECT_FALSE(ticks.back().report.punctured);
   // Held above the surface a while: no force, tip contact faded back in.
   Path away;
   away.z_low = away.z0 = kTip + 0.3;
-  ticks = RunNeedle(model, state, ws, away, 0.5, 0.3);
+  ticks = Insert(away, 0.5, 0.3);
   EXPECT_FALSE(ticks.back().report.punctured);
   EXPECT_LT(Step3(ticks.back().force, std::array<double, 3>{0, 0, 0}.data()), 1e-9);
-  EXPECT_EQ(state.tools[0].needle.tip_scale, 1.0);
+  EXPECT_EQ(state_.tools[0].needle.tip_scale, 1.0);
 }
 
 // The puncture's give is felt no faster than the press built it: from the puncture on, no
 // per-tick change of the device force exceeds the largest of the press before it.
-TEST(Needle, NoStepInTheDeviceForceAtThePuncture) {
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+TEST_F(NeedleTest, NoStepInTheDeviceForceAtThePuncture) {
   Path path;
-  const std::vector<Tick> ticks = RunNeedle(model, state, ws, path, 0.5, (path.z0 - path.z_low) / path.speed);
+  const std::vector<Tick> ticks = Insert(path, 0.5, (path.z0 - path.z_low) / path.speed);
   const int p = FirstPuncture(ticks);
   ASSERT_GT(p, 0);
   double press_max = 0, after_max = 0;
@@ -205,18 +196,15 @@ TEST(Needle, NoStepInTheDeviceForceAtThePuncture) {
   EXPECT_GT(press_max, 0);
   EXPECT_LE(after_max, press_max) << "press " << press_max << ", after the puncture " << after_max;
   // The tip's give happened: its contact faded out over several ticks.
-  EXPECT_EQ(state.tools[0].needle.tip_scale, 0.0);
-  EXPECT_GT(state.tools[0].needle.tip_ramp, 0.0);
+  EXPECT_EQ(state_.tools[0].needle.tip_scale, 0.0);
+  EXPECT_GT(state_.tools[0].needle.tip_ramp, 0.0);
 }
 
 // The hand feels exactly what the tissue receives: the device force is minus the sum of the
 // needle's forces on the atoms (before the clamps, which this path never reaches).
-TEST(Needle, DeviceForceIsTheTissueReaction) {
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+TEST_F(NeedleTest, DeviceForceIsTheTissueReaction) {
   Path path;
-  const std::vector<Tick> ticks = RunNeedle(model, state, ws, path, 0.5, (path.z0 - path.z_low) / path.speed);
+  const std::vector<Tick> ticks = Insert(path, 0.5, (path.z0 - path.z_low) / path.speed);
   for (const Tick& k : ticks) {
     for (int c = 0; c < 3; ++c) EXPECT_EQ(k.force[c], k.report.force_raw[c]);
   }
@@ -224,8 +212,8 @@ TEST(Needle, DeviceForceIsTheTissueReaction) {
 }
 
 // Same inputs, same bits: twice from rest, and from a snapshot taken inside the tissue.
-TEST(Needle, IsDeterministic) {
-  const Model model = Hex();
+TEST_F(NeedleTest, IsDeterministic) {
+  const Model& model = model_;
   Path path;
   auto run = [&](State& state, Workspace& ws) { return RunNeedle(model, state, ws, path, 0.5); };
   State a = MakeState(model), b = MakeState(model);
@@ -237,8 +225,8 @@ TEST(Needle, IsDeterministic) {
     for (int c = 0; c < 3; ++c) ASSERT_EQ(ta[i].force[c], tb[i].force[c]) << i;
   }
   // A snapshot inside the tissue replays to the same bits in a fresh workspace.
-  State s = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+  State& s = state_;
+  Workspace& ws = ws_;
   const double inside = (path.z0 - path.z_low) / path.speed;
   RunNeedle(model, s, ws, path, 0.5, inside);
   ASSERT_TRUE(s.tools[0].needle.punctured);
@@ -257,7 +245,7 @@ TEST(Needle, IsDeterministic) {
 class NeedleSchemes : public ::testing::TestWithParam<std::pair<Integrator, bool>> {};
 
 TEST_P(NeedleSchemes, SameInputsSameBits) {
-  const Model model = Hex();
+  const Model model = GenerateSlab(SlabOptions{});
   StepOptions options;
   options.integrator = GetParam().first;
   options.full = GetParam().second;
@@ -280,59 +268,56 @@ INSTANTIATE_TEST_SUITE_P(Schemes, NeedleSchemes,
                                            std::pair{Integrator::kSymplecticEuler, true}));
 
 // Inside the tissue the step allocates nothing.
-TEST(Needle, StepAllocatesNothingInside) {
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
+TEST_F(NeedleTest, StepAllocatesNothingInside) {
   Path path;
-  RunNeedle(model, state, ws, path, 0.5, 0.5);
+  Insert(path, 0.5, 0.5);
   ToolInput in;
   in.num_tools = 1;
   const int64_t before = test::AllocationCount();
   for (int i = 0; i < 200; ++i) {
     in.tools[0] = Needle(path.Z(0.5 + i * 1e-3), 0.5);
-    Step(model, state, ws, in);
+    Step(model_, state_, ws_, in);
   }
   EXPECT_EQ(test::AllocationCount(), before);
-  EXPECT_TRUE(state.tools[0].needle.punctured);
+  EXPECT_TRUE(state_.tools[0].needle.punctured);
 }
 
 // Bad parameters: the boundary's check names the field; the step holds the last valid pose.
-TEST(Needle, BadParametersAreRefusedNamingTheField) {
+TEST_F(NeedleTest, BadParametersAreRefusedNamingTheField) {
   std::string error;
   ToolCommand c = Needle(1, 0.5);
   EXPECT_TRUE(ValidateNeedle(c, &error)) << error;
-  c.needle.puncture_force = 0;
-  EXPECT_FALSE(ValidateNeedle(c, &error));
-  EXPECT_EQ(error, "needle.puncture_force must be a finite number > 0, got 0");
-  c = Needle(1, 0.5);
-  c.needle.length = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_FALSE(ValidateNeedle(c, &error));
-  EXPECT_EQ(error, "needle.length must be a finite number > 0, got nan");
-  c = Needle(1, 0.5);
-  c.needle.mu = -0.1;
-  EXPECT_FALSE(ValidateNeedle(c, &error));
-  EXPECT_EQ(error, "needle.mu must be a finite number >= 0, got -0.1");
-  c = Needle(1, 0.5);
-  c.needle.axial_damping = std::numeric_limits<double>::infinity();
-  EXPECT_FALSE(ValidateNeedle(c, &error));
-  EXPECT_EQ(error, "needle.axial_damping must be a finite number (< 0 = axial_stiffness * dt), got inf");
+  struct Bad {
+    double NeedleParams::*field;
+    double value;
+    const char* error;
+  };
+  const Bad bad[] = {
+      {&NeedleParams::puncture_force, 0, "needle.puncture_force must be a finite number > 0, got 0"},
+      {&NeedleParams::length, std::nan(""), "needle.length must be a finite number > 0, got nan"},
+      {&NeedleParams::mu, -0.1, "needle.mu must be a finite number >= 0, got -0.1"},
+      {&NeedleParams::axial_damping, std::numeric_limits<double>::infinity(),
+       "needle.axial_damping must be a finite number (< 0 = axial_stiffness * dt), got inf"},
+  };
+  for (const Bad& b : bad) {
+    c = Needle(1, 0.5);
+    c.needle.*b.field = b.value;
+    EXPECT_FALSE(ValidateNeedle(c, &error));
+    EXPECT_EQ(error, b.error);
+  }
 
   // In the step: a zero axis or a bad parameter is bad input, the last valid pose held.
-  const Model model = Hex();
-  State state = MakeState(model);
-  Workspace ws = MakeWorkspace(model, StepOptions{});
   ToolInput in;
   in.num_tools = 1;
   in.tools[0] = Needle(1, 0.5);
-  Step(model, state, ws, in);
+  Step(model_, state_, ws_, in);
   in.tools[0].axis[2] = 0;
   in.tools[0].pos[2] = 0.5;
-  EXPECT_TRUE(Step(model, state, ws, in).tools[0].input_held);
+  EXPECT_TRUE(Step(model_, state_, ws_, in).tools[0].input_held);
   in.tools[0] = Needle(0.5, std::numeric_limits<double>::quiet_NaN());
-  EXPECT_TRUE(Step(model, state, ws, in).tools[0].input_held);
-  EXPECT_EQ(state.tools[0].pos[2], 1.0);
-  EXPECT_EQ(state.warnings.bad_tool_input, 2);
+  EXPECT_TRUE(Step(model_, state_, ws_, in).tools[0].input_held);
+  EXPECT_EQ(state_.tools[0].pos[2], 1.0);
+  EXPECT_EQ(state_.warnings.bad_tool_input, 2);
 }
 
 }  // namespace
