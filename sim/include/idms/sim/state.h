@@ -46,16 +46,18 @@ constexpr bool IsContactTool(ToolKind kind) {
   return kind == ToolKind::kSphere || kind == ToolKind::kTweezers || kind == ToolKind::kNeedle;
 }
 
-// What a needle slot remembers between ticks (needle.cc). Before puncture only tip_scale matters.
-// Once punctured, the entry point is a weighted mean of surface atoms (the tip's strongest contacts
-// at the puncture), so it rides on the tissue; the needle's depth is the tip's distance past it
+// What a needle slot remembers between ticks (needle.cc). Before puncture, the tip's fade and the
+// press's largest per-tick change. Once punctured, the entry point is a weighted mean of surface atoms (the tip's
+// strongest contacts at the puncture), so it rides on the tissue; the needle's depth is the tip's distance past it
 // along the axis, measured from entry_depth (the depth at the puncture). Axial friction is the
 // Kikuuwe stick/slip of friction.cc in one dimension: the needle sticks where depth =
 // axial_offset, and axial_u is the committed displacement from there.
 struct NeedleState {
   bool punctured = false;
-  double tip_scale = 1;     // the tip contact's stiffness factor: 1 free, ramps to 0 once punctured
-  double tip_ramp = 0;      // tip_scale's change per tick while it ramps, in (0, 1]
+  // The tip contact's stiffness factor: 1 free; once punctured it falls so that the tip's force
+  // drops by at most tip_max_step a tick, and after a withdrawal it rises by tip_ramp a tick.
+  double tip_scale = 1;
+  double tip_ramp = 0;      // in (0, 1]: tip_max_step / the tip force at the puncture, at least dt / 0.25 s
   double tip_max_step = 0;  // largest per-tick change of the tip's axial force while free, force units
   double tip_axial = 0;     // the tip's axial force last tick (on the atoms, along the axis), force units
   int32_t entry_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
