@@ -24,6 +24,7 @@ struct Parts {
   bool prediction = false, energy_check = false, fallback = false, settling = false;
   bool gravity = false, air = false, tweezers = false, scalpel = false;
   bool friction = false;        // Coulomb friction with stiction at the sphere (mu_s 0.6, mu_d 0.4)
+  bool needle = false;          // a straight needle that punctures beside the palpation and stays in
   bool undamped_model = false;  // every element b = 0: no eq. 4.6 filter at all
 };
 
@@ -80,9 +81,30 @@ StageMeans RunOnce(const Model& base, const Parts& parts, double duration_s) {
   int32_t slot = 1;
   const int32_t tweezers = parts.tweezers ? slot++ : -1;
   const int32_t scalpel = parts.scalpel ? slot++ : -1;
+  const int32_t needle = parts.needle ? slot++ : -1;
   in.num_tools = slot;
   if (tweezers >= 0) in.tools[tweezers].kind = ToolKind::kTweezers;
   if (scalpel >= 0) in.tools[scalpel].kind = ToolKind::kScalpel, in.tools[scalpel].blade[2] = -1.0;
+  // The needle goes in over a surface atom on the other side of the palpation (its small tip must
+  // meet an atom: the contact is with atoms, not triangles), punctures within the first second and
+  // is pushed on through the slab.
+  double needle_xy[2] = {0, 0};
+  if (needle >= 0) {
+    ToolCommand& c = in.tools[needle];
+    c.kind = ToolKind::kNeedle;
+    c.radius = 0.25, c.stiffness = 400, c.law = ContactLaw::kLinear;
+    c.needle.puncture_force = 0.3, c.needle.grip = 1, c.needle.capture_radius = 0.7;
+    c.needle.lateral_stiffness = 20, c.needle.axial_stiffness = 100;
+    const double target[2] = {palpate.center[0] - (model.num_atoms > 1000 ? 6.0 : 1.0), palpate.center[1]};
+    double best = 1e300;
+    for (int32_t a = 0; a < model.num_atoms; ++a) {
+      const double dx = model.atom_pos_eq[3 * a] - target[0], dy = model.atom_pos_eq[3 * a + 1] - target[1];
+      if (model.atom_external[a] && !model.atom_fixed[a] && dx * dx + dy * dy < best) {
+        best = dx * dx + dy * dy;
+        needle_xy[0] = model.atom_pos_eq[3 * a], needle_xy[1] = model.atom_pos_eq[3 * a + 1];
+      }
+    }
+  }
 
   const int64_t ticks = static_cast<int64_t>(std::llround(duration_s / options.dt_s));
   std::vector<StepReport> reports(ticks);
@@ -99,6 +121,10 @@ StageMeans RunOnce(const Model& base, const Parts& parts, double duration_s) {
       in.tools[scalpel].pos[0] = palpate.center[0] - 2.0 + 0.5 * t;
       in.tools[scalpel].pos[1] = palpate.center[1] - 1.0;
       in.tools[scalpel].pos[2] = palpate.top_z + 3.0;
+    }
+    if (needle >= 0) {
+      in.tools[needle].pos[0] = needle_xy[0], in.tools[needle].pos[1] = needle_xy[1];
+      in.tools[needle].pos[2] = palpate.top_z + 0.3 - std::min(0.2 * t, 1.2);
     }
     reports[i] = Step(model, state, ws, in);
   }
@@ -153,7 +179,7 @@ int main(int argc, char** argv) {
   }
   Parts all;
   all.prediction = all.energy_check = all.fallback = all.settling = true;
-  all.gravity = all.air = all.tweezers = all.scalpel = all.friction = true;
+  all.gravity = all.air = all.tweezers = all.scalpel = all.friction = all.needle = true;
   auto with = [](auto set) {
     Parts p;
     set(p);
@@ -171,6 +197,7 @@ int main(int argc, char** argv) {
       {"+ tweezers (plucking)", with([](Parts& p) { p.tweezers = true; })},
       {"+ scalpel (hovering)", with([](Parts& p) { p.scalpel = true; })},
       {"+ friction (mu_s 0.6)", with([](Parts& p) { p.friction = true; })},
+      {"+ needle (inserted)", with([](Parts& p) { p.needle = true; })},
       {"everything on", all},
   };
   struct Scene {

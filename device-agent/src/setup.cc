@@ -170,6 +170,9 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
     case v1::Tool::KIND_SCALPEL:
       c.kind = ToolKind::kScalpel;
       break;
+    case v1::Tool::KIND_NEEDLE:
+      c.kind = ToolKind::kNeedle;  // its axis stays -z until the device sample carries an orientation
+      break;
     default:
       c.kind = ToolKind::kSphere;
       break;
@@ -182,6 +185,18 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   c.mu_d = t.has_kinetic_friction() ? t.kinetic_friction() : t.static_friction();
   c.friction_stiffness = t.friction_stiffness();                              // 0 = the tool's stiffness
   c.friction_damping = t.has_friction_damping() ? t.friction_damping() : -1;  // < 0 = k_t dt
+  // The needle's parameters where the scene sets them (the rest: NeedleParams' defaults).
+  const v1::Needle& n = t.needle();
+  NeedleParams& np = c.needle;
+  if (n.has_length()) np.length = n.length();
+  if (n.has_puncture_force()) np.puncture_force = n.puncture_force();
+  if (n.has_axial_friction()) np.mu = n.axial_friction();
+  if (n.has_grip()) np.grip = n.grip();
+  if (n.has_capture_radius()) np.capture_radius = n.capture_radius();
+  if (n.has_lateral_stiffness()) np.lateral_stiffness = n.lateral_stiffness();
+  if (n.has_lateral_damping()) np.lateral_damping = n.lateral_damping();
+  if (n.has_axial_stiffness()) np.axial_stiffness = n.axial_stiffness();
+  if (n.has_axial_damping()) np.axial_damping = n.axial_damping();
   *tool = c;
 
   // Registration: p_model = scale * Rz Ry Rx * p_device + offset.

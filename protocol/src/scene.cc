@@ -115,13 +115,36 @@ bool ValidModelName(const std::string& s) {
   return token_ok(std::string_view(s).substr(0, at)) && token_ok(std::string_view(s).substr(at + 1));
 }
 
+// A needle's parameters in range; a needle message on another kind is refused.
+void CheckNeedle(const v1::Tool& tool, int i, Checker* c) {
+  const auto path = [i](const char* field) {
+    return std::vector<std::pair<std::string, int>>{{"tools", i}, {"needle", -1}, {field, -1}};
+  };
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  if (!tool.has_needle()) return;
+  if (tool.kind() != v1::Tool::KIND_NEEDLE) {
+    c->Fail({{"tools", i}, {"needle", -1}}, "applies to KIND_NEEDLE only");
+    return;
+  }
+  const v1::Needle& n = tool.needle();
+  if (n.has_length()) c->Range(path("length"), n.length(), 0, kInf, true);
+  if (n.has_puncture_force()) c->Range(path("puncture_force"), n.puncture_force(), 0, kInf, true);
+  if (n.has_axial_friction()) c->Range(path("axial_friction"), n.axial_friction(), 0, kInf, false);
+  if (n.has_grip()) c->Range(path("grip"), n.grip(), 0, kInf, false);
+  if (n.has_capture_radius()) c->Range(path("capture_radius"), n.capture_radius(), 0, kInf, true);
+  if (n.has_lateral_stiffness()) c->Range(path("lateral_stiffness"), n.lateral_stiffness(), 0, kInf, true);
+  if (n.has_lateral_damping()) c->Range(path("lateral_damping"), n.lateral_damping(), 0, kInf, false);
+  if (n.has_axial_stiffness()) c->Range(path("axial_stiffness"), n.axial_stiffness(), 0, kInf, true);
+  if (n.has_axial_damping()) c->Range(path("axial_damping"), n.axial_damping(), 0, kInf, false);
+}
+
 void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {
   const auto path = [i](const char* field) {
     return std::vector<std::pair<std::string, int>>{{"tools", i}, {field, -1}};
   };
   constexpr double kInf = std::numeric_limits<double>::infinity();
   if (tool.kind() == v1::Tool::KIND_UNSPECIFIED || !v1::Tool::Kind_IsValid(tool.kind())) {
-    c->Fail(path("kind"), "set kind: KIND_SPHERE, KIND_TWEEZERS or KIND_SCALPEL");
+    c->Fail(path("kind"), "set kind: KIND_SPHERE, KIND_TWEEZERS, KIND_SCALPEL or KIND_NEEDLE");
   }
   if (!tool.has_radius()) c->Fail(path("radius"), "required (model units, > 0)");
   if (!tool.has_stiffness()) c->Fail(path("stiffness"), "required (force / length, > 0)");
@@ -131,7 +154,7 @@ void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {
   // Friction: finite coefficients, 0 <= mu_d <= mu_s, a spring and damper in range.
   const bool friction = tool.has_static_friction() || tool.has_kinetic_friction() || tool.has_friction_stiffness() ||
                         tool.has_friction_damping();
-  if (friction && tool.kind() == v1::Tool::KIND_SCALPEL) {
+  if (friction && (tool.kind() == v1::Tool::KIND_SCALPEL || tool.kind() == v1::Tool::KIND_NEEDLE)) {
     c->Fail(path(tool.has_static_friction() ? "static_friction" : "kinetic_friction"),
             "friction applies to KIND_SPHERE and KIND_TWEEZERS only");
   }
@@ -147,6 +170,7 @@ void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {
   }
   if (tool.has_friction_stiffness()) c->Range(path("friction_stiffness"), tool.friction_stiffness(), 0, kInf, true);
   if (tool.has_friction_damping()) c->Range(path("friction_damping"), tool.friction_damping(), 0, kInf, false);
+  CheckNeedle(tool, i, c);
   if (tool.has_local_radius()) {
     c->Range(path("local_radius"), tool.local_radius(), 0, kInf, true);
     if (!full_simulation && tool.local_radius() < tool.radius()) {

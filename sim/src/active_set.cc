@@ -117,6 +117,12 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
         continue;
       }
       b.QuerySphere(at.pos, std::max(ws.local_radius, at.radius), /*contact=*/true, linger);
+      if (at.kind == ToolKind::kNeedle && at.shaft_len > 0) {
+        // A needle inside: the tissue along its inserted shaft moves too.
+        double tail[3];
+        NeedleShaft(at, tail);
+        b.QuerySegment(tail, at.pos, std::max(ws.local_radius, at.needle.capture_radius), linger);
+      }
       if (at.grasp_atom >= 0) {
         double g[3];
         for (int c = 0; c < 3; ++c) g[c] = s.atom_pos[3 * at.grasp_atom + c];

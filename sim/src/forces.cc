@@ -73,6 +73,7 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
     }
     // Friction (friction.cc) against this evaluation's contact force, before the grasp element.
     if (at.friction != FrictionState::kNone) AddFriction(s, ws, at, force, stride);
+    if (at.kind == ToolKind::kNeedle) AddNeedle(s, ws, t, force, stride);
     if (at.grasp_atom < 0) continue;
     // Grasp element atom -> centre: k (l - l_eq) along s^ (eq. 4.7 with the centre as atom 1).
     const Real* p = &s.atom_pos[3 * at.grasp_atom];
@@ -213,6 +214,7 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
       for (int c = 0; c < 3; ++c) sum[c] += cf.f[c];
     }
     if (at.friction != FrictionState::kNone) *contact += FrictionEnergy(s, at, sum, ws.options.dt_s);
+    if (at.kind == ToolKind::kNeedle) *contact += NeedleEnergy(s, ws, t);
     if (at.grasp_atom >= 0) {
       const Real* p = &s.atom_pos[3 * at.grasp_atom];
       const double dx = at.pos[0] - p[0], dy = at.pos[1] - p[1], dz = at.pos[2] - p[2];

@@ -33,25 +33,8 @@ namespace {
 
 inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-// The anchor point: sum of w_i p_i. False when it is not finite.
-bool AnchorPoint(const State& s, const int32_t* atoms, const double* w, double out[3]) {
-  out[0] = out[1] = out[2] = 0;
-  for (int i = 0; i < kAnchorAtoms && atoms[i] >= 0; ++i) {
-    for (int c = 0; c < 3; ++c) out[c] += w[i] * s.atom_pos[3 * atoms[i] + c];
-  }
-  return Finite3(out);
-}
-
-// The anchor spread over the tick's strongest contacts, weights by contact force.
-void SpreadAnchor(ActiveTool& at) {
-  double total = 0;
-  for (int i = 0; i < kAnchorAtoms && at.strong_atoms[i] >= 0; ++i) total += at.strong_f[i];
-  for (int i = 0; i < kAnchorAtoms; ++i) {
-    const bool used = at.strong_atoms[i] >= 0 && total > 0;
-    at.anchor_atoms[i] = used ? at.strong_atoms[i] : -1;
-    at.anchor_w[i] = used ? at.strong_f[i] / total : 0.0;
-  }
-}
+// The anchor spread over the tick's strongest contacts.
+void SpreadAnchor(ActiveTool& at) { SpreadOverStrongest(at, at.anchor_atoms, at.anchor_w); }
 
 void CopyAnchorTo(const ActiveTool& at, ToolState& ts) {
   std::copy(at.anchor_atoms, at.anchor_atoms + kAnchorAtoms, ts.anchor_atoms);
@@ -111,6 +94,24 @@ FrictionEval Evaluate(const State& s, const ActiveTool& at, const double contact
 }
 
 }  // namespace
+
+bool AnchorPoint(const State& s, const int32_t* atoms, const double* w, double out[3]) {
+  out[0] = out[1] = out[2] = 0;
+  for (int i = 0; i < kAnchorAtoms && atoms[i] >= 0; ++i) {
+    for (int c = 0; c < 3; ++c) out[c] += w[i] * s.atom_pos[3 * atoms[i] + c];
+  }
+  return Finite3(out);
+}
+
+void SpreadOverStrongest(const ActiveTool& at, int32_t* atoms, double* w) {
+  double total = 0;
+  for (int i = 0; i < kAnchorAtoms && at.strong_atoms[i] >= 0; ++i) total += at.strong_f[i];
+  for (int i = 0; i < kAnchorAtoms; ++i) {
+    const bool used = at.strong_atoms[i] >= 0 && total > 0;
+    atoms[i] = used ? at.strong_atoms[i] : -1;
+    w[i] = used ? at.strong_f[i] / total : 0.0;
+  }
+}
 
 void RankContact(ActiveTool& at, int32_t atom, double force) {
   if (!(force > at.strong_f[kAnchorAtoms - 1]) && at.strong_atoms[kAnchorAtoms - 1] >= 0) return;

@@ -62,13 +62,14 @@ void ToolStiffness(State& s, Workspace& ws, StepReport* report) {
   ws.reach_slack = -1;
   double slack = std::numeric_limits<double>::infinity();
   bool grasp_seen[kMaxTools] = {};
-  bool friction = false;
+  bool friction = false, needle = false;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     ActiveTool& at = ws.tools[t];
     if (IsContactTool(at.kind)) slack = std::min(slack, 0.5 * at.radius);
     std::fill(at.strong_atoms, at.strong_atoms + kAnchorAtoms, -1);
     std::fill(at.strong_f, at.strong_f + kAnchorAtoms, 0.0);
     friction = friction || at.mu_s > 0;
+    needle = needle || at.kind == ToolKind::kNeedle;
   }
   if (slack == std::numeric_limits<double>::infinity()) return;  // no contact tool
   const int32_t n = ws.num_candidates;
@@ -93,7 +94,8 @@ void ToolStiffness(State& s, Workspace& ws, StepReport* report) {
       if (!cf.touching) continue;
       ++report->tools[t].contacts;
       if (a != at.grasp_atom) ws.atom_extra_k[a] += cf.stiffness;
-      if (at.mu_s > 0 && a != at.grasp_atom) {
+      // The strongest contacts: friction's anchor, a needle's entry point.
+      if ((at.mu_s > 0 || at.kind == ToolKind::kNeedle) && a != at.grasp_atom) {
         internal::RankContact(at, a, std::sqrt(cf.f[0] * cf.f[0] + cf.f[1] * cf.f[1] + cf.f[2] * cf.f[2]));
       }
     }
@@ -106,6 +108,7 @@ void ToolStiffness(State& s, Workspace& ws, StepReport* report) {
   }
   ws.reach_slack = slack;
   if (friction) internal::BeginFriction(s, ws);
+  if (needle) internal::BeginNeedles(s, ws, report);
 }
 
 // Thesis 4.2 past the 6th-order window: the smallest predicted stable step over active atoms.
@@ -493,10 +496,12 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   report.forces_ns = times.forces_ns;
   report.integrate_ns = times.integrate_ns;
 
-  // 5. Friction's anchors (stick or slip), then the device force.
+  // 5. Friction's anchors (stick or slip), needles (puncture, axial stick or slip, withdrawal),
+  // then the device force.
   {
     StageTimer timer(&report.checks_ns);
     CommitFriction(s, ws, &report);
+    CommitNeedles(s, ws, &report);
     DeviceForces(s, ws, &report);
   }
 

@@ -54,6 +54,12 @@ void ResolveTools(const Model& model, State& state, Workspace& ws, const ToolInp
 void UpdateGrasps(const Model& model, State& state, Workspace& ws, StepReport* report);
 
 // friction.cc — Coulomb friction with stiction (thesis 7.2.4; the law is described there).
+// AnchorPoint: sum of w_i p_i over up to kAnchorAtoms atoms (-1 ends the list); false when it is not
+// finite. The friction anchor, and a needle's entry point.
+bool AnchorPoint(const State& state, const int32_t* atoms, const double* w, double out[3]);
+// SpreadOverStrongest: the tick's strongest contacts with weights by contact force (summing to 1;
+// -1 / 0 in unused slots): a new friction anchor, a needle's entry.
+void SpreadOverStrongest(const ActiveTool& tool, int32_t* atoms, double* w);
 // RankContact: keeps the tool's kAnchorAtoms strongest contacts of the tick (ToolStiffness).
 void RankContact(ActiveTool& tool, int32_t atom, double force);
 // At the tick's start, after the contacts were ranked: anchors a tool that touches and has none,
@@ -68,6 +74,29 @@ double FrictionEnergy(const State& state, const ActiveTool& tool, const double c
 // After the accepted attempt: stick or slip (the anchor dragged), re-spread, the report's
 // friction fields, the anchor back to State; contact lost clears it.
 void CommitFriction(State& state, Workspace& ws, StepReport* report);
+
+// needle.cc — the straight needle (the model is described there).
+// The command's axis and parameters are valid (a zero axis or a bad parameter is bad input).
+bool ValidNeedleCommand(const ToolCommand& command);
+// In ResolveTools: the unit axis, parameters with their defaults, the State's needle, the tip's
+// faded stiffness, and the inserted shaft's length at the tick's start.
+void ResolveNeedle(const State& state, const ToolState& tool_state, const ToolCommand& command, double dt,
+                   ActiveTool& tool);
+// Some needle is inside the tissue this tick.
+bool NeedleInside(const Workspace& ws);
+// The inserted shaft's far end (the tip is the tool's pos).
+void NeedleShaft(const ActiveTool& tool, double tail[3]);
+// In ToolStiffness: each punctured needle's captured atoms (active atoms near the inserted shaft),
+// their spring stiffness and the axial spring's on the entry atoms into atom_extra_k.
+void BeginNeedles(const State& state, Workspace& ws, StepReport* report);
+// In ToolForces, after the tip's contact loop: the lateral and axial forces of a punctured needle
+// on the atoms' accumulator and eval_force.
+void AddNeedle(const State& state, Workspace& ws, int32_t tool, Real* force, int stride);
+// A punctured needle's lateral and axial-friction potentials at the State's positions.
+double NeedleEnergy(const State& state, const Workspace& ws, int32_t tool);
+// After the accepted attempt: puncture (tip axial force above the threshold), axial stick or slip,
+// withdrawal, the tip's fade; the report's needle fields; the needle back to State.
+void CommitNeedles(State& state, Workspace& ws, StepReport* report);
 
 // active_set.cc — stage 2: active atoms (ws.active, copied to State), contact candidates, and
 // the active element list; immobilises atoms that left the window and settled.

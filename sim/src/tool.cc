@@ -130,6 +130,7 @@ bool FrictionValid(const ToolCommand& c) {
 bool ValidCommand(const ToolCommand& c) {
   if (!Finite3(c.pos)) return false;
   if (c.kind == ToolKind::kScalpel) return Finite3(c.blade);
+  if (c.kind == ToolKind::kNeedle && !ValidNeedleCommand(c)) return false;
   return std::isfinite(c.radius) && c.radius > 0 && std::isfinite(c.stiffness) && c.stiffness >= 0;
 }
 
@@ -203,7 +204,8 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       for (int c = 0; c < 3; ++c) ts.pos[c] = cmd->pos[c], ts.blade_tip[c] = cmd->pos[c] + cmd->blade[c];
       ts.radius = cmd->radius;
       ts.stiffness = cmd->stiffness;
-      if (ts.kind != cmd->kind) ts.grasp_atom = -1;
+      if (ts.kind != cmd->kind) ts.grasp_atom = -1, ts.needle = NeedleState{};
+      std::copy(cmd->axis, cmd->axis + 3, ts.axis);
       ts.kind = cmd->kind;
       ts.has_pos = true;
     } else {
@@ -236,6 +238,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       ts.friction = FrictionState::kNone;  // friction switched off: forget the anchor
       std::fill(ts.anchor_atoms, ts.anchor_atoms + kAnchorAtoms, -1);
     }
+    if (at.kind == ToolKind::kNeedle) ResolveNeedle(s, ts, *cmd, ws.options.dt_s, at);
     // Scalpel: the quad swept since the last tick (thesis 3.2.6: slicing removes elements).
     if (at.kind == ToolKind::kScalpel && had_scalpel) {
       report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.pos, at.blade_tip);

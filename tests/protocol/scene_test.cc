@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 
 namespace idms {
 namespace {
@@ -122,7 +123,7 @@ TEST(Scene, BadValuesNameTheFieldAndWhere) {
   EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n}\n"),
             "test.scene:2:1: tools[0].stiffness: required (force / length, > 0)");
   EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  radius: 1\n  stiffness: 1\n}\n"),
-            "test.scene:2:1: tools[0].kind: set kind: KIND_SPHERE, KIND_TWEEZERS or KIND_SCALPEL");
+            "test.scene:2:1: tools[0].kind: set kind: KIND_SPHERE, KIND_TWEEZERS, KIND_SCALPEL or KIND_NEEDLE");
   EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 2\n"
                       "  stiffness: 1\n  local_radius: 1\n}\n"),
             "test.scene:6:3: tools[0].local_radius: must be >= radius (2) so that contact atoms "
@@ -205,6 +206,36 @@ TEST(Scene, FrictionIsValidatedAndDefaulted) {
   ASSERT_TRUE(LoadSceneText(kMinimal, "m.scene", &scene, &error)) << error;
   EXPECT_FALSE(scene.tools(0).has_static_friction());
   EXPECT_FALSE(scene.tools(0).has_friction_damping());
+}
+
+// Issue 32: a needle's parameters are checked, each refusal naming the field; a needle message on
+// another kind and friction on a needle are refused.
+TEST(SceneTest, NeedleParametersAreCheckedByField) {
+  const std::string needle = "model: \"hex\"\ntools {\n  kind: KIND_NEEDLE\n  radius: 0.2\n  stiffness: 400\n";
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(needle + "  needle { length: 8 puncture_force: 2 axial_friction: 0.4 grip: 1 }\n}\n",
+                            "n.scene", &scene, &error))
+      << error;
+  EXPECT_EQ(scene.tools(0).kind(), v1::Tool::KIND_NEEDLE);
+  EXPECT_EQ(scene.tools(0).needle().puncture_force(), 2);
+  // Each bad value, refused at its own column.
+  const std::pair<const char*, const char*> bad[] = {
+      {"puncture_force: 0", "puncture_force: must be in (0, inf), got 0"},
+      {"length: -1", "length: must be in (0, inf), got -1"},
+      {"axial_friction: nan", "axial_friction: must be in [0, inf), got nan"},
+      {"capture_radius: 0", "capture_radius: must be in (0, inf), got 0"},
+      {"lateral_damping: -1", "lateral_damping: must be in [0, inf), got -1"},
+  };
+  for (const auto& [field, message] : bad) {
+    EXPECT_EQ(LoadError(needle + "  needle { " + field + " }\n}\n"),
+              std::string("test.scene:6:12: tools[0].needle.") + message);
+  }
+  EXPECT_EQ(LoadError("model: \"hex\"\ntools {\n  kind: KIND_SPHERE\n  radius: 1\n  stiffness: 1\n"
+                      "  needle { length: 5 }\n}\n"),
+            "test.scene:6:3: tools[0].needle: applies to KIND_NEEDLE only");
+  EXPECT_EQ(LoadError(needle + "  static_friction: 0.5\n}\n"),
+            "test.scene:6:3: tools[0].static_friction: friction applies to KIND_SPHERE and KIND_TWEEZERS only");
 }
 
 }  // namespace

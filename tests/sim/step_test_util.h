@@ -78,6 +78,16 @@ inline uint64_t HashState(const State& s) {
   mix(&s.tick, sizeof(s.tick));
   mix(&s.time_s, sizeof(s.time_s));
   for (const ToolState& t : s.tools) mix(t.force, sizeof(t.force)), mix(&t.grasp_atom, sizeof(t.grasp_atom));
+  // A needle's puncture, entry and axial friction (needle.cc).
+  for (const ToolState& t : s.tools) {
+    const NeedleState& n = t.needle;
+    const double values[] = {n.tip_scale,   n.tip_ramp,     n.tip_max_step, n.tip_axial,
+                             n.entry_depth, n.axial_offset, n.axial_u};
+    mix(values, sizeof(values));
+    mix(n.entry_atoms, sizeof(n.entry_atoms)), mix(n.entry_w, sizeof(n.entry_w));
+    const uint8_t flags[2] = {static_cast<uint8_t>(n.punctured), static_cast<uint8_t>(n.axial)};
+    mix(flags, sizeof(flags));
+  }
   for (const WarningKind& k : WarningKinds(s.warnings)) mix(&k.count, sizeof(k.count));  // every counter
   return h;
 }

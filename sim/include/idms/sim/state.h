@@ -28,6 +28,8 @@ enum class ToolKind : uint8_t {
   kSphere,    // fingertip MIO: penalty contact with external atoms
   kTweezers,  // a sphere that grasps the nearest contact atom while closed
   kScalpel,   // a blade segment that cuts the elements its swept path crosses; no contact force
+  kNeedle,    // a rigid straight needle: its tip presses like a small sphere MIO until it punctures
+              // (needle.cc), then the shaft holds the tissue laterally and slides against axial friction
 };
 
 // Friction at a contact tool (thesis 7.2.4): none (no friction, or no contact), sticking to its
@@ -37,9 +39,34 @@ enum class FrictionState : uint8_t { kNone, kStick, kSlip };
 // Atoms a friction anchor is spread over: the tool's strongest contacts when it was placed.
 inline constexpr int kAnchorAtoms = 4;
 
-// Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip
-// and the tweezers); the scalpel only cuts.
-constexpr bool IsContactTool(ToolKind kind) { return kind == ToolKind::kSphere || kind == ToolKind::kTweezers; }
+// Whether a tool of this kind presses on atoms with the contact law (a sphere MIO: the fingertip,
+// the tweezers, and the needle's tip, whose stiffness fades out once it has punctured); the
+// scalpel only cuts.
+constexpr bool IsContactTool(ToolKind kind) {
+  return kind == ToolKind::kSphere || kind == ToolKind::kTweezers || kind == ToolKind::kNeedle;
+}
+
+// What a needle slot remembers between ticks (needle.cc). Before puncture, the tip's fade and the
+// press's largest per-tick change. Once punctured, the entry point is a weighted mean of surface atoms (the tip's
+// strongest contacts at the puncture), so it rides on the tissue; the needle's depth is the tip's distance past it
+// along the axis, measured from entry_depth (the depth at the puncture). Axial friction is the
+// Kikuuwe stick/slip of friction.cc in one dimension: the needle sticks where depth =
+// axial_offset, and axial_u is the committed displacement from there.
+struct NeedleState {
+  bool punctured = false;
+  // The tip contact's stiffness factor: 1 free; once punctured it falls so that the tip's force
+  // drops by at most tip_max_step a tick, and after a withdrawal it rises by tip_ramp a tick.
+  double tip_scale = 1;
+  double tip_ramp = 0;      // in (0, 1]: tip_max_step / the tip force at the puncture, at least dt / 0.25 s
+  double tip_max_step = 0;  // largest per-tick change of the tip's axial force while free, force units
+  double tip_axial = 0;     // the tip's axial force last tick (on the atoms, along the axis), force units
+  int32_t entry_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
+  double entry_w[kAnchorAtoms] = {0, 0, 0, 0};
+  double entry_depth = 0;   // model units: depth at the puncture (the inserted length is depth - it)
+  double axial_offset = 0;  // model units: the depth where the needle sticks
+  double axial_u = 0;       // model units: committed axial displacement from the sticking depth
+  FrictionState axial = FrictionState::kNone;
+};
 
 // What a tool slot remembers between ticks (thesis table 5.1 plus the tweezers of 6.1.3).
 struct ToolState {
@@ -70,6 +97,8 @@ struct ToolState {
   double anchor_offset[3] = {0, 0, 0};  // model units: centre - anchor point when sticking
   double friction_u[3] = {0, 0, 0};     // model units, committed at the end of the last tick
   FrictionState friction = FrictionState::kNone;
+  double axis[3] = {0, 0, -1};  // needle: last valid unit axis, tail -> tip
+  NeedleState needle;
 };
 
 // Counted numerical events (STYLE: numerical trouble is a counted warning and a safe fallback).

@@ -131,6 +131,20 @@ struct ToolReport {
   double normal_force = 0;               // force units
   double friction_work = 0;              // force * length
   FrictionState friction = FrictionState::kNone;
+  // Needle (needle.cc): punctured after this tick; the inserted length (depth past the entry
+  // point), model units; the tip's axial force on the tissue (tick average, force units; what the
+  // puncture threshold is compared with); the axial friction force on the device along the axis
+  // (negative while the needle slides in: it resists) and the grip normal force it was bounded by
+  // (the last evaluation's); the atoms the shaft held, and
+  // how many near it were left free (more than kNeedleAtoms). All 0 / false without a needle.
+  bool punctured = false;
+  double inserted = 0;
+  double tip_axial_force = 0;
+  double axial_force = 0;
+  double needle_normal = 0;
+  FrictionState axial = FrictionState::kNone;
+  int32_t needle_atoms = 0;
+  int32_t needle_overflow = 0;
 };
 
 struct StepReport {

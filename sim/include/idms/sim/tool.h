@@ -19,6 +19,25 @@ enum class ContactLaw : uint8_t {
 // One device's sample for one tick, in the model frame (after registration, thesis 5.3).
 // Non-finite or negative values are not an error: the step holds the last valid pose and counts
 // a warning (validate at the boundary; this is the last line of defence).
+// A straight needle's parameters (needle.cc). The tip is a sphere MIO of the tool's radius and
+// stiffness until the axial force it puts on the tissue exceeds puncture_force; then the shaft
+// holds the atoms near it laterally and slides along its axis against Coulomb friction whose
+// normal force is the tissue's grip: grip per unit of inserted length (Okamura et al. 2004: needle
+// friction grows with the inserted length) plus the lateral forces' magnitudes. A circular-arc
+// needle would add a radius of curvature here (not built: the shaft would be an arc about a centre
+// in the needle's plane, the capture a distance to that arc).
+struct NeedleParams {
+  double length = 10;            // model units, > 0: the shaft runs from tip - length * axis to the tip
+  double puncture_force = 1;     // force units, > 0: axial tip force at which the surface yields
+  double mu = 0.5;               // >= 0: axial Coulomb coefficient (stick and slip alike)
+  double grip = 0;               // force / length, >= 0: the tissue's clamping force per inserted length
+  double capture_radius = 0;     // model units, >= 0 (0 = 2 x the tip radius): atoms this near the shaft follow it
+  double lateral_stiffness = 0;  // force / length, >= 0 (0 = the tool's stiffness)
+  double lateral_damping = -1;   // force / (length / s) (< 0 = lateral_stiffness * dt)
+  double axial_stiffness = 0;    // force / length, >= 0 (0 = the tool's stiffness): the stick spring
+  double axial_damping = -1;     // force / (length / s) (< 0 = axial_stiffness * dt)
+};
+
 struct ToolCommand {
   ToolKind kind = ToolKind::kNone;
   double pos[3] = {0, 0, 0};  // device endpoint = MIO centre (sphere, tweezers) or blade base
@@ -36,7 +55,15 @@ struct ToolCommand {
   double mu_d = 0;
   double friction_stiffness = 0;
   double friction_damping = -1;
+  // Needle: pos is the tip, axis its unit direction from tail to tip (normalised by the step; zero
+  // or non-finite is bad input), radius and stiffness the tip's sphere MIO.
+  double axis[3] = {0, 0, -1};
+  NeedleParams needle;
 };
+
+// The needle's parameters as a boundary checks them (finite, in range). False with *error naming
+// the field ("needle.puncture_force must be a finite number > 0, got 0").
+bool ValidateNeedle(const ToolCommand& tool, std::string* error);
 
 // One item of a friction spec on a command line ("mu_s=0.6", "mu_d", "k_t", "b_t") into the
 // tool; false when the key is not one of them or the value is not a finite number.

@@ -18,6 +18,10 @@ namespace idms {
 
 struct Model;
 
+// Atoms a punctured needle's shaft can hold laterally at once (more are left free this tick and
+// counted in ToolReport::needle_overflow).
+inline constexpr int kNeedleAtoms = 256;
+
 // A tool slot as this tick uses it: validated input plus what State remembers (grasp). The
 // fields it shares with ToolCommand, ToolState and ToolReport have the same names there.
 struct ActiveTool {
@@ -50,6 +54,19 @@ struct ActiveTool {
   double eval_normal[3] = {0, 0, 0};    // unit contact normal (surface -> tool), last evaluation
   double eval_fn = 0;                   // |contact force|, last evaluation
   double tick_fn = 0;                   // ... weighted over the tick's evaluations
+  // Needle (needle.cc): the unit axis, the resolved parameters, and, once punctured, the tick's
+  // entry point, shaft and number of captured atoms (Workspace::needle_atoms) and what the
+  // evaluations found.
+  double axis[3] = {0, 0, -1};
+  NeedleParams needle;
+  NeedleState needle_state;
+  double entry_start[3] = {0, 0, 0};  // entry point at the tick's start
+  double shaft_len = 0;               // inserted length of shaft the capture runs along, model units
+  int32_t num_needle_atoms = 0;
+  double eval_axial = 0;          // axial friction force on the atoms (along the axis), last evaluation
+  double eval_normal_needle = 0;  // the grip it was bounded by, last evaluation
+  double tick_axial = 0;          // ... weighted over the tick's evaluations
+  double tick_normal_needle = 0;
 };
 
 // Linearised backward Euler on the active set: a row-major CSR matrix (viewed by Eigen through
@@ -164,6 +181,10 @@ struct Workspace {
 
   std::array<ActiveTool, kMaxTools> tools{};
   int32_t num_tools = 0;
+  // A punctured needle's captured atoms per tool slot, found at the tick's start (active-list
+  // order; the first ActiveTool::num_needle_atoms are meaningful). Kept outside ActiveTool, which
+  // ResolveTools resets every tick, so that a scene without a needle never touches them.
+  std::array<std::array<int32_t, kNeedleAtoms>, kMaxTools> needle_atoms{};
 };
 
 // Sizes everything for `model` and `options` (validated: IDMS_CHECK on nonsense such as

@@ -1,0 +1,375 @@
+// The straight needle (thesis 7.2.4, "piercing"; issue 32): a sphere MIO at the tip until the
+// tissue yields, then a shaft that holds the atoms near it laterally and slides along its own axis
+// against Coulomb friction.
+//
+// Puncture: at the end of a tick, the tip's axial force on the tissue (the sphere contact's sum
+// along the axis) is compared with the puncture threshold; above it the needle enters. The entry
+// point is anchored to the tip's strongest contact atoms (weights by contact force), so it rides
+// on the deforming surface. The tip contact does not vanish at once: its stiffness fades so that
+// its force falls by at most the largest per-tick change of the tip force seen while pressing (the
+// give is felt no faster than a tick of the contact that built it), and fades back in after
+// withdrawal (over the same number of ticks, at most kMaxTipFadeS).
+//
+// Inside: each active atom within the capture radius of the inserted shaft (between the entry
+// depth and the tip) is pulled toward the axis by k (1 - d / r_c) d_perp plus a damper on its
+// velocity relative to the needle, scaled by the same factor: zero at the capture radius, so an
+// atom joins or leaves without a step; and faded in over the tip radius behind the tip, so the
+// advancing tip picks atoms up without a step either. Rejected: a hard constraint to the shaft
+// (a jump when an atom is captured, and a stiffness the explicit schemes cannot bound).
+//
+// Axial friction is friction.cc's Kikuuwe et al. (2006) law in one dimension: a spring k_a and
+// damper b_a between the needle's depth past the entry point and a sticking depth, the force
+// bounded by mu f_n, the sticking depth dragged when it slips. f_n is the tissue's grip on the
+// shaft: grip times the inserted length plus the lateral springs' magnitudes. The friction acts on
+// the entry atoms with their weights (rejected for now: spreading it along the captured atoms,
+// which change every tick, so its anchor would have to be re-spread like friction.cc's slip),
+// and its opposite on the device, so the hand feels what the tissue receives.
+//
+// Withdrawal: when the tip comes back behind the depth it punctured at, the needle is free (the tip
+// contact fades back in; entering again takes the threshold again).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "idms/sim/model.h"
+#include "idms/sim/tool.h"
+#include "idms/sim/workspace.h"
+#include "step_internal.h"
+
+namespace idms {
+
+namespace {
+
+// The first needle parameter out of range, with what it must be, or null: no allocation, so the
+// step can ask it too.
+struct NeedleRule {
+  const char* field;
+  const char* expected;
+};
+const NeedleRule* BadNeedleField(const NeedleParams& n, double* value) {
+  static constexpr NeedleRule kRules[] = {
+      {"length", "a finite number > 0"},
+      {"puncture_force", "a finite number > 0"},
+      {"mu", "a finite number >= 0"},
+      {"grip", "a finite number >= 0"},
+      {"capture_radius", "a finite number >= 0 (0 = 2 x the tip radius)"},
+      {"lateral_stiffness", "a finite number >= 0 (0 = the tool's stiffness)"},
+      {"lateral_damping", "a finite number (< 0 = lateral_stiffness * dt)"},
+      {"axial_stiffness", "a finite number >= 0 (0 = the tool's stiffness)"},
+      {"axial_damping", "a finite number (< 0 = axial_stiffness * dt)"},
+  };
+  // Lower bounds in the order of kRules: > 0, >= 0, or any finite value.
+  enum Bound { kPositive, kNonNegative, kAny };
+  const double values[] = {
+      n.length,          n.puncture_force,  n.mu,           n.grip, n.capture_radius, n.lateral_stiffness,
+      n.lateral_damping, n.axial_stiffness, n.axial_damping};
+  const Bound bounds[] = {kPositive,    kPositive, kNonNegative, kNonNegative, kNonNegative,
+                          kNonNegative, kAny,      kNonNegative, kAny};
+  for (int i = 0; i < 9; ++i) {
+    const double v = values[i];
+    const bool ok = std::isfinite(v) && (bounds[i] == kAny || (bounds[i] == kPositive ? v > 0 : v >= 0));
+    if (!ok) {
+      *value = v;
+      return &kRules[i];
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+bool ValidateNeedle(const ToolCommand& t, std::string* error) {
+  double v = 0;
+  const NeedleRule* bad = BadNeedleField(t.needle, &v);
+  if (bad == nullptr) return true;
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  *error = std::string("needle.") + bad->field + " must be " + bad->expected + ", got " + buf;
+  return false;
+}
+
+namespace internal {
+namespace {
+
+// The largest time the tip contact takes to fade out after a puncture (or back in after a
+// withdrawal), s: a bound for a press so slow that its per-tick change is tiny.
+constexpr double kMaxTipFadeS = 0.25;
+
+inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// The entry point (friction.cc's AnchorPoint over the entry atoms). False when there is none or it
+// is not finite.
+bool EntryPoint(const State& s, const NeedleState& ns, double out[3]) {
+  return AnchorPoint(s, ns.entry_atoms, ns.entry_w, out) && ns.entry_atoms[0] >= 0;
+}
+
+// The tip's depth past the entry point along the axis (NaN without one).
+double Depth(const State& s, const ActiveTool& at) {
+  double e[3];
+  if (!EntryPoint(s, at.needle_state, e)) return std::nan("");
+  const double r[3] = {at.pos[0] - e[0], at.pos[1] - e[1], at.pos[2] - e[2]};
+  return Dot3(r, at.axis);
+}
+
+// The lateral pull on one atom at offset r from the tip: the factor w (1 - d / r_c) of the spring
+// and damper (0 outside the capture), the perpendicular offset, and its potential.
+struct Lateral {
+  double scale = 0;  // w (1 - d / r_c), or 0 when not captured
+  double perp[3] = {0, 0, 0};
+  double energy = 0;
+};
+
+Lateral LateralAt(const ActiveTool& at, const double r[3]) {
+  Lateral out;
+  const double along = Dot3(r, at.axis);
+  if (!(along < 0 && along > -at.shaft_len)) return out;
+  for (int c = 0; c < 3; ++c) out.perp[c] = r[c] - along * at.axis[c];
+  const double d = std::sqrt(Dot3(out.perp, out.perp));
+  const double rc = at.needle.capture_radius;
+  if (!(d < rc)) return out;
+  const double w = std::min(1.0, -along / at.radius);
+  out.scale = w * (1 - d / rc);
+  // The potential of k (1 - d / r_c) d along d^ (w held: its gradient along the axis is left out).
+  out.energy = w * at.needle.lateral_stiffness * (0.5 * d * d - d * d * d / (3 * rc));
+  return out;
+}
+
+// Axial friction at the State's positions given the grip f_n (friction.cc's Evaluate, in 1-D).
+struct AxialEval {
+  bool active = false;
+  double u = 0, fstar = 0, limit = 0, f = 0, energy = 0;
+};
+
+AxialEval EvaluateAxial(const State& s, const ActiveTool& at, double fn, double dt) {
+  AxialEval out;
+  const NeedleState& ns = at.needle_state;
+  const double depth = Depth(s, at);
+  if (!std::isfinite(depth) || !std::isfinite(fn)) return out;
+  out.active = true;
+  const double damp = at.needle.axial_damping / dt, keff = at.needle.axial_stiffness + damp;
+  out.u = depth - ns.axial_offset;
+  out.fstar = keff * out.u - damp * ns.axial_u;
+  out.limit = at.needle.mu * fn;
+  const double mag = std::fabs(out.fstar);
+  out.f = mag > out.limit ? std::copysign(out.limit, out.fstar) : out.fstar;
+  out.energy = mag <= out.limit ? 0.5 * mag * mag / keff : (out.limit * mag - 0.5 * out.limit * out.limit) / keff;
+  return out;
+}
+
+bool Inside(const ActiveTool& at) { return at.kind == ToolKind::kNeedle && at.needle_state.punctured; }
+
+}  // namespace
+
+bool ValidNeedleCommand(const ToolCommand& c) {
+  double unused = 0;
+  const double n2 = Dot3(c.axis, c.axis);
+  return Finite3(c.axis) && n2 > 1e-24 && std::isfinite(n2) && BadNeedleField(c.needle, &unused) == nullptr;
+}
+
+void ResolveNeedle(const State& s, const ToolState& ts, const ToolCommand& cmd, double dt, ActiveTool& at) {
+  // The axis is the last valid one (ResolveTools holds it with the pose).
+  const double n = std::sqrt(Dot3(ts.axis, ts.axis));
+  for (int c = 0; c < 3; ++c) at.axis[c] = ts.axis[c] / n;
+  // Defaults: the tool's stiffness for the springs, k dt for their dampers, 2 r for the capture.
+  NeedleParams p = cmd.needle;
+  double unused = 0;
+  if (BadNeedleField(p, &unused) != nullptr) p = NeedleParams{};  // held input: the defaults
+  if (!(p.capture_radius > 0)) p.capture_radius = 2 * at.radius;
+  if (!(p.lateral_stiffness > 0)) p.lateral_stiffness = ts.stiffness;
+  if (p.lateral_damping < 0) p.lateral_damping = p.lateral_stiffness * dt;
+  if (!(p.axial_stiffness > 0)) p.axial_stiffness = ts.stiffness;
+  if (p.axial_damping < 0) p.axial_damping = p.axial_stiffness * dt;
+  at.needle = p;
+  at.needle_state = ts.needle;
+  // The tip's sphere contact, faded by the puncture.
+  at.stiffness = ts.stiffness * ts.needle.tip_scale;
+  // Inside: the inserted shaft, from the entry depth (at most the needle's length) to the tip.
+  at.shaft_len = 0;
+  if (at.needle_state.punctured && EntryPoint(s, at.needle_state, at.entry_start)) {
+    const double depth = Depth(s, at);
+    at.shaft_len = std::clamp(depth - at.needle_state.entry_depth, 0.0, p.length);
+  }
+}
+
+bool NeedleInside(const Workspace& ws) {
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    if (Inside(ws.tools[t])) return true;
+  }
+  return false;
+}
+
+void NeedleShaft(const ActiveTool& at, double tail[3]) {
+  for (int c = 0; c < 3; ++c) tail[c] = at.pos[c] - at.shaft_len * at.axis[c];
+}
+
+void BeginNeedles(const State& s, Workspace& ws, StepReport* report) {
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    ActiveTool& at = ws.tools[t];
+    at.num_needle_atoms = 0;
+    if (!Inside(at)) continue;
+    // The captured atoms: active atoms in reach of the inserted shaft, in active-list order.
+    const double k_lat = at.needle.lateral_stiffness + at.needle.lateral_damping / ws.options.dt_s;
+    for (int32_t i = 0; i < ws.num_active; ++i) {
+      const int32_t a = ws.active[i];
+      const Real* p = &s.atom_pos[3 * a];
+      const double r[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      const Lateral lat = LateralAt(at, r);
+      if (!(lat.scale > 0)) continue;
+      if (at.num_needle_atoms == kNeedleAtoms) {
+        ++report->tools[t].needle_overflow;
+        continue;
+      }
+      ws.needle_atoms[t][at.num_needle_atoms++] = a;
+      // Gershgorin: the spring and the damper (as k + b / T, as friction.cc counts its damper).
+      ws.atom_extra_k[a] += k_lat;
+    }
+    // The axial spring on the entry atoms.
+    const double k_ax = at.needle.axial_stiffness + at.needle.axial_damping / ws.options.dt_s;
+    const NeedleState& ns = at.needle_state;
+    for (int i = 0; i < kAnchorAtoms && ns.entry_atoms[i] >= 0; ++i) {
+      if (ws.atom_mark[ns.entry_atoms[i]] == 1) ws.atom_extra_k[ns.entry_atoms[i]] += ns.entry_w[i] * k_ax;
+    }
+    report->tools[t].needle_atoms = at.num_needle_atoms;
+  }
+}
+
+void AddNeedle(const State& s, Workspace& ws, int32_t t, Real* force, int stride) {
+  ActiveTool& at = ws.tools[t];
+  at.eval_axial = at.eval_normal_needle = 0;
+  if (!Inside(at)) return;
+  const double dt = ws.options.dt_s;
+  double vn[3];
+  for (int c = 0; c < 3; ++c) vn[c] = (at.pos[c] - at.prev_pos[c]) / dt;
+  // Lateral: each captured atom toward the axis, its perpendicular velocity relative to the needle damped.
+  double fn = 0;
+  for (int32_t i = 0; i < at.num_needle_atoms; ++i) {
+    const int32_t a = ws.needle_atoms[t][i];
+    const Real* p = &s.atom_pos[3 * a];
+    const Real* v = &s.atom_vel[3 * a];
+    const double r[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+    const Lateral lat = LateralAt(at, r);
+    if (!(lat.scale > 0)) continue;
+    double dv[3] = {v[0] - vn[0], v[1] - vn[1], v[2] - vn[2]};
+    const double dv_along = Dot3(dv, at.axis);
+    double f[3];
+    for (int c = 0; c < 3; ++c) {
+      dv[c] -= dv_along * at.axis[c];
+      f[c] = -lat.scale * (at.needle.lateral_stiffness * lat.perp[c] + at.needle.lateral_damping * dv[c]);
+    }
+    fn += lat.scale * at.needle.lateral_stiffness * std::sqrt(Dot3(lat.perp, lat.perp));
+    for (int c = 0; c < 3; ++c) at.eval_force[c] += f[c];
+    if (ws.atom_mark[a]) {
+      for (int c = 0; c < 3; ++c) force[stride * a + c] += static_cast<Real>(f[c]);
+    }
+  }
+  // Axial friction against the grip: on the entry atoms with their weights.
+  fn += at.needle.grip * at.shaft_len;
+  const AxialEval ax = EvaluateAxial(s, at, fn, dt);
+  at.eval_normal_needle = fn;
+  if (!ax.active) return;
+  at.eval_axial = ax.f;
+  for (int c = 0; c < 3; ++c) at.eval_force[c] += ax.f * at.axis[c];
+  const NeedleState& ns = at.needle_state;
+  for (int i = 0; i < kAnchorAtoms && ns.entry_atoms[i] >= 0; ++i) {
+    const int32_t a = ns.entry_atoms[i];
+    if (ws.atom_mark[a] != 1) continue;
+    for (int c = 0; c < 3; ++c) force[stride * a + c] += static_cast<Real>(ns.entry_w[i] * ax.f * at.axis[c]);
+  }
+}
+
+double NeedleEnergy(const State& s, const Workspace& ws, int32_t t) {
+  const ActiveTool& at = ws.tools[t];
+  if (!Inside(at)) return 0;
+  const double dt = ws.options.dt_s;
+  double energy = 0, fn = 0;
+  for (int32_t i = 0; i < at.num_needle_atoms; ++i) {
+    const Real* p = &s.atom_pos[3 * ws.needle_atoms[t][i]];
+    const double r[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+    const Lateral lat = LateralAt(at, r);
+    energy += lat.energy;
+    fn += lat.scale * at.needle.lateral_stiffness * std::sqrt(Dot3(lat.perp, lat.perp));
+  }
+  const AxialEval ax = EvaluateAxial(s, at, fn + at.needle.grip * at.shaft_len, dt);
+  return energy + (ax.active ? ax.energy : 0.0);
+}
+
+void CommitNeedles(State& s, Workspace& ws, StepReport* report) {
+  const double dt = ws.options.dt_s;
+  for (int32_t t = 0; t < ws.num_tools; ++t) {
+    ActiveTool& at = ws.tools[t];
+    if (at.kind != ToolKind::kNeedle) continue;
+    ToolState& ts = s.tools[t];
+    NeedleState& ns = ts.needle;
+    ToolReport& tr = report->tools[t];
+    // The tip's axial force on the tissue where the atoms ended (the contact's own loop).
+    double tip[3] = {0, 0, 0};
+    for (int32_t i = 0; i < ws.num_candidates; ++i) {
+      const Real* p = &s.atom_pos[3 * ws.candidates[i]];
+      const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+      if (!InsideSphere(d, at.radius)) continue;
+      const ContactForce cf = SphereContact(at.law, at.stiffness, at.radius, ws.options.min_distance_fraction, d);
+      for (int c = 0; c < 3; ++c) tip[c] += cf.f[c];
+    }
+    double axial = Dot3(tip, at.axis);
+    if (!std::isfinite(axial)) axial = 0;
+    tr.tip_axial_force = axial;
+    if (!ns.punctured) {
+      // Free: the largest per-tick change of the press, then the threshold.
+      if (axial > 0 || ns.tip_axial > 0) ns.tip_max_step = std::max(ns.tip_max_step, std::fabs(axial - ns.tip_axial));
+      ns.tip_axial = axial;
+      if (axial > at.needle.puncture_force && at.strong_atoms[0] >= 0) {
+        // Puncture: the entry on the tick's strongest contacts, the needle sticking where it is.
+        SpreadOverStrongest(at, ns.entry_atoms, ns.entry_w);
+        at.needle_state = ns;
+        const double depth = Depth(s, at);
+        if (std::isfinite(depth)) {
+          ns.punctured = true;
+          ns.entry_depth = ns.axial_offset = depth;
+          ns.axial_u = 0;
+          ns.axial = FrictionState::kStick;
+          ns.tip_ramp = std::clamp(ns.tip_max_step / axial, dt / kMaxTipFadeS, 1.0);
+        }
+      }
+    } else {
+      // Inside: stick or slip (the sticking depth dragged), then the withdrawal test.
+      const AxialEval ax = EvaluateAxial(s, at, at.eval_normal_needle, dt);
+      const double depth = Depth(s, at);
+      if (!ax.active || !std::isfinite(depth) || depth < ns.entry_depth) {
+        const double ramp = ns.tip_ramp;
+        const double scale = ns.tip_scale;
+        ns = NeedleState{};
+        ns.tip_ramp = ramp > 0 ? ramp : 1.0;
+        ns.tip_scale = scale;
+        ns.tip_axial = axial;
+      } else {
+        const double damp = at.needle.axial_damping / dt, keff = at.needle.axial_stiffness + damp;
+        double u_new = ax.u;
+        ns.axial = FrictionState::kStick;
+        if (std::fabs(ax.fstar) > ax.limit) {
+          ns.axial = FrictionState::kSlip;
+          u_new = (std::copysign(ax.limit, ax.fstar) + damp * ns.axial_u) / keff;
+          ns.axial_offset += ax.u - u_new;
+        }
+        ns.axial_u = u_new;
+        tr.inserted = depth - ns.entry_depth;
+        tr.axial_force = -at.eval_axial;
+        tr.needle_normal = at.eval_normal_needle;
+        tr.axial = ns.axial;
+      }
+    }
+    // The tip contact fades out while inside: next tick's stiffness factor is the one that would
+    // have made this tick's axial force tip_max_step smaller (the force is linear in k), so the
+    // give is felt no faster than the press's largest tick. Once free it fades back in.
+    if (ns.punctured) {
+      const double drop = axial - ns.tip_max_step;
+      ns.tip_scale = axial > 0 && drop > 0 ? std::clamp(ns.tip_scale * drop / axial, 0.0, 1.0) : 0.0;
+    } else {
+      ns.tip_scale = std::min(1.0, ns.tip_scale + ns.tip_ramp);
+    }
+    tr.punctured = ns.punctured;
+  }
+}
+
+}  // namespace internal
+}  // namespace idms
