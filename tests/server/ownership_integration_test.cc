@@ -54,11 +54,15 @@ struct TwoOwners {
         dir + "/agent.log");
     id = WaitForLiveSession(a->port(), observer);
     if (id.empty()) return;
-    // The owner: the server the agent reached, where the session is live.
+    // The owner: the server the agent reached, where the session is live, and live there alone
+    // (on a slow run the agent may resume on the other server while its first is still live).
     Eventually([&] {
-      if (MetricValue(a->port(), observer, "idms_live_sessions") == 1) owner = a.get(), other = b.get();
-      if (MetricValue(b->port(), observer, "idms_live_sessions") == 1) owner = b.get(), other = a.get();
-      return owner != nullptr;
+      const bool on_a = MetricValue(a->port(), observer, "idms_live_sessions") == 1;
+      const bool on_b = MetricValue(b->port(), observer, "idms_live_sessions") == 1;
+      if (on_a == on_b) return false;
+      owner = on_a ? a.get() : b.get();
+      other = on_a ? b.get() : a.get();
+      return true;
     });
   }
   bool ready() const { return owner != nullptr; }
