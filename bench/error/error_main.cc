@@ -24,7 +24,7 @@ namespace idms::bench {
 namespace {
 
 struct Args {
-  bool quick = false, hex = true, curved = true;
+  bool quick = false, hex = true, curved = true, friction = true;
   std::string out_dir = ".";
   std::string from_csv;  // redo the report from this CSV instead of running
   std::string work_dir;  // curved model cache; default: out_dir
@@ -38,7 +38,8 @@ struct Args {
 
 void Usage(const char* argv0) {
   std::fprintf(stderr,
-               "usage: %s [--quick] [--out DIR] [--work DIR] [--hex PREFIX] [--no-hex] [--no-curved] [--from-csv F]\n"
+               "usage: %s [--quick] [--out DIR] [--work DIR] [--hex PREFIX] [--no-hex] [--no-curved] [--no-friction]\n"
+               "          [--from-csv F]\n"
                "          [--curved ROWSxCOLS] [--curved-radius R] [--curved-window S] [--repeats N]\n"
                "  --quick        smoke run: short windows, 2 ticks x 2 radii, a small cap (seconds)\n"
                "  --out DIR      where error-vs-runtime.{csv,md} and the PNGs go (default .)\n"
@@ -57,6 +58,8 @@ bool ParseArgs(int argc, char** argv, Args* a) {
       a->hex = false;
     } else if (arg == "--no-curved") {
       a->curved = false;
+    } else if (arg == "--no-friction") {
+      a->friction = false;
     } else if (arg == "--from-csv" && has_value) {
       a->from_csv = argv[++i];
     } else if (arg == "--out" && has_value) {
@@ -271,6 +274,23 @@ int main(int argc, char** argv) {
       if (a.quick) c.t0_s = 2.0, c.t1_s = 2.6;
       results.push_back(RunSweep(c, configs, a.repeats));
     }
+  }
+  if (a.hex && a.friction) {
+    // The gentle stroke with friction (issue 30): the tests' and benches' coefficients, and the
+    // tangential damper fixed at the default tick's k_t dt (its default changes with dt). The
+    // quick run keeps the press and the stroke's first half second.
+    Case c{.model_name = "hex_4x5_home",
+           .script_name = std::string(ScriptName(Script::kStrokeGentle)) + "-friction",
+           .model = &hex,
+           .script = Script::kStrokeGentle,
+           .geometry = MakeScriptGeometry(hex, kMioRadius),
+           .t0_s = 0,
+           .t1_s = ScriptDuration(Script::kStrokeGentle),
+           .mu_s = 0.6,
+           .mu_d = 0.4,
+           .friction_damping = 400 * 1e-3};
+    if (a.quick) c.t0_s = std::floor((ContactOnset(c) - 0.01) * 100) / 100, c.t1_s = 3.5;
+    results.push_back(RunSweep(c, configs, a.repeats));
   }
   if (a.curved) {
     CurvedModel(a, &curved, &report.curved_note);

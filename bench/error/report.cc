@@ -16,10 +16,15 @@
 namespace idms::bench {
 namespace {
 
-constexpr const char* kCsvHeader =
+// The columns before friction came (issue 30); a CSV with only these reads back frictionless.
+constexpr const char* kCsvHeaderFrictionless =
     "model,script,t0_s,t1_s,atoms,onset_s,ref_cpu_s,ref_peak_force,ref_warnings,integrator,dt_s,radius_ratio,"
     "local_radius,cpu_us_per_ms,force_rms,force_max,pos_max,ticks,substeps_mean,fallbacks,warnings,max_active,"
     "in_budget,on_front_force,on_front_pos,default";
+constexpr int kFieldsFrictionless = 26;
+constexpr const char* kFrictionColumns = ",mu_s,mu_d,friction_damping,friction_rms,friction_max";
+constexpr int kFields = kFieldsFrictionless + 5;
+const std::string kCsvHeader = std::string(kCsvHeaderFrictionless) + kFrictionColumns;
 
 const Integrator kIntegrators[] = {Integrator::kExplicitEuler, Integrator::kSymplecticEuler, Integrator::kRk4,
                                    Integrator::kImplicitEuler};
@@ -69,14 +74,15 @@ bool WriteCsv(const std::vector<CaseResult>& cases, const ReportOptions& o, cons
       char line[640];
       std::snprintf(line, sizeof line,
                     "%s,%s,%.17g,%.17g,%d,%.6g,%.4g,%.6g,%lld,%s,%g,%g,%g,%.4g,%.6g,%.6g,%.6g,%lld,%.4g,%lld,%lld,%d,"
-                    "%d,%d,%d,%d\n",
+                    "%d,%d,%d,%d,%g,%g,%g,%.6g,%.6g\n",
                     c.c.model_name.c_str(), c.c.script_name.c_str(), c.c.t0_s, c.c.t1_s, c.atoms, c.onset_s,
                     c.reference_cpu_s, c.reference_peak_force, static_cast<long long>(c.reference_warnings),
                     IntegratorName(r.config.integrator), r.config.dt_s, r.config.radius_ratio,
                     r.config.radius_ratio * kMioRadius, r.cpu_us_per_ms, r.force_rms, r.force_max, r.pos_max,
                     static_cast<long long>(r.ticks), r.substeps_mean, static_cast<long long>(r.fallbacks),
                     static_cast<long long>(r.warnings), r.max_active, InBudget(r) ? 1 : 0, front_f[i] ? 1 : 0,
-                    front_p[i] ? 1 : 0, r.config == o.default_config ? 1 : 0);
+                    front_p[i] ? 1 : 0, r.config == o.default_config ? 1 : 0, c.c.mu_s, c.c.mu_d,
+                    c.c.friction_damping, r.friction_rms, r.friction_max);
       out << line;
     }
   }
@@ -224,6 +230,33 @@ void WriteCaseSection(std::ostream& md, const CaseResult& c, const ReportOptions
     md << "\n";
   }
 
+  // With friction, its own force's error (the tangential part of the device force) on the same grid.
+  if (c.c.mu_s > 0) {
+    md << "\nFriction (mu_s " << Fmt("%g", c.c.mu_s) << ", mu_d " << Fmt("%g", c.c.mu_d) << ", b_t "
+       << Fmt("%g", c.c.friction_damping)
+       << " at every tick): the RMS and max error of friction's force |f_t - f_t,ref|, force units.\n\n| integrator "
+          "| dt (s) |";
+    for (double ratio : ratios) md << " r_l " << Radius(ratio) << " |";
+    md << "\n|---|---|";
+    for (size_t i = 0; i < ratios.size(); ++i) md << "---|";
+    md << "\n";
+    for (const auto& [integrator, dt] : rows) {
+      md << "| " << IntegratorName(static_cast<Integrator>(integrator)) << " | " << Fmt("%g", dt) << " |";
+      for (double ratio : ratios) {
+        const int i = FindConfig(c.runs, {static_cast<Integrator>(integrator), dt, ratio});
+        if (i < 0) {
+          md << " |";
+          continue;
+        }
+        const RunResult& r = c.runs[i];
+        std::string cell = Fmt("%.3g", r.friction_rms) + " / " + Fmt("%.3g", r.friction_max);
+        if (r.config == o.default_config) cell = "**" + cell + "**";
+        md << " " << cell << " |";
+      }
+      md << "\n";
+    }
+  }
+
   // The front, fastest first, with every metric.
   std::vector<int> order;
   for (size_t i = 0; i < c.runs.size(); ++i) {
@@ -321,17 +354,19 @@ std::string WindowNote(const std::vector<CaseResult>& cases, const Config& d) {
 bool ReadCsv(const std::string& path, std::vector<CaseResult>* cases, std::string* error) {
   std::ifstream in(path);
   std::string line;
-  if (!in || !std::getline(in, line) || line != kCsvHeader) {
+  if (!in || !std::getline(in, line) || (line != kCsvHeader && line != kCsvHeaderFrictionless)) {
     *error = path + ": not an error-vs-runtime CSV of this version (expected the header " + kCsvHeader + ")";
     return false;
   }
+  const size_t columns = line == kCsvHeader ? kFields : kFieldsFrictionless;
   for (int number = 2; std::getline(in, line); ++number) {
     std::vector<std::string> f;
     std::stringstream fields(line);
     for (std::string field; std::getline(fields, field, ',');) f.push_back(field);
     RunResult r;
-    if (f.size() != 26 || !ParseIntegratorName(f[9], &r.config.integrator)) {
-      *error = path + ":" + std::to_string(number) + ": expected 26 fields with an integrator name in the 10th";
+    if (f.size() != columns || !ParseIntegratorName(f[9], &r.config.integrator)) {
+      *error = path + ":" + std::to_string(number) + ": expected " + std::to_string(columns) +
+               " fields with an integrator name in the 10th";
       return false;
     }
     const double t0 = std::stod(f[2]), t1 = std::stod(f[3]);
@@ -343,6 +378,9 @@ bool ReadCsv(const std::string& path, std::vector<CaseResult>* cases, std::strin
       c.reference_cpu_s = std::stod(f[6]);
       c.reference_peak_force = std::stod(f[7]);
       c.reference_warnings = std::stoll(f[8]);
+      if (columns == kFields) {
+        c.c.mu_s = std::stod(f[26]), c.c.mu_d = std::stod(f[27]), c.c.friction_damping = std::stod(f[28]);
+      }
       cases->push_back(c);
     }
     r.config.dt_s = std::stod(f[10]);
@@ -356,6 +394,7 @@ bool ReadCsv(const std::string& path, std::vector<CaseResult>* cases, std::strin
     r.fallbacks = std::stoll(f[19]);
     r.warnings = std::stoll(f[20]);
     r.max_active = std::stoi(f[21]);
+    if (columns == kFields) r.friction_rms = std::stod(f[29]), r.friction_max = std::stod(f[30]);
     cases->back().runs.push_back(r);
   }
   return true;
@@ -397,7 +436,11 @@ std::string VerdictMargin(const CaseResult& c, const Config& default_config) {
     if (fastest < 0 || c.runs[i].cpu_us_per_ms < c.runs[fastest].cpu_us_per_ms) fastest = static_cast<int>(i);
   }
   std::string out = CaseSlug(c) + ": default force rms " + Fmt("%.4e", def.force_rms) + " max " +
-                    Fmt("%.4e", def.force_max) + ", pos max " + Fmt("%.4e", def.pos_max) + "; " +
+                    Fmt("%.4e", def.force_max) + ", pos max " + Fmt("%.4e", def.pos_max) +
+                    (c.c.mu_s > 0 ? ", friction rms " + Fmt("%.4e", def.friction_rms) + " max " +
+                                        Fmt("%.4e", def.friction_max)
+                                  : std::string()) +
+                    "; " +
                     std::to_string(more_accurate) + " of " + std::to_string(c.runs.size() - 1) +
                     " configurations more accurate";
   if (fastest < 0) return out;
@@ -454,6 +497,11 @@ bool WriteReport(const std::vector<CaseResult>& cases, const ReportOptions& o, s
         "the default is what StepOptions defaults to: `"
      << ConfigLabel(o.default_config) << "` (r_l = " << Fmt("%g", o.default_config.radius_ratio * kMioRadius)
      << ", thesis 6.2).\n\n";
+  md << "A case named `...-friction` is the same script with Coulomb friction and stiction on the tool "
+        "(docs/friction.md; its coefficients in the case's section): its force error includes friction's, and "
+        "friction's own force |f_t - f_t,ref| is given as well. The break-away and the re-sticking at a turn are "
+        "discontinuous: a run that makes them one tick apart from the reference is charged the whole jump "
+        "(mu_s - mu_d) f_n at that sample, which is what the max shows.\n\n";
   if (!o.curved_note.empty()) {
     md << "The curved model is " << o.curved_note
        << ". Its scripts are shortened to a window from 10 ms before first contact: before contact nothing moves, "

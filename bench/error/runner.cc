@@ -38,8 +38,9 @@ double ClockPairNs() {
 int64_t TickAtSample(int32_t k, double dt) { return static_cast<int64_t>(std::floor(k * kSamplePeriodS / dt + 1e-6)); }
 
 // Records the sample (reference run): the force and the atoms off their rest position.
-void RecordSample(const Model& m, const State& s, const double f[3], Reference* ref) {
+void RecordSample(const Model& m, const State& s, const double f[3], const double ft[3], Reference* ref) {
   ref->force.push_back({f[0], f[1], f[2]});
+  ref->friction.push_back({ft[0], ft[1], ft[2]});
   ref->peak_force = std::max(ref->peak_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
   if (ref->moved_adr.empty()) ref->moved_adr.push_back(0);
   for (int32_t a = 0; a < m.num_atoms; ++a) {
@@ -89,13 +90,16 @@ RunResult RunOnce(const Case& c, const Config& config, const Reference* referenc
   ToolCommand tool;
   tool.kind = ToolKind::kSphere;
   tool.radius = c.geometry.mio_radius;
+  tool.mu_s = c.mu_s;
+  tool.mu_d = c.mu_d;
+  tool.friction_damping = c.friction_damping;
   RunResult r;
   r.config = config;
   const int64_t total_ticks = std::llround((c.t1_s - c.t0_s) / config.dt_s);
   const double clock_pair = ClockPairNs();
-  double cpu_ns = 0, force_sq_sum = 0;
+  double cpu_ns = 0, force_sq_sum = 0, friction_sq_sum = 0;
   int64_t n = 0, substeps = 0;
-  double f[3] = {0, 0, 0};
+  double f[3] = {0, 0, 0}, ft[3] = {0, 0, 0};
   for (int32_t k = 1; k <= c.samples(); ++k) {
     // Timed: the ticks up to this sample.
     const int64_t target = std::min(total_ticks, TickAtSample(k, config.dt_s));
@@ -106,6 +110,7 @@ RunResult RunOnce(const Case& c, const Config& config, const Reference* referenc
       input.tools[0] = tool;
       const StepReport report = Step(m, s, ws, input);
       std::copy_n(report.tools[0].force, 3, f);
+      std::copy_n(report.tools[0].friction_force, 3, ft);
       substeps += report.substeps;
       r.fallbacks += report.fallback;
       r.max_active = std::max(r.max_active, report.active_atoms);
@@ -114,18 +119,23 @@ RunResult RunOnce(const Case& c, const Config& config, const Reference* referenc
 
     // Untimed: the sample.
     if (record) {
-      RecordSample(m, s, f, record);
+      RecordSample(m, s, f, ft, record);
       continue;
     }
     const std::array<double, 3>& g = reference->force[k - 1];
     const double e2 = (f[0] - g[0]) * (f[0] - g[0]) + (f[1] - g[1]) * (f[1] - g[1]) + (f[2] - g[2]) * (f[2] - g[2]);
     force_sq_sum += e2;
     r.force_max = std::max(r.force_max, std::sqrt(e2));
+    const std::array<double, 3>& gt = reference->friction[k - 1];
+    const double t2 = (ft[0] - gt[0]) * (ft[0] - gt[0]) + (ft[1] - gt[1]) * (ft[1] - gt[1]) + (ft[2] - gt[2]) * (ft[2] - gt[2]);
+    friction_sq_sum += t2;
+    r.friction_max = std::max(r.friction_max, std::sqrt(t2));
     r.pos_max = std::max(r.pos_max, PositionError(m, s, *reference, k - 1, ref_pos));
   }
   r.ticks = n;
   r.cpu_us_per_ms = std::max(0.0, cpu_ns) * 1e-3 / ((c.t1_s - c.t0_s) * 1e3);
   r.force_rms = std::sqrt(force_sq_sum / std::max(1, c.samples()));
+  r.friction_rms = std::sqrt(friction_sq_sum / std::max(1, c.samples()));
   r.substeps_mean = n > 0 ? static_cast<double>(substeps) / static_cast<double>(n) : 0;
   r.warnings = TotalWarnings(s.warnings);
   return r;
@@ -136,7 +146,7 @@ RunResult RunOnce(const Case& c, const Config& config, const Reference* referenc
 int32_t Case::samples() const { return static_cast<int32_t>(std::floor((t1_s - t0_s) / kSamplePeriodS + 1e-6)); }
 
 int64_t Reference::bytes() const {
-  return static_cast<int64_t>(force.size() * sizeof(force[0]) + moved_adr.size() * sizeof(int64_t) +
+  return static_cast<int64_t>((force.size() + friction.size()) * sizeof(force[0]) + moved_adr.size() * sizeof(int64_t) +
                               moved_atom.size() * sizeof(int32_t) + moved_pos.size() * sizeof(double));
 }
 

@@ -24,6 +24,9 @@ struct Case {
   Script script = Script::kPalpate;
   ScriptGeometry geometry;
   double t0_s = 0, t1_s = 0;
+  // The tool's friction (issue 30): mu_s = 0 is none; friction_damping b_t fixed across the
+  // configurations (its default, k_t dt, would change with the tick being compared).
+  double mu_s = 0, mu_d = 0, friction_damping = -1;
   int32_t samples() const;  // sample k = 1..samples() is at t0 + k ms
 };
 
@@ -43,6 +46,7 @@ StepOptions OptionsFor(const Config& config);
 struct Reference {
   static constexpr double kMovedThreshold = 1e-12;  // model units
   std::vector<std::array<double, 3>> force;         // (samples)
+  std::vector<std::array<double, 3>> friction;      // (samples) its tangential part, friction's
   std::vector<int64_t> moved_adr;                   // (samples + 1): sample k's atoms are [adr[k], adr[k+1])
   std::vector<int32_t> moved_atom;
   std::vector<double> moved_pos;  // (3 x moved atoms)
@@ -55,6 +59,7 @@ struct RunResult {
   double cpu_us_per_ms = 0;             // thread CPU time of the steps per simulated ms (min over repeats)
   double force_rms = 0, force_max = 0;  // |f - f_ref| over the samples, force units
   double pos_max = 0;                   // max over samples and atoms of |p - p_ref|, model units
+  double friction_rms = 0, friction_max = 0;  // |f_t - f_t_ref| of friction's force (0 without friction)
   int64_t ticks = 0;
   double substeps_mean = 0;  // substeps per tick of the accepted attempts
   int64_t fallbacks = 0;     // ticks that fell back to implicit Euler

@@ -26,32 +26,18 @@ v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
 
 bool ApplyFrictionSpec(const std::string& spec, v1::Scene* scene, std::string* error) {
   ToolCommand parsed;
-  parsed.mu_s = -1;
-  bool has[4] = {false, false, false, false};  // mu_s, mu_d, k_t, b_t
-  size_t start = 0;
-  while (start <= spec.size()) {
-    const size_t comma = std::min(spec.find(',', start), spec.size());
-    const std::string item = spec.substr(start, comma - start);
-    start = comma + 1;
-    const size_t eq = item.find('=');
-    const std::string key = item.substr(0, eq);
-    if (eq == std::string::npos || !SetFrictionItem(key, item.substr(eq + 1), &parsed)) {
-      *error = "--friction: bad item '" + item + "' (expected mu_s=S[,mu_d=D,k_t=K,b_t=B], finite numbers)";
-      return false;
-    }
-    has[key == "mu_s" ? 0 : key == "mu_d" ? 1 : key == "k_t" ? 2 : 3] = true;
-  }
-  if (!has[0]) {
-    *error = "--friction: give mu_s=S (the static coefficient, >= 0)";
+  FrictionGiven has;
+  if (!ParseFrictionSpec(spec, &parsed, &has, error)) {
+    *error = "--friction: " + *error;
     return false;
   }
   for (v1::Tool& t : *scene->mutable_tools()) {
     if (t.kind() == v1::Tool::KIND_SCALPEL) continue;
     t.clear_static_friction(), t.clear_kinetic_friction(), t.clear_friction_stiffness(), t.clear_friction_damping();
     t.set_static_friction(parsed.mu_s);
-    if (has[1]) t.set_kinetic_friction(parsed.mu_d);
-    if (has[2]) t.set_friction_stiffness(parsed.friction_stiffness);
-    if (has[3]) t.set_friction_damping(parsed.friction_damping);
+    if (has.mu_d) t.set_kinetic_friction(parsed.mu_d);
+    if (has.k_t) t.set_friction_stiffness(parsed.friction_stiffness);
+    if (has.b_t) t.set_friction_damping(parsed.friction_damping);
   }
   if (!ValidateScene(*scene, error)) {
     *error = "--friction: " + *error;

@@ -116,6 +116,97 @@ bool ValidateFriction(const ToolCommand& t, std::string* error) {
   return false;
 }
 
+namespace {
+
+// Splits "a=1,b=2" at commas and calls item(key, value, whole item) for each; an empty spec has
+// one empty item. Stops at the first item that returns false.
+template <typename F>
+bool ForEachItem(std::string_view spec, F&& item) {
+  while (true) {
+    const size_t comma = spec.find(',');
+    const std::string_view whole = spec.substr(0, comma);
+    const size_t eq = whole.find('=');
+    const std::string_view key = whole.substr(0, eq);
+    const std::string_view value = eq == std::string_view::npos ? std::string_view{} : whole.substr(eq + 1);
+    if (!item(key, value, whole)) return false;
+    if (comma == std::string_view::npos) return true;
+    spec.remove_prefix(comma + 1);
+  }
+}
+
+bool PositiveNumber(std::string_view value, double* out) {
+  const std::string text(value);
+  char* end = nullptr;
+  const double x = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(x) || !(x > 0)) return false;
+  *out = x;
+  return true;
+}
+
+}  // namespace
+
+bool ParseFrictionSpec(std::string_view spec, ToolCommand* tool, FrictionGiven* given, std::string* error) {
+  *given = {};
+  const bool items = ForEachItem(spec, [&](std::string_view key, std::string_view value, std::string_view whole) {
+    bool* seen = key == "mu_s"   ? &given->mu_s
+                 : key == "mu_d" ? &given->mu_d
+                 : key == "k_t"  ? &given->k_t
+                 : key == "b_t"  ? &given->b_t
+                                 : nullptr;
+    if (seen == nullptr || *seen || whole.find('=') == std::string_view::npos || !SetFrictionItem(key, value, tool)) {
+      *error = "bad item '" + std::string(whole) + "' (expected mu_s=S[,mu_d=D,k_t=K,b_t=B], each once, finite numbers)";
+      return false;
+    }
+    return *seen = true;
+  });
+  if (!items) return false;
+  if (!given->mu_s) {
+    *error = "give mu_s=S (the static coefficient, >= 0)";
+    return false;
+  }
+  if (!given->mu_d) tool->mu_d = tool->mu_s;
+  return ValidateFriction(*tool, error);
+}
+
+bool ParseToolSpec(std::string_view spec, ToolCommand* tool, std::string* error) {
+  const size_t colon = spec.find(':');
+  const std::string_view kind = spec.substr(0, colon);
+  const std::string quoted = "--tool '" + std::string(spec) + "': ";
+  if (kind == "sphere") {
+    tool->kind = ToolKind::kSphere;
+  } else if (kind == "tweezers") {
+    tool->kind = ToolKind::kTweezers;
+  } else {
+    *error = quoted + "expected sphere:... or tweezers:...";
+    return false;
+  }
+  if (colon == std::string_view::npos || colon + 1 == spec.size()) return true;
+  bool mu_d_given = false;
+  const bool items =
+      ForEachItem(spec.substr(colon + 1), [&](std::string_view key, std::string_view value, std::string_view whole) {
+        if (key == "r" && PositiveNumber(value, &tool->radius)) return true;
+        if (key == "k" && PositiveNumber(value, &tool->stiffness)) return true;
+        if (key == "law" && (value == "thesis" || value == "linear")) {
+          tool->law = value == "thesis" ? ContactLaw::kThesis : ContactLaw::kLinear;
+          return true;
+        }
+        if (whole.find('=') != std::string_view::npos && SetFrictionItem(key, value, tool)) {
+          if (key == "mu_s" && !mu_d_given) tool->mu_d = tool->mu_s;  // mu_d defaults to mu_s
+          mu_d_given = mu_d_given || key == "mu_d";
+          return true;
+        }
+        *error = quoted + "bad item '" + std::string(whole) +
+                 "' (expected r=POSITIVE, k=POSITIVE, law=thesis|linear, mu_s=, mu_d=, k_t=, b_t=)";
+        return false;
+      });
+  if (!items) return false;
+  if (!ValidateFriction(*tool, error)) {
+    *error = quoted + *error;
+    return false;
+  }
+  return true;
+}
+
 namespace internal {
 namespace {
 

@@ -64,49 +64,6 @@ struct Crossing {
   }
 };
 
-// "sphere:r=1.5,k=400,law=thesis" or "tweezers:..." -> ToolCommand.
-bool ParseTool(const std::string& spec, ToolCommand* tool, std::string* error) {
-  const size_t colon = spec.find(':');
-  const std::string kind = spec.substr(0, colon);
-  if (kind == "sphere") {
-    tool->kind = ToolKind::kSphere;
-  } else if (kind == "tweezers") {
-    tool->kind = ToolKind::kTweezers;
-  } else {
-    *error = "--tool '" + spec + "': expected sphere:... or tweezers:...";
-    return false;
-  }
-  std::stringstream in(colon == std::string::npos ? "" : spec.substr(colon + 1));
-  std::string item;
-  bool mu_d_given = false;
-  while (std::getline(in, item, ',')) {
-    const size_t eq = item.find('=');
-    const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
-    char* end = nullptr;
-    const double number = std::strtod(value.c_str(), &end);
-    const bool numeric = !value.empty() && *end == '\0' && std::isfinite(number) && number > 0;
-    if (key == "r" && numeric) {
-      tool->radius = number;
-    } else if (key == "k" && numeric) {
-      tool->stiffness = number;
-    } else if (key == "law" && (value == "thesis" || value == "linear")) {
-      tool->law = value == "thesis" ? ContactLaw::kThesis : ContactLaw::kLinear;
-    } else if (SetFrictionItem(key, value, tool)) {
-      if (key == "mu_s" && !mu_d_given) tool->mu_d = tool->mu_s;  // mu_d defaults to mu_s
-      mu_d_given = mu_d_given || key == "mu_d";
-    } else {
-      *error = "--tool '" + spec + "': bad item '" + item +
-               "' (expected r=POSITIVE, k=POSITIVE, law=thesis|linear, mu_s=, mu_d=, k_t=, b_t=)";
-      return false;
-    }
-  }
-  if (!ValidateFriction(*tool, error)) {
-    *error = "--tool '" + spec + "': " + *error;
-    return false;
-  }
-  return true;
-}
-
 // CPU time of this thread, s: what a tick cost, whatever else the machine runs (the benches'
 // clock, docs/performance.md).
 double ThreadCpuSeconds() {
@@ -202,7 +159,7 @@ void Run(RunArgs& a) {
   ToolCommand tool;
   tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   std::string error;
-  if (!a.tool.empty() && !ParseTool(a.tool, &tool, &error)) Fail("run", error);
+  if (!a.tool.empty() && !ParseToolSpec(a.tool, &tool, &error)) Fail("run", error);
   DragOptions drag_options;
   if (drag && !ParseDragSpec(a.script, &drag_options, &error)) Fail("run", "--script: " + error);
   if (drag && !(tool.mu_s > 0))

@@ -132,11 +132,17 @@ TEST(Devices, FrictionReachesTheToolAndTheSamples) {
   EXPECT_DOUBLE_EQ(tool.friction_damping, 0.4);
   v1::Scene bad = scene;
   EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=0.3,mu_d=0.5", &bad, &error));
-  EXPECT_EQ(error, "--friction: tools[0].kinetic_friction: must be <= static_friction (0.3), got 0.5");
+  EXPECT_EQ(error, "--friction: mu_d must be <= mu_s (0.3), got 0.5");
   EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=nan", &bad, &error));
   EXPECT_NE(error.find("bad item 'mu_s=nan'"), std::string::npos) << error;
   EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=-1", &bad, &error));
-  EXPECT_EQ(error, "--friction: tools[0].static_friction: must be in [0, inf), got -1");
+  EXPECT_EQ(error, "--friction: mu_s must be a finite number >= 0, got -1");
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_s=0.6,mu_s=0.5", &bad, &error));
+  EXPECT_NE(error.find("bad item 'mu_s=0.5'"), std::string::npos) << error;
+  EXPECT_FALSE(agent::ApplyFrictionSpec("mu_d=0.4", &bad, &error));
+  EXPECT_EQ(error, "--friction: give mu_s=S (the static coefficient, >= 0)");
+  EXPECT_EQ(bad.tools(0).static_friction(), 0.6) << "a refused spec leaves the scene as it was";
+  EXPECT_EQ(bad.tools(0).kinetic_friction(), 0.4);
 
   const Model model = Hex();
   agent::DeviceContext context;

@@ -32,3 +32,7 @@ set(IDMS_FUZZ_LIBS_relay_fuzz idms_server)
 # What the S3 client reads: a store's XML replies (listings, errors) and s3:// URLs.
 list(APPEND IDMS_FUZZ_TARGETS s3_parse_fuzz)
 set(IDMS_FUZZ_LIBS_s3_parse_fuzz idms_server_api)
+# The command lines' tool, friction and drag specs (idms-sim run --tool/--script drag:, idms-agent
+# --friction/--device scripted:drag,...).
+list(APPEND IDMS_FUZZ_TARGETS spec_fuzz)
+set(IDMS_FUZZ_LIBS_spec_fuzz idms_sim)

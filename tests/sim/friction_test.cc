@@ -478,5 +478,70 @@ TEST(Friction, AnchorStiffnessIsClearedBetweenSteps) {
   }
 }
 
+// The command lines' specs (idms-sim run --tool, idms-agent --friction): what they accept sets
+// exactly the named fields; every refusal names the item or the field.
+TEST(Friction, SpecsAreParsedAndRefusedByItem) {
+  ToolCommand tool;
+  std::string error;
+  ASSERT_TRUE(ParseToolSpec("sphere:r=2,k=300,law=linear,mu_s=0.6", &tool, &error)) << error;
+  EXPECT_EQ(tool.kind, ToolKind::kSphere);
+  EXPECT_EQ(tool.radius, 2);
+  EXPECT_EQ(tool.stiffness, 300);
+  EXPECT_EQ(tool.law, ContactLaw::kLinear);
+  EXPECT_EQ(tool.mu_s, 0.6);
+  EXPECT_EQ(tool.mu_d, 0.6) << "mu_d defaults to mu_s";
+  tool = {};
+  ASSERT_TRUE(ParseToolSpec("tweezers:mu_d=0.2,mu_s=0.5,k_t=100,b_t=0.1", &tool, &error)) << error;
+  EXPECT_EQ(tool.kind, ToolKind::kTweezers);
+  EXPECT_EQ(tool.mu_d, 0.2) << "a given mu_d is kept whatever the order";
+  EXPECT_EQ(tool.friction_stiffness, 100);
+  EXPECT_EQ(tool.friction_damping, 0.1);
+  tool = {};
+  ASSERT_TRUE(ParseToolSpec("sphere:", &tool, &error)) << error;
+  EXPECT_EQ(tool.radius, 1.5);
+
+  const std::pair<const char*, const char*> bad_tools[] = {
+      {"scalpel:r=1", "--tool 'scalpel:r=1': expected sphere:... or tweezers:..."},
+      {"sphere:r=-1", "bad item 'r=-1'"},
+      {"sphere:r", "bad item 'r'"},
+      {"sphere:k=1e999", "bad item 'k=1e999'"},
+      {"sphere:law=stiff", "bad item 'law=stiff'"},
+      {"sphere:mu_s=nan", "bad item 'mu_s=nan'"},
+      {"sphere:r=1,,k=2", "bad item ''"},
+      {"sphere:mu_s=0.3,mu_d=0.5", "--tool 'sphere:mu_s=0.3,mu_d=0.5': mu_d must be <= mu_s (0.3), got 0.5"},
+      {"sphere:mu_s=-0.1", "mu_s must be a finite number >= 0, got -0.1"},
+  };
+  for (const auto& [spec, want] : bad_tools) {
+    tool = {};
+    error.clear();
+    EXPECT_FALSE(ParseToolSpec(spec, &tool, &error)) << spec;
+    EXPECT_NE(error.find(want), std::string::npos) << spec << ": " << error;
+  }
+
+  FrictionGiven given;
+  tool = {};
+  ASSERT_TRUE(ParseFrictionSpec("b_t=0.2,mu_s=0.5", &tool, &given, &error)) << error;
+  EXPECT_TRUE(given.mu_s && given.b_t && !given.mu_d && !given.k_t);
+  EXPECT_EQ(tool.mu_s, 0.5);
+  EXPECT_EQ(tool.mu_d, 0.5);
+  EXPECT_EQ(tool.friction_damping, 0.2);
+  const std::pair<const char*, const char*> bad_specs[] = {
+      {"", "bad item ''"},
+      {"mu_d=0.1", "give mu_s=S"},
+      {"mu_s=0.5,mu_s=0.4", "bad item 'mu_s=0.4'"},
+      {"mu_s", "bad item 'mu_s'"},
+      {"mu_s=0.5,r=1", "bad item 'r=1'"},
+      {"mu_s=0.5x", "bad item 'mu_s=0.5x'"},
+      {"mu_s=0.5,mu_d=0.6", "mu_d must be <= mu_s (0.5), got 0.6"},
+      {"mu_s=0.5,k_t=-3", "k_t must be a finite number > 0"},
+  };
+  for (const auto& [spec, want] : bad_specs) {
+    tool = {};
+    error.clear();
+    EXPECT_FALSE(ParseFrictionSpec(spec, &tool, &given, &error)) << spec;
+    EXPECT_NE(error.find(want), std::string::npos) << spec << ": " << error;
+  }
+}
+
 }  // namespace
 }  // namespace idms

@@ -73,6 +73,20 @@ bool SetFrictionItem(std::string_view key, std::string_view value, ToolCommand* 
 // b_t finite. False with *error naming the field ("mu_d must be <= mu_s (0.4), got 0.6").
 bool ValidateFriction(const ToolCommand& tool, std::string* error);
 
+// A friction spec as idms-agent's --friction takes it: "mu_s=0.6[,mu_d=0.4,k_t=K,b_t=B]", items
+// in any order; mu_s is required and mu_d defaults to it. Sets *tool's friction fields and says
+// which were given (a scene keeps the others at its defaults). False with *error naming the item
+// or the field, *tool and *given then unspecified.
+struct FrictionGiven {
+  bool mu_s = false, mu_d = false, k_t = false, b_t = false;
+};
+bool ParseFrictionSpec(std::string_view spec, ToolCommand* tool, FrictionGiven* given, std::string* error);
+
+// A tool as idms-sim run's --tool takes it: "sphere:r=1.5,k=400,law=thesis|linear" or
+// "tweezers:...", with the friction items above among them (mu_d defaults to mu_s). Sets *tool's
+// kind and the given fields. False with *error quoting the spec and naming the bad item.
+bool ParseToolSpec(std::string_view spec, ToolCommand* tool, std::string* error);
+
 struct ToolInput {
   std::array<ToolCommand, kMaxTools> tools{};
   int32_t num_tools = 0;  // slots [0, num_tools) are read
