@@ -81,8 +81,8 @@ bool WriteCsv(const std::vector<CaseResult>& cases, const ReportOptions& o, cons
                     r.config.radius_ratio * kMioRadius, r.cpu_us_per_ms, r.force_rms, r.force_max, r.pos_max,
                     static_cast<long long>(r.ticks), r.substeps_mean, static_cast<long long>(r.fallbacks),
                     static_cast<long long>(r.warnings), r.max_active, InBudget(r) ? 1 : 0, front_f[i] ? 1 : 0,
-                    front_p[i] ? 1 : 0, r.config == o.default_config ? 1 : 0, c.c.mu_s, c.c.mu_d,
-                    c.c.friction_damping, r.friction_rms, r.friction_max);
+                    front_p[i] ? 1 : 0, r.config == o.default_config ? 1 : 0, c.c.mu_s, c.c.mu_d, c.c.friction_damping,
+                    r.friction_rms, r.friction_max);
       out << line;
     }
   }
@@ -435,14 +435,13 @@ std::string VerdictMargin(const CaseResult& c, const Config& default_config) {
     more_accurate += c.runs[i].force_rms < def.force_rms;
     if (fastest < 0 || c.runs[i].cpu_us_per_ms < c.runs[fastest].cpu_us_per_ms) fastest = static_cast<int>(i);
   }
-  std::string out = CaseSlug(c) + ": default force rms " + Fmt("%.4e", def.force_rms) + " max " +
-                    Fmt("%.4e", def.force_max) + ", pos max " + Fmt("%.4e", def.pos_max) +
-                    (c.c.mu_s > 0 ? ", friction rms " + Fmt("%.4e", def.friction_rms) + " max " +
-                                        Fmt("%.4e", def.friction_max)
-                                  : std::string()) +
-                    "; " +
-                    std::to_string(more_accurate) + " of " + std::to_string(c.runs.size() - 1) +
-                    " configurations more accurate";
+  std::string out =
+      CaseSlug(c) + ": default force rms " + Fmt("%.4e", def.force_rms) + " max " + Fmt("%.4e", def.force_max) +
+      ", pos max " + Fmt("%.4e", def.pos_max) +
+      (c.c.mu_s > 0 ? ", friction rms " + Fmt("%.4e", def.friction_rms) + " max " + Fmt("%.4e", def.friction_max)
+                    : std::string()) +
+      "; " + std::to_string(more_accurate) + " of " + std::to_string(c.runs.size() - 1) +
+      " configurations more accurate";
   if (fastest < 0) return out;
   const double ratio = c.runs[fastest].cpu_us_per_ms / std::max(def.cpu_us_per_ms, 1e-300);
   return out + ", the fastest of them " + ConfigLabel(c.runs[fastest].config) + " at " + Fmt("%.2f", ratio) +

@@ -127,7 +127,8 @@ RunResult RunOnce(const Case& c, const Config& config, const Reference* referenc
     force_sq_sum += e2;
     r.force_max = std::max(r.force_max, std::sqrt(e2));
     const std::array<double, 3>& gt = reference->friction[k - 1];
-    const double t2 = (ft[0] - gt[0]) * (ft[0] - gt[0]) + (ft[1] - gt[1]) * (ft[1] - gt[1]) + (ft[2] - gt[2]) * (ft[2] - gt[2]);
+    const double t2 =
+        (ft[0] - gt[0]) * (ft[0] - gt[0]) + (ft[1] - gt[1]) * (ft[1] - gt[1]) + (ft[2] - gt[2]) * (ft[2] - gt[2]);
     friction_sq_sum += t2;
     r.friction_max = std::max(r.friction_max, std::sqrt(t2));
     r.pos_max = std::max(r.pos_max, PositionError(m, s, *reference, k - 1, ref_pos));

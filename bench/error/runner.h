@@ -56,9 +56,9 @@ struct Reference {
 
 struct RunResult {
   Config config;
-  double cpu_us_per_ms = 0;             // thread CPU time of the steps per simulated ms (min over repeats)
-  double force_rms = 0, force_max = 0;  // |f - f_ref| over the samples, force units
-  double pos_max = 0;                   // max over samples and atoms of |p - p_ref|, model units
+  double cpu_us_per_ms = 0;                   // thread CPU time of the steps per simulated ms (min over repeats)
+  double force_rms = 0, force_max = 0;        // |f - f_ref| over the samples, force units
+  double pos_max = 0;                         // max over samples and atoms of |p - p_ref|, model units
   double friction_rms = 0, friction_max = 0;  // |f_t - f_t_ref| of friction's force (0 without friction)
   int64_t ticks = 0;
   double substeps_mean = 0;  // substeps per tick of the accepted attempts

@@ -154,7 +154,8 @@ bool ParseFrictionSpec(std::string_view spec, ToolCommand* tool, FrictionGiven* 
                  : key == "b_t"  ? &given->b_t
                                  : nullptr;
     if (seen == nullptr || *seen || whole.find('=') == std::string_view::npos || !SetFrictionItem(key, value, tool)) {
-      *error = "bad item '" + std::string(whole) + "' (expected mu_s=S[,mu_d=D,k_t=K,b_t=B], each once, finite numbers)";
+      *error =
+          "bad item '" + std::string(whole) + "' (expected mu_s=S[,mu_d=D,k_t=K,b_t=B], each once, finite numbers)";
       return false;
     }
     return *seen = true;

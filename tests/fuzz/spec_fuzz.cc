@@ -14,8 +14,7 @@
 namespace {
 
 void CheckFriction(const idms::ToolCommand& t) {
-  if (!(std::isfinite(t.mu_s) && t.mu_s >= 0 && std::isfinite(t.mu_d) && t.mu_d >= 0 && t.mu_d <= t.mu_s))
-    std::abort();
+  if (!(std::isfinite(t.mu_s) && t.mu_s >= 0 && std::isfinite(t.mu_d) && t.mu_d >= 0 && t.mu_d <= t.mu_s)) std::abort();
   if (!(std::isfinite(t.friction_stiffness) && t.friction_stiffness >= 0 && std::isfinite(t.friction_damping)))
     std::abort();
 }
