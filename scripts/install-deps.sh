@@ -18,6 +18,7 @@ packages=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev
   libmeshoptimizer-dev libbullet-dev
   libnats-dev libcurl4-openssl-dev
+  libceres-dev
   nodejs npm
 )
 # The tests' tools: chromium for the web viewer, prometheus for promtool (checks /metrics), docker,

@@ -1,0 +1,108 @@
+// The fitter's figures (issue 34, docs/fit.md): parameters hidden in synthetic recordings of every
+// shipped sphere script on the hex fragment, with Gaussian noise of 1% of the peak force, fitted
+// back; how close each comes (fitted / hidden) with its one-sigma uncertainty, the residual, and
+// what the fit cost. Deterministic but for the times. --quick: the palpation and the gentle stroke.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "fit.h"
+#include "idms/sim/interaction_script.h"
+#include "idms/sim/model_io.h"
+
+namespace {
+
+using namespace idms;
+using namespace idms::fit;
+
+Trace Synthetic(const Model& truth, Script script, double noise, uint32_t seed) {
+  Trace t;
+  t.dt_s = 1e-3;
+  const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
+  const int64_t ticks = std::llround(ScriptDuration(script) / t.dt_s);
+  for (int64_t n = 0; n < ticks; ++n) {
+    const ScriptSample s = SampleScript(script, g, static_cast<double>(n + 1) * t.dt_s);
+    t.pos.push_back({s.pos[0], s.pos[1], s.pos[2]});
+  }
+  ToolCommand tool;
+  tool.kind = ToolKind::kSphere;
+  t.force = Replay(truth, t, StepOptions{}, tool, 1);
+  double peak = 0;
+  for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, noise * peak);
+  for (auto& f : t.force) {
+    for (double& c : f) c += normal(rng);
+  }
+  return t;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  Model typed;
+  LoadError error;
+  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
+  if (!LoadModel(prefix + ".fem", prefix + ".plg", {}, &typed, &error)) {
+    std::fprintf(stderr, "%s\n", error.ToString().c_str());
+    return 1;
+  }
+  // The hidden model: the home springs 30% stiffer and 20% more damped, the surface 20% softer.
+  const std::vector<Param> params = {Param::kHomeK, Param::kSurfaceK, Param::kHomeB};
+  const double hidden[] = {1.3, 0.8, 1.2};
+  Model truth = typed;
+  for (size_t i = 0; i < params.size(); ++i) ScaleGroup(truth, params[i], hidden[i]);
+  std::printf("hex fragment, hidden home_k x1.3, surface_k x0.8, home_b x1.2; noise 1%% of the peak force, seed 7\n");
+  std::printf("fitted / hidden (+- one sigma, from the covariance)\n");
+  std::printf("%-14s %6s | %-17s %-17s %-17s | %9s %9s | %5s %7s %6s\n", "script", "peak", "home_k", "surface_k",
+              "home_b", "rms typed", "rms fit", "iters", "replays", "s");
+  std::vector<Script> scripts = {Script::kPalpate, Script::kStrokeGentle};
+  if (!quick) scripts = {Script::kPalpate, Script::kStrokeGentle, Script::kStrokeSlow, Script::kStrokeFast};
+  for (Script script : scripts) {
+    const Trace trace = Synthetic(truth, script, 0.01, 7);
+    FitOptions o;
+    o.params = params;
+    o.tool.kind = ToolKind::kSphere;
+    const FitResult r = Fit(typed, trace, o);
+    if (!r.ok) {
+      std::printf("%-14s %s\n", ScriptName(script), r.message.c_str());
+      continue;
+    }
+    std::printf("%-14s %6.3g |", ScriptName(script), r.peak_force);
+    for (size_t i = 0; i < params.size(); ++i) {
+      std::printf(" %.4f +- %.4f  ", r.scale[i] / hidden[i], r.scale_sigma[i] / hidden[i]);
+    }
+    std::printf("| %9.3g %9.3g | %5d %7d %6.2f\n", r.rms_before, r.rms_after, r.iterations, r.replays, r.seconds);
+  }
+  // One stiffness from a palpation, and what it predicts of a stroke it did not see.
+  Model truth_one = typed;
+  ScaleGroup(truth_one, Param::kHomeK, 1.3);
+  FitOptions one;
+  one.params = {Param::kHomeK};
+  one.tool.kind = ToolKind::kSphere;
+  const auto start = std::chrono::steady_clock::now();
+  const FitResult r = Fit(typed, Synthetic(truth_one, Script::kPalpate, 0.01, 7), one);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!r.ok) {
+    std::printf("palpation, home_k alone: %s\n", r.message.c_str());
+    return 1;
+  }
+  const Trace stroke = Synthetic(truth_one, Script::kStrokeGentle, 0.0, 7);
+  const auto predicted = Replay(r.fitted, stroke, StepOptions{}, one.tool, 1);
+  double sum = 0, peak = 0;
+  for (size_t n = 0; n < predicted.size(); ++n) {
+    const auto& f = stroke.force[n];
+    peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+    for (int c = 0; c < 3; ++c) sum += (predicted[n][c] - f[c]) * (predicted[n][c] - f[c]);
+  }
+  std::printf(
+      "palpation, home_k alone (hidden x1.3): fitted / hidden %.4f +- %.4f in %.2f s; the held-out gentle stroke "
+      "predicted with relative RMS error %.4f\n",
+      r.scale[0] / 1.3, r.scale_sigma[0] / 1.3, s, std::sqrt(sum / static_cast<double>(predicted.size())) / peak);
+  return 0;
+}

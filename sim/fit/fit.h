@@ -1,0 +1,86 @@
+// Fitting a model to what was felt (thesis 7.2.5, issue 34): given a recorded tool path and the
+// force measured along it, the element parameters that make the simulated force match. The path
+// is replayed through the real Step, and Ceres Solver minimises the force error over scale
+// factors of the home elements' and the surface elements' stiffness and damping.
+//
+// Why scale factors: a model's elements need not be uniform (a tumour's are stiffer), and one
+// factor per group keeps their ratios while fitting the level; on a uniform group the factor times
+// the typed-in value is the fitted value itself. The factors are solved in log space (positive by
+// construction, and a factor of 2 is as far from 1 as a factor of 1/2).
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "idms/sim/model.h"
+#include "idms/sim/step.h"
+#include "idms/sim/tool.h"
+
+namespace idms::fit {
+
+// A recorded interaction: per tick, the tool's position (model frame) and the device force it
+// produced, at a fixed tick dt_s. Row n is the state after tick n + 1, as `idms-sim run --csv`
+// writes it.
+struct Trace {
+  double dt_s = 1e-3;
+  std::vector<std::array<double, 3>> pos;
+  std::vector<std::array<double, 3>> force;
+};
+
+// Reads the columns t,x,y,z,fx,fy,fz of an `idms-sim run --csv` file (the others are ignored).
+// The tick is taken from t (uniform within 1e-6 s, or it is refused). False with *error naming the
+// file and line.
+bool ReadTraceCsv(const std::string& path, Trace* trace, std::string* error);
+
+enum class Param : uint8_t { kHomeK, kHomeB, kSurfaceK, kSurfaceB };
+inline constexpr int kNumParams = 4;
+const char* ParamName(Param p);  // "home_k", "home_b", "surface_k", "surface_b"
+
+// "home_k,surface_k" -> params (each once). False with *error naming the bad item.
+bool ParseParams(const std::string& list, std::vector<Param>* params, std::string* error);
+
+// The group's mean typed-in value in `model` (home or surface elements' k or b); 0 if the group is
+// empty.
+double GroupMean(const Model& model, Param p);
+
+// Multiplies the group's values by `scale` and re-derives what depends on them (FinalizeModel).
+void ScaleGroup(Model& model, Param p, double scale);
+
+struct FitOptions {
+  std::vector<Param> params = {Param::kHomeK, Param::kSurfaceK};
+  StepOptions step;  // as the recording was made (idms-sim run's defaults)
+  ToolCommand tool;  // kind, radius, stiffness, law, friction: as recorded (pos comes from the trace)
+  int stride = 1;    // compare every stride-th tick (a replay steps every tick whatever it is)
+  int max_iterations = 50;
+};
+
+struct FitResult {
+  bool ok = false;
+  std::string message;  // why not ok, or the solver's summary line
+  std::vector<Param> params;
+  std::vector<double> scale;        // fitted factor per param
+  std::vector<double> scale_sigma;  // one standard deviation of the factor (from the covariance)
+  std::vector<double> value;        // fitted group mean (typed-in mean * scale)
+  std::vector<double> value_sigma;
+  double rms_before = 0, rms_after = 0;  // force RMS error over the compared samples, force units
+  double peak_force = 0;                 // largest |measured force|
+  int samples = 0;                       // compared ticks
+  int iterations = 0;
+  int replays = 0;  // whole-trace replays the solver asked for
+  double seconds = 0;
+  Model fitted;                                     // the model with the fitted factors applied
+  std::vector<std::array<double, 3>> fitted_force;  // the replayed force at the fit, per compared sample
+};
+
+// Fits `model`'s groups to `trace`. Refuses (ok = false, message says why) a trace that never
+// touches the model, a group with no elements or a zero typed-in mean, and a parameter the
+// recording does not determine (a singular covariance).
+FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options);
+
+// Replays the trace through Step on `model`; the device force at every stride-th tick (for the
+// residuals and for a recording's synthetic twin in tests).
+std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace, const StepOptions& step,
+                                          const ToolCommand& tool, int stride);
+
+}  // namespace idms::fit
