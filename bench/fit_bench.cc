@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -14,36 +13,9 @@
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
 
-namespace {
-
-using namespace idms;
-using namespace idms::fit;
-
-Trace Synthetic(const Model& truth, Script script, double noise, uint32_t seed) {
-  Trace t;
-  t.dt_s = 1e-3;
-  const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
-  const int64_t ticks = std::llround(ScriptDuration(script) / t.dt_s);
-  for (int64_t n = 0; n < ticks; ++n) {
-    const ScriptSample s = SampleScript(script, g, static_cast<double>(n + 1) * t.dt_s);
-    t.pos.push_back({s.pos[0], s.pos[1], s.pos[2]});
-  }
-  ToolCommand tool;
-  tool.kind = ToolKind::kSphere;
-  t.force = Replay(truth, t, StepOptions{}, tool, 1);
-  double peak = 0;
-  for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> normal(0.0, noise * peak);
-  for (auto& f : t.force) {
-    for (double& c : f) c += normal(rng);
-  }
-  return t;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
+  using namespace idms;
+  using namespace idms::fit;
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
   Model typed;
   LoadError error;
@@ -64,7 +36,7 @@ int main(int argc, char** argv) {
   std::vector<Script> scripts = {Script::kPalpate, Script::kStrokeGentle};
   if (!quick) scripts = {Script::kPalpate, Script::kStrokeGentle, Script::kStrokeSlow, Script::kStrokeFast};
   for (Script script : scripts) {
-    const Trace trace = Synthetic(truth, script, 0.01, 7);
+    const Trace trace = ScriptedTrace(truth, script, 0.01, 7);
     FitOptions o;
     o.params = params;
     o.tool.kind = ToolKind::kSphere;
@@ -86,13 +58,13 @@ int main(int argc, char** argv) {
   one.params = {Param::kHomeK};
   one.tool.kind = ToolKind::kSphere;
   const auto start = std::chrono::steady_clock::now();
-  const FitResult r = Fit(typed, Synthetic(truth_one, Script::kPalpate, 0.01, 7), one);
+  const FitResult r = Fit(typed, ScriptedTrace(truth_one, Script::kPalpate, 0.01, 7), one);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!r.ok) {
     std::printf("palpation, home_k alone: %s\n", r.message.c_str());
     return 1;
   }
-  const Trace stroke = Synthetic(truth_one, Script::kStrokeGentle, 0.0, 7);
+  const Trace stroke = ScriptedTrace(truth_one, Script::kStrokeGentle, 0.0, 7);
   const auto predicted = Replay(r.fitted, stroke, StepOptions{}, one.tool, 1);
   double sum = 0, peak = 0;
   for (size_t n = 0; n < predicted.size(); ++n) {

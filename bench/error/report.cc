@@ -187,6 +187,33 @@ std::string RunLine(const RunResult& r, double peak) {
   return s.str();
 }
 
+// A table of the case's runs: a row per integrator and tick, a column per haptic window, the
+// cell cell(run index) (the default's in bold).
+template <typename Cell>
+void WriteGrid(std::ostream& md, const CaseResult& c, const std::vector<double>& ratios, const Config& default_config,
+               Cell cell) {
+  md << "| integrator | dt (s) |";
+  for (double ratio : ratios) md << " r_l " << Radius(ratio) << " |";
+  md << "\n|---|---|";
+  for (size_t i = 0; i < ratios.size(); ++i) md << "---|";
+  md << "\n";
+  std::set<std::pair<int, double>> rows;
+  for (const RunResult& r : c.runs) rows.insert({static_cast<int>(r.config.integrator), r.config.dt_s});
+  for (const auto& [integrator, dt] : rows) {
+    md << "| " << IntegratorName(static_cast<Integrator>(integrator)) << " | " << Fmt("%g", dt) << " |";
+    for (double ratio : ratios) {
+      const int i = FindConfig(c.runs, {static_cast<Integrator>(integrator), dt, ratio});
+      if (i < 0) {
+        md << " |";
+        continue;
+      }
+      const std::string text = cell(i);
+      md << " " << (c.runs[i].config == default_config ? "**" + text + "**" : text) << " |";
+    }
+    md << "\n";
+  }
+}
+
 void WriteCaseSection(std::ostream& md, const CaseResult& c, const ReportOptions& o) {
   const double peak = c.reference_peak_force;
   md << "\n### " << c.c.model_name << ", " << c.c.script_name << "\n\n";
@@ -205,56 +232,21 @@ void WriteCaseSection(std::ostream& md, const CaseResult& c, const ReportOptions
   std::sort(ratios.begin(), ratios.end(), [](double a, double b) { return (a <= 0 ? 1e9 : a) < (b <= 0 ? 1e9 : b); });
   const std::vector<bool> front = ParetoFront(c.runs, &RunResult::force_rms);
   md << "Force RMS error in % of the peak force, and (us of CPU per simulated ms). ◆ = on the Pareto front within the "
-        "budget; **bold** = the default.\n\n| integrator | dt (s) |";
-  for (double ratio : ratios) md << " r_l " << Radius(ratio) << " |";
-  md << "\n|---|---|";
-  for (size_t i = 0; i < ratios.size(); ++i) md << "---|";
-  md << "\n";
-  std::set<std::pair<int, double>> rows;
-  for (const RunResult& r : c.runs) rows.insert({static_cast<int>(r.config.integrator), r.config.dt_s});
-  for (const auto& [integrator, dt] : rows) {
-    md << "| " << IntegratorName(static_cast<Integrator>(integrator)) << " | " << Fmt("%g", dt) << " |";
-    for (double ratio : ratios) {
-      const int i = FindConfig(c.runs, {static_cast<Integrator>(integrator), dt, ratio});
-      if (i < 0) {
-        md << " |";
-        continue;
-      }
-      const RunResult& r = c.runs[i];
-      std::string cell =
-          Fmt("%.3g%%", 100 * r.force_rms / std::max(peak, 1e-300)) + " (" + Fmt("%.3g", r.cpu_us_per_ms) + ")";
-      if (front[i]) cell += " ◆";
-      if (r.config == o.default_config) cell = "**" + cell + "**";
-      md << " " << cell << " |";
-    }
-    md << "\n";
-  }
+        "budget; **bold** = the default.\n\n";
+  WriteGrid(md, c, ratios, o.default_config, [&](int i) {
+    const RunResult& r = c.runs[i];
+    std::string cell =
+        Fmt("%.3g%%", 100 * r.force_rms / std::max(peak, 1e-300)) + " (" + Fmt("%.3g", r.cpu_us_per_ms) + ")";
+    return front[i] ? cell + " ◆" : cell;
+  });
 
   // With friction, its own force's error (the tangential part of the device force) on the same grid.
   if (c.c.mu_s > 0) {
     md << "\nFriction (mu_s " << Fmt("%g", c.c.mu_s) << ", mu_d " << Fmt("%g", c.c.mu_d) << ", b_t "
        << Fmt("%g", c.c.friction_damping)
-       << " at every tick): the RMS and max error of friction's force |f_t - f_t,ref|, force units.\n\n| integrator "
-          "| dt (s) |";
-    for (double ratio : ratios) md << " r_l " << Radius(ratio) << " |";
-    md << "\n|---|---|";
-    for (size_t i = 0; i < ratios.size(); ++i) md << "---|";
-    md << "\n";
-    for (const auto& [integrator, dt] : rows) {
-      md << "| " << IntegratorName(static_cast<Integrator>(integrator)) << " | " << Fmt("%g", dt) << " |";
-      for (double ratio : ratios) {
-        const int i = FindConfig(c.runs, {static_cast<Integrator>(integrator), dt, ratio});
-        if (i < 0) {
-          md << " |";
-          continue;
-        }
-        const RunResult& r = c.runs[i];
-        std::string cell = Fmt("%.3g", r.friction_rms) + " / " + Fmt("%.3g", r.friction_max);
-        if (r.config == o.default_config) cell = "**" + cell + "**";
-        md << " " << cell << " |";
-      }
-      md << "\n";
-    }
+       << " at every tick): the RMS and max error of friction's force |f_t - f_t,ref|, force units.\n\n";
+    WriteGrid(md, c, ratios, o.default_config,
+              [&](int i) { return Fmt("%.3g", c.runs[i].friction_rms) + " / " + Fmt("%.3g", c.runs[i].friction_max); });
   }
 
   // The front, fastest first, with every metric.

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "idms/sim/workspace.h"
@@ -276,6 +277,28 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   r.message = summary.BriefReport();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
+}
+
+Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed) {
+  Trace t;
+  t.dt_s = 1e-3;
+  const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
+  const int64_t ticks = std::llround(ScriptDuration(script) / t.dt_s);
+  for (int64_t n = 0; n < ticks; ++n) {
+    const ScriptSample s = SampleScript(script, g, static_cast<double>(n + 1) * t.dt_s);
+    t.pos.push_back({s.pos[0], s.pos[1], s.pos[2]});
+  }
+  ToolCommand tool;
+  tool.kind = ToolKind::kSphere;
+  t.force = Replay(truth, t, StepOptions{}, tool, 1);
+  double peak = 0;
+  for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, noise * peak);
+  for (auto& f : t.force) {
+    for (double& c : f) c += normal(rng);
+  }
+  return t;
 }
 
 }  // namespace idms::fit

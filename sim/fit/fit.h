@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "idms/sim/interaction_script.h"
 #include "idms/sim/model.h"
 #include "idms/sim/step.h"
 #include "idms/sim/tool.h"
@@ -82,5 +83,10 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
 // residuals and for a recording's synthetic twin in tests).
 std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace, const StepOptions& step,
                                           const ToolCommand& tool, int stride);
+
+// A recording's synthetic twin, for tests, benches and the docs' figures: a shipped script's path
+// (the thesis's sphere, r 1.5, k 400, on the default step) at 1 kHz, the force `truth` gives along
+// it, and Gaussian noise of `noise` times the peak force on every component (std::mt19937 `seed`).
+Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed);
 
 }  // namespace idms::fit

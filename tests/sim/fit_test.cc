@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <random>
 #include <string>
 
 #include "idms/sim/interaction_script.h"
@@ -23,30 +22,6 @@ Model Hex() {
   const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
   EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &m, &error)) << error.ToString();
   return m;
-}
-
-// The scripted path at 1 kHz and the force `truth` gives along it, with Gaussian noise of
-// `noise` times the peak force (fixed seed).
-Trace Synthetic(const Model& truth, Script script, double noise, uint32_t seed = 7) {
-  Trace t;
-  t.dt_s = 1e-3;
-  const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
-  const int64_t ticks = std::llround(ScriptDuration(script) / t.dt_s);
-  for (int64_t n = 0; n < ticks; ++n) {
-    const ScriptSample s = SampleScript(script, g, static_cast<double>(n + 1) * t.dt_s);
-    t.pos.push_back({s.pos[0], s.pos[1], s.pos[2]});
-  }
-  ToolCommand tool;
-  tool.kind = ToolKind::kSphere;
-  t.force = Replay(truth, t, StepOptions{}, tool, 1);
-  double peak = 0;
-  for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> normal(0.0, noise * peak);
-  for (auto& f : t.force) {
-    for (double& c : f) c += normal(rng);
-  }
-  return t;
 }
 
 FitOptions Options(std::vector<Param> params) {
@@ -64,7 +39,7 @@ TEST(Fit, RecoversStiffnessAndDampingFromANoisyStroke) {
   ScaleGroup(truth, Param::kHomeK, 1.3);
   ScaleGroup(truth, Param::kSurfaceK, 0.8);
   ScaleGroup(truth, Param::kHomeB, 1.2);
-  const Trace trace = Synthetic(truth, Script::kStrokeGentle, 0.01);
+  const Trace trace = ScriptedTrace(truth, Script::kStrokeGentle, 0.01, 7);
   const FitResult r = Fit(typed, trace, Options({Param::kHomeK, Param::kSurfaceK, Param::kHomeB}));
   ASSERT_TRUE(r.ok) << r.message;
   const double want[] = {1.3, 0.8, 1.2};
@@ -87,10 +62,10 @@ TEST(Fit, APalpationDeterminesOneStiffnessAndPredictsAStroke) {
   const Model typed = Hex();
   Model truth = typed;
   ScaleGroup(truth, Param::kHomeK, 1.3);
-  const FitResult r = Fit(typed, Synthetic(truth, Script::kPalpate, 0.01), Options({Param::kHomeK}));
+  const FitResult r = Fit(typed, ScriptedTrace(truth, Script::kPalpate, 0.01, 7), Options({Param::kHomeK}));
   ASSERT_TRUE(r.ok) << r.message;
   EXPECT_NEAR(r.scale[0] / 1.3, 1.0, 0.02) << "home_k x " << r.scale[0];
-  const Trace stroke = Synthetic(truth, Script::kStrokeGentle, 0.0);
+  const Trace stroke = ScriptedTrace(truth, Script::kStrokeGentle, 0.0, 7);
   ToolCommand tool;
   tool.kind = ToolKind::kSphere;
   const auto predicted = Replay(r.fitted, stroke, StepOptions{}, tool, 1);
@@ -105,7 +80,7 @@ TEST(Fit, APalpationDeterminesOneStiffnessAndPredictsAStroke) {
   std::printf("palpation fit: home_k x %.5f +- %.5f; held-out stroke relative RMS error %.4f\n", r.scale[0],
               r.scale_sigma[0], relative);
   const FitResult both =
-      Fit(typed, Synthetic(truth, Script::kPalpate, 0.01), Options({Param::kHomeK, Param::kSurfaceK}));
+      Fit(typed, ScriptedTrace(truth, Script::kPalpate, 0.01, 7), Options({Param::kHomeK, Param::kSurfaceK}));
   ASSERT_TRUE(both.ok) << both.message;
   EXPECT_GT(both.scale_sigma[1], 0.05) << "one press cannot tell the home springs from the surface's";
 }
@@ -115,7 +90,7 @@ TEST(Fit, RecoversDampingFromAStroke) {
   Model truth = typed;
   ScaleGroup(truth, Param::kSurfaceK, 1.2);
   ScaleGroup(truth, Param::kSurfaceB, 1.5);
-  const Trace trace = Synthetic(truth, Script::kStrokeFast, 0.01);
+  const Trace trace = ScriptedTrace(truth, Script::kStrokeFast, 0.01, 7);
   const FitResult r = Fit(typed, trace, Options({Param::kSurfaceK, Param::kSurfaceB}));
   ASSERT_TRUE(r.ok) << r.message;
   EXPECT_NEAR(r.scale[0] / 1.2, 1.0, 0.02) << "surface_k x " << r.scale[0];
@@ -124,7 +99,7 @@ TEST(Fit, RecoversDampingFromAStroke) {
 
 TEST(Fit, APathThatNeverTouchesIsRefused) {
   const Model typed = Hex();
-  Trace trace = Synthetic(typed, Script::kPalpate, 0.0);
+  Trace trace = ScriptedTrace(typed, Script::kPalpate, 0.0, 7);
   for (auto& p : trace.pos) p[2] += 50;  // far above the surface
   for (auto& f : trace.force) f = {0, 0, 0};
   const FitResult r = Fit(typed, trace, Options({Param::kHomeK}));
@@ -143,7 +118,7 @@ TEST(Fit, ParamsAreNamedEachOnceAndAGroupWithNothingToScaleIsRefused) {
   EXPECT_EQ(params, (std::vector<Param>{Param::kSurfaceB, Param::kHomeK}));
   Model springless = Hex();
   ScaleGroup(springless, Param::kHomeK, 0.0);
-  const FitResult r = Fit(springless, Synthetic(Hex(), Script::kPalpate, 0.0), Options({Param::kHomeK}));
+  const FitResult r = Fit(springless, ScriptedTrace(Hex(), Script::kPalpate, 0.0, 7), Options({Param::kHomeK}));
   EXPECT_FALSE(r.ok);
   EXPECT_EQ(r.message, "home_k: the model has no home elements with a nonzero value to scale");
 }
