@@ -24,18 +24,24 @@ bool InGroup(const Model& m, Param p, int32_t e) {
   return (p == Param::kHomeK || p == Param::kHomeB) ? home : !home;
 }
 
-std::vector<double>& GroupValues(Model& m, Param p) {
-  return (p == Param::kHomeK || p == Param::kSurfaceK) ? m.elem_k : m.elem_b;
+bool IsElementGroup(Param p) { return p != Param::kToolK; }
+
+// The element group's values times `scale`, without re-deriving (tool_k: nothing).
+void ScaleValues(Model& m, Param p, double scale) {
+  if (!IsElementGroup(p)) return;
+  std::vector<double>& v = (p == Param::kHomeK || p == Param::kSurfaceK) ? m.elem_k : m.elem_b;
+  for (int32_t e = 0; e < m.num_elems; ++e) {
+    if (InGroup(m, p, e)) v[e] *= scale;
+  }
 }
 
-Model Scaled(const Model& base, const std::vector<Param>& params, const double* log_scale) {
+// The model and the tool with every factor applied.
+Model Scaled(const Model& base, const FitOptions& o, const double* log_scale, ToolCommand* tool) {
   Model m = base;
-  for (size_t i = 0; i < params.size(); ++i) {
-    std::vector<double>& v = GroupValues(m, params[i]);
-    const double s = std::exp(log_scale[i]);
-    for (int32_t e = 0; e < m.num_elems; ++e) {
-      if (InGroup(m, params[i], e)) v[e] *= s;
-    }
+  *tool = o.tool;
+  for (size_t i = 0; i < o.params.size(); ++i) {
+    ScaleValues(m, o.params[i], std::exp(log_scale[i]));
+    if (o.params[i] == Param::kToolK) tool->stiffness *= std::exp(log_scale[i]);
   }
   FinalizeModel(m);
   return m;
@@ -49,8 +55,9 @@ struct ForceResidual {
   const std::vector<std::array<double, 3>>* measured;
   int* replays;
   bool operator()(double const* const* x, double* residuals) const {
-    const Model m = Scaled(*model, options->params, x[0]);
-    const std::vector<std::array<double, 3>> f = Replay(m, *trace, options->step, options->tool, options->stride);
+    ToolCommand tool;
+    const Model m = Scaled(*model, *options, x[0], &tool);
+    const std::vector<std::array<double, 3>> f = Replay(m, *trace, options->step, tool, options->stride);
     ++*replays;
     for (size_t i = 0; i < f.size(); ++i) {
       for (int c = 0; c < 3; ++c) {
@@ -74,6 +81,8 @@ const char* ParamName(Param p) {
       return "surface_k";
     case Param::kSurfaceB:
       return "surface_b";
+    case Param::kToolK:
+      return "tool_k";
   }
   return "?";
 }
@@ -90,19 +99,21 @@ bool ParseParams(const std::string& list, std::vector<Param>* params, std::strin
       found = item == ParamName(p);
     }
     if (!found || std::find(params->begin(), params->end(), p) != params->end()) {
-      *error = "--params: bad item '" + item + "' (expected each of home_k, home_b, surface_k, surface_b at most once)";
+      *error = "--params: bad item '" + item +
+               "' (expected each of home_k, home_b, surface_k, surface_b, tool_k at most once)";
       return false;
     }
     params->push_back(p);
   }
   if (params->empty()) {
-    *error = "--params: name at least one of home_k, home_b, surface_k, surface_b";
+    *error = "--params: name at least one of home_k, home_b, surface_k, surface_b, tool_k";
     return false;
   }
   return true;
 }
 
 double GroupMean(const Model& m, Param p) {
+  if (!IsElementGroup(p)) return 0;
   const std::vector<double>& v = (p == Param::kHomeK || p == Param::kSurfaceK) ? m.elem_k : m.elem_b;
   double sum = 0;
   int32_t n = 0;
@@ -113,10 +124,7 @@ double GroupMean(const Model& m, Param p) {
 }
 
 void ScaleGroup(Model& m, Param p, double scale) {
-  std::vector<double>& v = GroupValues(m, p);
-  for (int32_t e = 0; e < m.num_elems; ++e) {
-    if (InGroup(m, p, e)) v[e] *= scale;
-  }
+  ScaleValues(m, p, scale);
   FinalizeModel(m);
 }
 
@@ -199,7 +207,11 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
     return r;
   }
   for (Param param : options.params) {
-    if (!(GroupMean(model, param) > 0)) {
+    if (param == Param::kToolK && !(options.tool.stiffness > 0 && std::isfinite(options.tool.stiffness))) {
+      r.message = "tool_k: the tool's stiffness must be a finite number > 0 to scale";
+      return r;
+    }
+    if (IsElementGroup(param) && !(GroupMean(model, param) > 0)) {
       r.message = std::string(ParamName(param)) + ": the model has no " +
                   (param == Param::kHomeK || param == Param::kHomeB ? "home" : "surface") +
                   " elements with a nonzero value to scale";
@@ -265,21 +277,22 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   for (size_t i = 0; i < p; ++i) {
     const double scale = std::exp(x[i]);
     const double sigma = scale * std::sqrt(std::max(0.0, cov[i * p + i] * s2));
-    const double mean = GroupMean(model, options.params[i]);
+    const double mean =
+        IsElementGroup(options.params[i]) ? GroupMean(model, options.params[i]) : options.tool.stiffness;
     r.scale.push_back(scale);
     r.scale_sigma.push_back(sigma);
     r.value.push_back(mean * scale);
     r.value_sigma.push_back(mean * sigma);
   }
-  r.fitted = Scaled(model, options.params, x.data());
-  r.fitted_force = Replay(r.fitted, trace, options.step, options.tool, options.stride);
+  r.fitted = Scaled(model, options, x.data(), &r.fitted_tool);
+  r.fitted_force = Replay(r.fitted, trace, options.step, r.fitted_tool, options.stride);
   r.ok = true;
   r.message = summary.BriefReport();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }
 
-Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed) {
+Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed, double tool_stiffness) {
   Trace t;
   t.dt_s = 1e-3;
   const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
@@ -290,6 +303,7 @@ Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t se
   }
   ToolCommand tool;
   tool.kind = ToolKind::kSphere;
+  tool.stiffness = tool_stiffness;
   t.force = Replay(truth, t, StepOptions{}, tool, 1);
   double peak = 0;
   for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));

@@ -34,18 +34,21 @@ struct Trace {
 // file and line.
 bool ReadTraceCsv(const std::string& path, Trace* trace, std::string* error);
 
-enum class Param : uint8_t { kHomeK, kHomeB, kSurfaceK, kSurfaceB };
-inline constexpr int kNumParams = 4;
-const char* ParamName(Param p);  // "home_k", "home_b", "surface_k", "surface_b"
+// The element groups' stiffness and damping, and the MIO's contact stiffness (the tool's k, which
+// the recording's tool command gives; its factor scales the tool, not the model).
+enum class Param : uint8_t { kHomeK, kHomeB, kSurfaceK, kSurfaceB, kToolK };
+inline constexpr int kNumParams = 5;
+const char* ParamName(Param p);  // "home_k", "home_b", "surface_k", "surface_b", "tool_k"
 
 // "home_k,surface_k" -> params (each once). False with *error naming the bad item.
 bool ParseParams(const std::string& list, std::vector<Param>* params, std::string* error);
 
 // The group's mean typed-in value in `model` (home or surface elements' k or b); 0 if the group is
-// empty.
+// empty, and for tool_k (not the model's).
 double GroupMean(const Model& model, Param p);
 
-// Multiplies the group's values by `scale` and re-derives what depends on them (FinalizeModel).
+// Multiplies the element group's values by `scale` and re-derives what depends on them
+// (FinalizeModel). tool_k leaves the model as it is.
 void ScaleGroup(Model& model, Param p, double scale);
 
 struct FitOptions {
@@ -71,6 +74,7 @@ struct FitResult {
   int replays = 0;  // whole-trace replays the solver asked for
   double seconds = 0;
   Model fitted;                                     // the model with the fitted factors applied
+  ToolCommand fitted_tool;                          // the tool with the fitted tool_k (as given without)
   std::vector<std::array<double, 3>> fitted_force;  // the replayed force at the fit, per compared sample
 };
 
@@ -87,6 +91,7 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
 // A recording's synthetic twin, for tests, benches and the docs' figures: a shipped script's path
 // (the thesis's sphere, r 1.5, k 400, on the default step) at 1 kHz, the force `truth` gives along
 // it, and Gaussian noise of `noise` times the peak force on every component (std::mt19937 `seed`).
-Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed);
+// tool_stiffness: the sphere's k in the recording.
+Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed, double tool_stiffness = 400);
 
 }  // namespace idms::fit

@@ -79,7 +79,7 @@ void RunFit(const FitArgs& a) {
   std::printf("fit of %s to %s: %d samples (every %d ticks), peak force %.4g\n", a.model.c_str(), a.csv.c_str(),
               r.samples, o.stride, r.peak_force);
   for (size_t i = 0; i < r.params.size(); ++i) {
-    std::printf("  %-10s %.6g +- %.2g  (x %.6g of the model's)\n", fit::ParamName(r.params[i]), r.value[i],
+    std::printf("  %-10s %.6g +- %.2g  (x %.6g of the typed-in value)\n", fit::ParamName(r.params[i]), r.value[i],
                 r.value_sigma[i], r.scale[i]);
   }
   std::printf("force RMS error %.4g -> %.4g (%.2g%% of the peak); %d iterations, %d replays, %.2f s\n", r.rms_before,
@@ -96,7 +96,7 @@ void Setup(CLI::App& app) {
       ->required();
   cmd->add_option("--params", a.params,
                   "Comma-separated groups to fit: home_k, home_b, surface_k, surface_b (each a factor on the model's "
-                  "values)")
+                  "values), tool_k (the MIO's contact stiffness)")
       ->capture_default_str();
   cmd->add_option("--preset", a.preset, "The step the recording was made with: default | thesis")
       ->capture_default_str();

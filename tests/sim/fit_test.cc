@@ -97,6 +97,17 @@ TEST(Fit, RecoversDampingFromAStroke) {
   EXPECT_NEAR(r.scale[1] / 1.5, 1.0, 0.02) << "surface_b x " << r.scale[1];
 }
 
+// The MIO's contact stiffness (the thesis's k = 400 is typed in too): a palpation made with a
+// stiffer fingertip gives its k back; the model is left as it was.
+TEST(Fit, RecoversTheToolsContactStiffness) {
+  const Model typed = Hex();
+  const FitResult r = Fit(typed, ScriptedTrace(typed, Script::kPalpate, 0.01, 7, 500), Options({Param::kToolK}));
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_NEAR(r.value[0] / 500, 1.0, 0.02) << "tool_k " << r.value[0];
+  EXPECT_NEAR(r.fitted_tool.stiffness, r.value[0], 1e-9 * r.value[0]);
+  EXPECT_EQ(r.fitted.elem_k, typed.elem_k);
+}
+
 TEST(Fit, APathThatNeverTouchesIsRefused) {
   const Model typed = Hex();
   Trace trace = ScriptedTrace(typed, Script::kPalpate, 0.0, 7);
