@@ -7,10 +7,12 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
 
@@ -19,29 +21,70 @@
 namespace idms::fit {
 namespace {
 
+bool IsElementGroup(Param p) { return p != Param::kToolK; }
+bool IsStiffness(Param p) { return p == Param::kHomeK || p == Param::kSurfaceK || p == Param::kK; }
+
 bool InGroup(const Model& m, Param p, int32_t e) {
+  if (p == Param::kK || p == Param::kB) return true;
   const bool home = m.elem_home[e] != 0;
   return (p == Param::kHomeK || p == Param::kHomeB) ? home : !home;
 }
 
-bool IsElementGroup(Param p) { return p != Param::kToolK; }
-
-// The element group's values times `scale`, without re-deriving (tool_k: nothing).
-void ScaleValues(Model& m, Param p, double scale) {
-  if (!IsElementGroup(p)) return;
-  std::vector<double>& v = (p == Param::kHomeK || p == Param::kSurfaceK) ? m.elem_k : m.elem_b;
+// Per element: the part it belongs to (Unknown::part), -1 when there are no regions.
+std::vector<int> PartsOf(const Model& m, const std::vector<Region>& regions) {
+  std::vector<int> parts(m.num_elems, -1);
+  if (regions.empty()) return parts;
   for (int32_t e = 0; e < m.num_elems; ++e) {
-    if (InGroup(m, p, e)) v[e] *= scale;
+    const double* p0 = &m.atom_pos_eq[3 * m.elem_atoms[2 * e]];
+    const double* p1 = &m.atom_pos_eq[3 * m.elem_atoms[2 * e + 1]];
+    const double mid[3] = {(p0[0] + p1[0]) / 2, (p0[1] + p1[1]) / 2, (p0[2] + p1[2]) / 2};
+    int part = static_cast<int>(regions.size());
+    for (size_t r = 0; r < regions.size() && part == static_cast<int>(regions.size()); ++r) {
+      if (regions[r].Contains(mid)) part = static_cast<int>(r);
+    }
+    parts[e] = part;
+  }
+  return parts;
+}
+
+bool InUnknown(const Model& m, const Unknown& u, const std::vector<int>& parts, int32_t e) {
+  return InGroup(m, u.param, e) && (u.part < 0 || parts[e] == u.part);
+}
+
+// The unknown's elements' values times `scale`, without re-deriving (tool_k: nothing).
+void ScaleValues(Model& m, const Unknown& u, const std::vector<int>& parts, double scale) {
+  if (!IsElementGroup(u.param)) return;
+  std::vector<double>& v = IsStiffness(u.param) ? m.elem_k : m.elem_b;
+  for (int32_t e = 0; e < m.num_elems; ++e) {
+    if (InUnknown(m, u, parts, e)) v[e] *= scale;
   }
 }
 
+double UnknownMean(const Model& m, const Unknown& u, const std::vector<int>& parts) {
+  if (!IsElementGroup(u.param)) return 0;
+  const std::vector<double>& v = IsStiffness(u.param) ? m.elem_k : m.elem_b;
+  double sum = 0;
+  int32_t n = 0;
+  for (int32_t e = 0; e < m.num_elems; ++e) {
+    if (InUnknown(m, u, parts, e)) sum += v[e], ++n;
+  }
+  return n > 0 ? sum / n : 0;
+}
+
+std::string UnknownName(const Unknown& u, const std::vector<Region>& regions) {
+  std::string name = ParamName(u.param);
+  if (u.part >= 0) name += "@" + (u.part < static_cast<int>(regions.size()) ? regions[u.part].name : "rest");
+  return name;
+}
+
 // The model and the tool with every factor applied.
-Model Scaled(const Model& base, const FitOptions& o, const double* log_scale, ToolCommand* tool) {
+Model Scaled(const Model& base, const FitOptions& o, const std::vector<Unknown>& unknowns,
+             const std::vector<int>& parts, const double* log_scale, ToolCommand* tool) {
   Model m = base;
   *tool = o.tool;
-  for (size_t i = 0; i < o.params.size(); ++i) {
-    ScaleValues(m, o.params[i], std::exp(log_scale[i]));
-    if (o.params[i] == Param::kToolK) tool->stiffness *= std::exp(log_scale[i]);
+  for (size_t i = 0; i < unknowns.size(); ++i) {
+    ScaleValues(m, unknowns[i], parts, std::exp(log_scale[i]));
+    if (unknowns[i].param == Param::kToolK) tool->stiffness *= std::exp(log_scale[i]);
   }
   FinalizeModel(m);
   return m;
@@ -52,11 +95,13 @@ struct ForceResidual {
   const Model* model;
   const Trace* trace;
   const FitOptions* options;
+  const std::vector<Unknown>* unknowns;
+  const std::vector<int>* parts;
   const std::vector<std::array<double, 3>>* measured;
   int* replays;
   bool operator()(double const* const* x, double* residuals) const {
     ToolCommand tool;
-    const Model m = Scaled(*model, *options, x[0], &tool);
+    const Model m = Scaled(*model, *options, *unknowns, *parts, x[0], &tool);
     const std::vector<std::array<double, 3>> f = Replay(m, *trace, options->step, tool, options->stride);
     ++*replays;
     for (size_t i = 0; i < f.size(); ++i) {
@@ -65,6 +110,21 @@ struct ForceResidual {
         if (!std::isfinite(residuals[3 * i + c])) return false;  // the solver backs off
       }
     }
+    return true;
+  }
+};
+
+// The lump's profile over the map: the background b inside an isotropic step of height h = R - b
+// at radius rho around (cx, cy), smoothed over a width w (a logistic in the distance). x: cx, cy,
+// log rho, log w, log h.
+struct LumpProfile {
+  double x, y, scale, background;
+  template <typename T>
+  bool operator()(const T* p, T* residual) const {
+    const T dx = T(x) - p[0], dy = T(y) - p[1];
+    const T d = sqrt(dx * dx + dy * dy + T(1e-18));  // smooth at the centre
+    const T z = (exp(p[2]) - d) / exp(p[3]);
+    residual[0] = T(background) + exp(p[4]) / (T(1) + exp(-z)) - T(scale);
     return true;
   }
 };
@@ -83,6 +143,10 @@ const char* ParamName(Param p) {
       return "surface_b";
     case Param::kToolK:
       return "tool_k";
+    case Param::kK:
+      return "k";
+    case Param::kB:
+      return "b";
   }
   return "?";
 }
@@ -100,32 +164,94 @@ bool ParseParams(const std::string& list, std::vector<Param>* params, std::strin
     }
     if (!found || std::find(params->begin(), params->end(), p) != params->end()) {
       *error = "--params: bad item '" + item +
-               "' (expected each of home_k, home_b, surface_k, surface_b, tool_k at most once)";
+               "' (expected each of home_k, home_b, surface_k, surface_b, k, b, tool_k at most once)";
       return false;
     }
     params->push_back(p);
   }
   if (params->empty()) {
-    *error = "--params: name at least one of home_k, home_b, surface_k, surface_b, tool_k";
+    *error = "--params: name at least one of home_k, home_b, surface_k, surface_b, k, b, tool_k";
     return false;
+  }
+  auto has = [&](Param q) { return std::find(params->begin(), params->end(), q) != params->end(); };
+  for (Param whole : {Param::kK, Param::kB}) {
+    const Param home = whole == Param::kK ? Param::kHomeK : Param::kHomeB;
+    const Param surface = whole == Param::kK ? Param::kSurfaceK : Param::kSurfaceB;
+    if (has(whole) && (has(home) || has(surface))) {
+      *error = std::string("--params: ") + ParamName(whole) + " (every element) overlaps " +
+               ParamName(has(home) ? home : surface) + "; fit one or the other";
+      return false;
+    }
   }
   return true;
 }
 
-double GroupMean(const Model& m, Param p) {
-  if (!IsElementGroup(p)) return 0;
-  const std::vector<double>& v = (p == Param::kHomeK || p == Param::kSurfaceK) ? m.elem_k : m.elem_b;
-  double sum = 0;
-  int32_t n = 0;
-  for (int32_t e = 0; e < m.num_elems; ++e) {
-    if (InGroup(m, p, e)) sum += v[e], ++n;
-  }
-  return n > 0 ? sum / n : 0;
-}
+double GroupMean(const Model& m, Param p) { return UnknownMean(m, Unknown{p, -1}, {}); }
 
 void ScaleGroup(Model& m, Param p, double scale) {
-  ScaleValues(m, p, scale);
+  ScaleValues(m, Unknown{p, -1}, {}, scale);
   FinalizeModel(m);
+}
+
+bool Region::Contains(const double* p) const {
+  if (shape == Shape::kSphere) {
+    const double dx = p[0] - v[0], dy = p[1] - v[1], dz = p[2] - v[2];
+    return dx * dx + dy * dy + dz * dz <= v[3] * v[3];
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (p[c] < std::min(v[c], v[c + 3]) || p[c] > std::max(v[c], v[c + 3])) return false;
+  }
+  return true;
+}
+
+bool ParseRegion(const std::string& spec, int index, Region* region, std::string* error) {
+  *region = {};
+  std::string body = spec;
+  const size_t eq = spec.find('=');
+  region->name = "region" + std::to_string(index + 1);
+  if (eq != std::string::npos) {
+    region->name = spec.substr(0, eq);
+    body = spec.substr(eq + 1);
+    const bool word = !region->name.empty() && std::all_of(region->name.begin(), region->name.end(), [](char c) {
+      return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+    });
+    if (!word || region->name == "rest") {
+      *error = "--region '" + spec + "': the name must be letters, digits, _ or - (and not 'rest')";
+      return false;
+    }
+  }
+  const size_t colon = body.find(':');
+  const std::string shape = body.substr(0, colon);
+  int want = 0;
+  if (shape == "sphere") region->shape = Region::Shape::kSphere, want = 4;
+  if (shape == "box") region->shape = Region::Shape::kBox, want = 6;
+  if (want == 0 || colon == std::string::npos) {
+    *error = "--region '" + spec + "': expected [NAME=]sphere:cx,cy,cz,r or [NAME=]box:x0,y0,z0,x1,y1,z1";
+    return false;
+  }
+  std::stringstream in(body.substr(colon + 1));
+  std::string item;
+  int n = 0;
+  while (std::getline(in, item, ',')) {
+    char* end = nullptr;
+    const double value = std::strtod(item.c_str(), &end);
+    if (n >= want || item.empty() || *end != '\0' || !std::isfinite(value)) {
+      *error = "--region '" + spec + "': " + shape + " takes " + std::to_string(want) + " numbers, value " +
+               std::to_string(n + 1) + " ('" + item + "') is not one";
+      return false;
+    }
+    region->v[n++] = value;
+  }
+  if (n != want) {
+    *error =
+        "--region '" + spec + "': " + shape + " takes " + std::to_string(want) + " numbers, got " + std::to_string(n);
+    return false;
+  }
+  if (region->shape == Region::Shape::kSphere && !(region->v[3] > 0)) {
+    *error = "--region '" + spec + "': the radius must be > 0";
+    return false;
+  }
+  return true;
 }
 
 bool ReadTraceCsv(const std::string& path, Trace* trace, std::string* error) {
@@ -200,21 +326,37 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
 FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   FitResult r;
-  r.params = options.params;
-  const size_t p = options.params.size();
+  const std::vector<int> parts = PartsOf(model, options.regions);
+  for (Param param : options.params) {
+    if (!IsElementGroup(param) || options.regions.empty()) {
+      r.unknowns.push_back({param, -1});
+      continue;
+    }
+    for (int part = 0; part <= static_cast<int>(options.regions.size()); ++part) r.unknowns.push_back({param, part});
+  }
+  for (const Unknown& u : r.unknowns) r.names.push_back(UnknownName(u, options.regions));
+  const size_t p = r.unknowns.size();
   if (p == 0 || options.stride < 1) {
     r.message = "nothing to fit (no parameters, or a stride below 1)";
     return r;
   }
-  for (Param param : options.params) {
+  for (size_t i = 0; i < p; ++i) {
+    const Param param = r.unknowns[i].param;
     if (param == Param::kToolK && !(options.tool.stiffness > 0 && std::isfinite(options.tool.stiffness))) {
       r.message = "tool_k: the tool's stiffness must be a finite number > 0 to scale";
       return r;
     }
-    if (IsElementGroup(param) && !(GroupMean(model, param) > 0)) {
-      r.message = std::string(ParamName(param)) + ": the model has no " +
-                  (param == Param::kHomeK || param == Param::kHomeB ? "home" : "surface") +
-                  " elements with a nonzero value to scale";
+    if (IsElementGroup(param) && !(UnknownMean(model, r.unknowns[i], parts) > 0)) {
+      const char* group = param == Param::kHomeK || param == Param::kHomeB         ? "home"
+                          : param == Param::kSurfaceK || param == Param::kSurfaceB ? "surface"
+                                                                                   : "";
+      const int part = r.unknowns[i].part;
+      const std::string where = part < 0 ? ""
+                                : part < static_cast<int>(options.regions.size())
+                                    ? " inside region " + options.regions[part].name
+                                    : " outside every region";
+      r.message = r.names[i] + ": the model has no " + group + (*group ? " " : "") +
+                  "elements with a nonzero value to scale" + where;
       return r;
     }
   }
@@ -237,7 +379,7 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
 
   std::vector<double> x(p, 0.0);  // log scale factors, starting at the typed-in values
   auto* cost = new ceres::DynamicNumericDiffCostFunction<ForceResidual, ceres::CENTRAL>(
-      new ForceResidual{&model, &trace, &options, &measured, &r.replays});
+      new ForceResidual{&model, &trace, &options, &r.unknowns, &parts, &measured, &r.replays});
   cost->AddParameterBlock(static_cast<int>(p));
   cost->SetNumResiduals(static_cast<int>(3 * measured.size()));
   ceres::Problem problem;
@@ -245,7 +387,7 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = options.max_iterations;
-  so.function_tolerance = 1e-12;
+  so.function_tolerance = options.function_tolerance;
   so.parameter_tolerance = 1e-10;
   so.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
@@ -278,16 +420,160 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
     const double scale = std::exp(x[i]);
     const double sigma = scale * std::sqrt(std::max(0.0, cov[i * p + i] * s2));
     const double mean =
-        IsElementGroup(options.params[i]) ? GroupMean(model, options.params[i]) : options.tool.stiffness;
+        IsElementGroup(r.unknowns[i].param) ? UnknownMean(model, r.unknowns[i], parts) : options.tool.stiffness;
     r.scale.push_back(scale);
     r.scale_sigma.push_back(sigma);
     r.value.push_back(mean * scale);
     r.value_sigma.push_back(mean * sigma);
   }
-  r.fitted = Scaled(model, options, x.data(), &r.fitted_tool);
+  r.fitted = Scaled(model, options, r.unknowns, parts, x.data(), &r.fitted_tool);
   r.fitted_force = Replay(r.fitted, trace, options.step, r.fitted_tool, options.stride);
   r.ok = true;
   r.message = summary.BriefReport();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  MapResult r;
+  const int64_t ticks = static_cast<int64_t>(trace.force.size());
+  auto magnitude = [&](int64_t n) {
+    const auto& f = trace.force[n];
+    return std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+  };
+  double peak = 0;
+  for (int64_t n = 0; n < ticks; ++n) peak = std::max(peak, magnitude(n));
+  if (!(peak > 1e-9)) {
+    r.message = "the recording never touches the model: there is nothing to map";
+    return r;
+  }
+  // The presses: runs of ticks above 5% of the largest force (well above a 1% noise), with gaps
+  // shorter than 50 ms bridged (noise at the edges) and runs shorter than 20 ms dropped.
+  const double threshold = 0.05 * peak;
+  const int64_t bridge = std::llround(0.05 / trace.dt_s), shortest = std::llround(0.02 / trace.dt_s);
+  std::vector<std::array<int64_t, 2>> presses;
+  for (int64_t n = 0; n < ticks; ++n) {
+    if (!(magnitude(n) > threshold)) continue;
+    if (!presses.empty() && n - presses.back()[1] <= bridge) {
+      presses.back()[1] = n + 1;
+    } else {
+      presses.push_back({n, n + 1});
+    }
+  }
+  std::erase_if(presses, [&](const auto& p) { return p[1] - p[0] < shortest; });
+  if (presses.size() < 3) {
+    r.message = "the recording holds " + std::to_string(presses.size()) +
+                " separate presses; a map needs at least 3 (a scan: idms-sim run --script scan)";
+    return r;
+  }
+  FitOptions one = options;
+  one.params = {Param::kK};
+  one.regions.clear();
+  // A map needs each factor to a fraction of a percent, not to the last digit: a few replays per
+  // press fewer (a 7 x 7 scan of the 40 x 40 slab: ~29 replays a press at 1e-12).
+  one.function_tolerance = std::max(options.function_tolerance, 1e-7);
+  for (size_t i = 0; i < presses.size(); ++i) {
+    // The ticks from halfway after the last press to halfway before the next, replayed from rest.
+    const int64_t t0 = i == 0 ? 0 : (presses[i - 1][1] + presses[i][0]) / 2;
+    const int64_t t1 = i + 1 == presses.size() ? ticks : (presses[i][1] + presses[i + 1][0]) / 2;
+    Trace slice;
+    slice.dt_s = trace.dt_s;
+    slice.pos.assign(trace.pos.begin() + t0, trace.pos.begin() + t1);
+    slice.force.assign(trace.force.begin() + t0, trace.force.begin() + t1);
+    const FitResult f = Fit(model, slice, one);
+    r.replays += f.replays;
+    if (!f.ok) {
+      r.message = "the press at t = " + std::to_string(static_cast<double>(presses[i][0] + 1) * trace.dt_s) +
+                  " s: " + f.message;
+      return r;
+    }
+    int64_t top = presses[i][0];
+    for (int64_t n = presses[i][0]; n < presses[i][1]; ++n) {
+      if (magnitude(n) > magnitude(top)) top = n;
+    }
+    r.points.push_back({.x = trace.pos[top][0],
+                        .y = trace.pos[top][1],
+                        .scale = f.scale[0],
+                        .sigma = f.scale_sigma[0],
+                        .peak_force = magnitude(top),
+                        .tick0 = t0,
+                        .tick1 = t1});
+  }
+  // The background and its scatter, robustly: a lump's presses must not raise them.
+  std::vector<double> v;
+  for (const MapPoint& p : r.points) v.push_back(p.scale);
+  auto median = [](std::vector<double> x) {
+    std::sort(x.begin(), x.end());
+    const size_t n = x.size();
+    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
+  };
+  r.background = median(v);
+  for (double& x : v) x = std::abs(x - r.background);
+  r.spread = 1.4826 * median(v);
+  size_t top = 0;
+  for (size_t i = 0; i < r.points.size(); ++i) {
+    if (r.points[i].scale > r.points[top].scale) top = i;
+  }
+  const double excess = r.points[top].scale - r.background;
+  r.lump.found = excess > std::max(0.25 * r.background, 5 * r.spread);
+  if (r.lump.found) {
+    // A first guess from the presses above half the largest excess (their excess-weighted mean and
+    // extent), then the profile fitted to every press: the centre comes from the lump's edges, not
+    // from where the grid happened to fall inside it.
+    double wsum = 0, cx = 0, cy = 0;
+    for (const MapPoint& p : r.points) {
+      const double w = p.scale - r.background;
+      if (w < 0.5 * excess) continue;
+      cx += w * p.x, cy += w * p.y, wsum += w;
+      ++r.lump.presses;
+    }
+    cx /= wsum, cy /= wsum;
+    double rho = 0, spacing = std::numeric_limits<double>::infinity();
+    for (const MapPoint& p : r.points) {
+      if (p.scale - r.background >= 0.5 * excess) rho = std::max(rho, std::hypot(p.x - cx, p.y - cy));
+      for (const MapPoint& q : r.points) {
+        const double d = std::hypot(p.x - q.x, p.y - q.y);
+        if (d > 0) spacing = std::min(spacing, d);
+      }
+    }
+    rho += 0.5 * spacing;
+    double x[5] = {cx, cy, std::log(rho), std::log(0.25 * rho), std::log(excess)};
+    ceres::Problem problem;
+    for (const MapPoint& p : r.points) {
+      problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<LumpProfile, 1, 5>(new LumpProfile{p.x, p.y, p.scale, r.background}), nullptr,
+          x);
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = 100;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    r.lump.x = x[0], r.lump.y = x[1], r.lump.radius = std::exp(x[2]);
+    const double height = std::exp(x[4]);
+    r.lump.ratio = (r.background + height) / r.background;
+    ceres::Covariance::Options co;
+    co.algorithm_type = ceres::DENSE_SVD;
+    co.null_space_rank = -1;  // pseudo-inverse: a profile with a flat edge leaves w loose, not the rest
+    ceres::Covariance covariance(co);
+    std::vector<std::pair<const double*, const double*>> blocks = {{x, x}};
+    double cov[25] = {};
+    const bool have = covariance.Compute(blocks, &problem) && covariance.GetCovarianceBlock(x, x, cov);
+    const double dof = std::max(1.0, static_cast<double>(r.points.size()) - 5);
+    const double s2 = 2 * summary.final_cost / dof;
+    if (have) {
+      r.lump.xy_sigma = std::sqrt(std::max(0.0, (cov[0] + cov[6]) * s2));
+      r.lump.ratio_sigma = height / r.background * std::sqrt(std::max(0.0, cov[24] * s2));
+    }
+    if (!summary.IsSolutionUsable() || !std::isfinite(r.lump.ratio)) {
+      r.lump.x = cx, r.lump.y = cy, r.lump.radius = rho;  // the first guess stands
+      r.lump.ratio = r.points[top].scale / r.background;
+    }
+  }
+  r.ok = true;
+  r.message = std::to_string(r.points.size()) + " presses mapped";
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }

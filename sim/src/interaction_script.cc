@@ -57,6 +57,55 @@ constexpr Key kStrokeGentle[] = {{0.0, 0.0, 1, kHover, false},        {1.0, 0.0,
 constexpr Key kPluck[] = {{0.0, 0.5, 0, kHover, false}, {0.5, 0.5, 0, kHover, false}, {2.0, 0.5, 0, -kPluckDepth, true},
                           {3.5, 0.5, 0, kLift, true},   {4.0, 0.5, 0, kLift, false},  {5.0, 0.5, 0, kLift, false}};
 
+// The scan (issue 34): at each grid point the MIO comes down from kScanHover above first contact
+// (ContactUnder) to kScanDepth below it, holds, goes back up and moves to the next point, row by row in a
+// serpentine. The depth is the palpation's order (0.063) but shallower: the tissue must stay
+// elastic (non-destructive, thesis 7.2.5), and a lump is felt as the force at a depth, not by
+// pressing harder. About 50 s for the 7 x 7 grid.
+constexpr double kScanDepth = 0.05;
+constexpr double kScanHover = 0.3;
+constexpr double kScanLead = 0.5;  // hover above the first point at the start, and the last at the end
+constexpr double kScanDown = 0.3, kScanHold = 0.1, kScanUp = 0.3, kScanMove = 0.3;
+constexpr double kScanPeriod = kScanDown + kScanHold + kScanUp + kScanMove;
+constexpr int kScanPoints = kScanGrid * kScanGrid;
+constexpr double kScanDuration = 2 * kScanLead + kScanPoints * kScanPeriod - kScanMove;
+
+double Ease(double u) { return 0.5 * (1 - std::cos(std::numbers::pi * std::clamp(u, 0.0, 1.0))); }
+
+// The grid index of the k-th point visited: rows in order, every other row backwards.
+int ScanVisit(int k) {
+  const int row = k / kScanGrid, col = k % kScanGrid;
+  return row * kScanGrid + (row % 2 == 0 ? col : kScanGrid - 1 - col);
+}
+
+ScriptSample SampleScan(const ScriptGeometry& g, double t) {
+  t = std::clamp(t, 0.0, kScanDuration);
+  const double u = t - kScanLead;
+  const int k = u < 0 ? 0 : std::min(static_cast<int>(u / kScanPeriod), kScanPoints - 1);
+  const double local = u - k * kScanPeriod;
+  const int at = ScanVisit(k);
+  const std::array<double, 2> p = ScanPoint(g, at);
+  ScriptSample out;
+  out.pos[0] = p[0], out.pos[1] = p[1];
+  double base = g.scan_top_z[at] + g.mio_radius;
+  double dz = kScanHover;
+  if (local >= 0 && local < kScanDown) {
+    dz = kScanHover - Ease(local / kScanDown) * (kScanHover + kScanDepth);
+  } else if (local >= kScanDown && local < kScanDown + kScanHold) {
+    dz = -kScanDepth;
+  } else if (local >= kScanDown + kScanHold && local < kScanDown + kScanHold + kScanUp) {
+    dz = -kScanDepth + Ease((local - kScanDown - kScanHold) / kScanUp) * (kScanHover + kScanDepth);
+  } else if (local >= kScanPeriod - kScanMove && k + 1 < kScanPoints) {
+    const int next = ScanVisit(k + 1);
+    const std::array<double, 2> q = ScanPoint(g, next);
+    const double s = Ease((local - (kScanPeriod - kScanMove)) / kScanMove);
+    out.pos[0] = p[0] + s * (q[0] - p[0]), out.pos[1] = p[1] + s * (q[1] - p[1]);
+    base += s * (g.scan_top_z[next] - g.scan_top_z[at]);
+  }
+  out.pos[2] = base + dz;
+  return out;
+}
+
 template <size_t N>
 ScriptSample Interpolate(const Key (&keys)[N], const ScriptGeometry& g, double t) {
   t = std::clamp(t, 0.0, keys[N - 1].t);
@@ -85,7 +134,37 @@ std::vector<std::array<double, 2>> Crossings(const Key (&keys)[N]) {
   return out;
 }
 
+// The highest external atom within `radius` of the vertical line through xy; `otherwise` if none.
+double TopUnder(const Model& model, std::array<double, 2> xy, double radius, double otherwise) {
+  double top = -std::numeric_limits<double>::infinity();
+  for (int32_t atom : model.external_atoms) {
+    const double* p = &model.atom_pos_eq[3 * atom];
+    if (std::hypot(p[0] - xy[0], p[1] - xy[1]) <= radius) top = std::max(top, p[2]);
+  }
+  return std::isfinite(top) ? top : otherwise;
+}
+
+// Where a sphere of `radius` coming down the vertical line through xy first touches an external
+// atom: its centre's height there minus the radius (`otherwise` if it touches none). A grid point
+// need not lie above an atom: between atoms the sphere sinks further before it touches, and a
+// press to a depth below top + r could miss the surface altogether.
+double ContactUnder(const Model& model, std::array<double, 2> xy, double radius, double otherwise) {
+  double top = -std::numeric_limits<double>::infinity();
+  for (int32_t atom : model.external_atoms) {
+    const double* p = &model.atom_pos_eq[3 * atom];
+    const double d = std::hypot(p[0] - xy[0], p[1] - xy[1]);
+    if (d < radius) top = std::max(top, p[2] + std::sqrt(radius * radius - d * d) - radius);
+  }
+  return std::isfinite(top) ? top : otherwise;
+}
+
 }  // namespace
+
+std::array<double, 2> ScanPoint(const ScriptGeometry& g, int i) {
+  const double fx = static_cast<double>(i % kScanGrid) / (kScanGrid - 1);
+  const double fy = static_cast<double>(i / kScanGrid) / (kScanGrid - 1);
+  return {g.x_min + fx * (g.x_max - g.x_min), g.y_min + fy * (g.y_max - g.y_min)};
+}
 
 std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
   switch (script) {
@@ -97,6 +176,7 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
       return Crossings(kStrokeGentle);
     case Script::kPalpate:
     case Script::kPluck:
+    case Script::kScan:
       break;
   }
   return {};
@@ -128,13 +208,12 @@ ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius) {
   g.x_max = hi[0] - 0.2 * (hi[0] - lo[0]);
   // The thesis strokes at y = 1.5 on the 3.46-deep fragment.
   g.stroke_y = lo[1] + (1.5 / 3.464) * (hi[1] - lo[1]);
+  g.y_min = lo[1] + 0.2 * (hi[1] - lo[1]);
+  g.y_max = hi[1] - 0.2 * (hi[1] - lo[1]);
   // The surface under the tool: the highest external atom within one radius of the centre line.
-  g.top_z = -std::numeric_limits<double>::infinity();
-  for (int32_t atom : model.external_atoms) {
-    const double* p = &model.atom_pos_eq[3 * atom];
-    if (std::hypot(p[0] - g.center[0], p[1] - g.center[1]) <= mio_radius) g.top_z = std::max(g.top_z, p[2]);
-  }
-  if (!std::isfinite(g.top_z)) g.top_z = hi[2];
+  g.top_z = TopUnder(model, {g.center[0], g.center[1]}, mio_radius, hi[2]);
+  for (int i = 0; i < kScanGrid * kScanGrid; ++i)
+    g.scan_top_z[i] = ContactUnder(model, ScanPoint(g, i), mio_radius, hi[2]);
   return g;
 }
 
@@ -150,6 +229,8 @@ ScriptSample SampleScript(Script script, const ScriptGeometry& g, double t) {
       return Interpolate(kStrokeGentle, g, t);
     case Script::kPluck:
       return Interpolate(kPluck, g, t);
+    case Script::kScan:
+      return SampleScan(g, t);
   }
   return {};
 }
@@ -166,6 +247,8 @@ double ScriptDuration(Script script) {
       return std::end(kStrokeGentle)[-1].t;
     case Script::kPluck:
       return std::end(kPluck)[-1].t;
+    case Script::kScan:
+      return kScanDuration;
   }
   return 0;
 }
@@ -182,12 +265,15 @@ const char* ScriptName(Script script) {
       return "stroke-gentle";
     case Script::kPluck:
       return "pluck";
+    case Script::kScan:
+      return "scan";
   }
   return "?";
 }
 
 bool ParseScriptName(std::string_view name, Script* script) {
-  for (Script s : {Script::kPalpate, Script::kStrokeSlow, Script::kStrokeFast, Script::kPluck, Script::kStrokeGentle}) {
+  for (Script s : {Script::kPalpate, Script::kStrokeSlow, Script::kStrokeFast, Script::kPluck, Script::kStrokeGentle,
+                   Script::kScan}) {
     if (name == ScriptName(s)) {
       *script = s;
       return true;

@@ -1,6 +1,7 @@
 // idms-sim fit: the element parameters that make a model feel like a recording (thesis 7.2.5,
 // issue 34). Replays the recorded path through the real step and fits the home and surface
-// elements' stiffness and damping (scale factors per group) to the recorded force.
+// elements' stiffness and damping (scale factors per group, globally or per region) to the
+// recorded force; with --map, the stiffness map of a scan and the lump in it.
 #include <cmath>
 #include <cstdio>
 
@@ -15,9 +16,84 @@ namespace {
 
 struct FitArgs {
   std::string model, csv, params = "home_k,surface_k", preset = "default", integrator, tool, out, plot;
+  std::vector<std::string> regions;
   int stride = 1;
-  bool json = false;
+  bool json = false, map = false;
 };
+
+// The scan's stiffness map: a table (or JSON), PREFIX.map.csv, and a PNG of the presses coloured
+// by their factor.
+void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const fit::FitOptions& o) {
+  const fit::MapResult r = fit::FitMap(model, trace, o);
+  if (!r.ok) Fail("fit", "--map: " + r.message);
+  std::string error;
+  if (!a.out.empty()) {
+    const std::string path = a.out + ".map.csv";
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    if (f == nullptr) Fail("fit", "--out " + path + ": cannot write");
+    std::fprintf(f, "x,y,scale,sigma,peak_force,t0,t1\n");
+    for (const fit::MapPoint& p : r.points) {
+      std::fprintf(f, "%.6g,%.6g,%.6g,%.3g,%.6g,%.4f,%.4f\n", p.x, p.y, p.scale, p.sigma, p.peak_force,
+                   static_cast<double>(p.tick0) * trace.dt_s, static_cast<double>(p.tick1) * trace.dt_s);
+    }
+    if (std::fclose(f) != 0) Fail("fit", "--out " + path + ": write failed");
+  }
+  if (!a.plot.empty()) {
+    PlotSpec spec;
+    spec.title = "idms-sim fit --map: " + a.model + " from " + a.csv;
+    spec.x_label = "x";
+    spec.y_label = "y";
+    spec.color_label = "stiffness factor";
+    spec.equal_aspect = true;
+    spec.key = "off";
+    PlotSeries presses{.title = "", .style = "points", .options = "pt 5 ps 4"};
+    presses.csv_path = a.out.empty() ? "" : a.out + ".map.csv";
+    if (presses.csv_path.empty()) Fail("fit", "--map --plot needs --out (the plot reads PREFIX.map.csv)");
+    presses.x_column = "x", presses.y_column = "y", presses.color_column = "scale";
+    spec.series = {presses};
+    if (r.lump.found) {
+      PlotSeries centre{.title = "", .style = "points", .options = "pt 6 ps 6 lw 3 lc rgb 'black'"};
+      centre.points = {{r.lump.x, r.lump.y}};
+      spec.series.push_back(centre);
+    }
+    if (!PlotPng(spec, a.plot, &error)) Fail("fit", "--plot: " + error);
+  }
+  nlohmann::json j = {{"presses", r.points.size()}, {"background", r.background}, {"spread", r.spread},
+                      {"replays", r.replays},       {"seconds", r.seconds},       {"lump", {{"found", r.lump.found}}}};
+  if (r.lump.found) {
+    j["lump"].update({{"x", r.lump.x},
+                      {"y", r.lump.y},
+                      {"xy_sigma", r.lump.xy_sigma},
+                      {"radius", r.lump.radius},
+                      {"ratio", r.lump.ratio},
+                      {"ratio_sigma", r.lump.ratio_sigma},
+                      {"presses", r.lump.presses}});
+  }
+  for (const fit::MapPoint& p : r.points) {
+    j["points"].push_back(
+        {{"x", p.x}, {"y", p.y}, {"scale", p.scale}, {"sigma", p.sigma}, {"peak_force", p.peak_force}});
+  }
+  if (a.json) {
+    PrintJson(j);
+    return;
+  }
+  std::printf("stiffness map of %s from %s: %zu presses, background factor %.4g (scatter %.2g)\n", a.model.c_str(),
+              a.csv.c_str(), r.points.size(), r.background, r.spread);
+  std::printf("  %10s %10s %10s %10s %10s\n", "x", "y", "factor", "sigma", "peak f");
+  for (const fit::MapPoint& p : r.points) {
+    std::printf("  %10.4g %10.4g %10.4g %10.2g %10.4g\n", p.x, p.y, p.scale, p.sigma, p.peak_force);
+  }
+  if (r.lump.found) {
+    std::printf(
+        "lump at x %.4g, y %.4g (+- %.2g), radius %.3g: %.3g +- %.2g times the background's stiffness (%d presses "
+        "above half)\n",
+        r.lump.x, r.lump.y, r.lump.xy_sigma, r.lump.radius, r.lump.ratio, r.lump.ratio_sigma, r.lump.presses);
+  } else {
+    std::printf("no lump: no press stands out of the background by more than 25%% and 5 times the scatter\n");
+  }
+  std::printf("%d replays, %.2f s\n", r.replays, r.seconds);
+  if (!a.out.empty()) std::printf("wrote %s.map.csv\n", a.out.c_str());
+}
 
 void RunFit(const FitArgs& a) {
   Model model;
@@ -28,6 +104,15 @@ void RunFit(const FitArgs& a) {
   if (!fit::ReadTraceCsv(a.csv, &trace, &error)) Fail("fit", "--csv " + error);
   fit::FitOptions o;
   if (!fit::ParseParams(a.params, &o.params, &error)) Fail("fit", error);
+  for (size_t i = 0; i < a.regions.size(); ++i) {
+    fit::Region region;
+    if (!fit::ParseRegion(a.regions[i], static_cast<int>(i), &region, &error)) Fail("fit", error);
+    for (const fit::Region& other : o.regions) {
+      if (other.name == region.name)
+        Fail("fit", "--region '" + a.regions[i] + "': a second region named " + other.name);
+    }
+    o.regions.push_back(region);
+  }
   o.tool.kind = ToolKind::kSphere;
   if (!a.tool.empty() && !ParseToolSpec(a.tool, &o.tool, &error)) Fail("fit", error);
   Preset preset{};
@@ -39,6 +124,11 @@ void RunFit(const FitArgs& a) {
   }
   o.step.local_radius = settings.local_radius_per_tool_radius * o.tool.radius;
   o.stride = a.stride;
+  if (a.map) {
+    if (!a.regions.empty()) Fail("fit", "--map fits every press on its own; it takes no --region");
+    RunMap(a, model, trace, o);
+    return;
+  }
 
   const fit::FitResult r = fit::Fit(model, trace, o);
   if (!r.ok) Fail("fit", r.message);
@@ -68,8 +158,8 @@ void RunFit(const FitArgs& a) {
                       {"iterations", r.iterations},
                       {"replays", r.replays},
                       {"seconds", r.seconds}};
-  for (size_t i = 0; i < r.params.size(); ++i) {
-    j["params"][fit::ParamName(r.params[i])] = {
+  for (size_t i = 0; i < r.names.size(); ++i) {
+    j["params"][r.names[i]] = {
         {"value", r.value[i]}, {"sigma", r.value_sigma[i]}, {"scale", r.scale[i]}, {"scale_sigma", r.scale_sigma[i]}};
   }
   if (a.json) {
@@ -78,8 +168,16 @@ void RunFit(const FitArgs& a) {
   }
   std::printf("fit of %s to %s: %d samples (every %d ticks), peak force %.4g\n", a.model.c_str(), a.csv.c_str(),
               r.samples, o.stride, r.peak_force);
-  for (size_t i = 0; i < r.params.size(); ++i) {
-    std::printf("  %-10s %.6g +- %.2g  (x %.6g of the typed-in value)\n", fit::ParamName(r.params[i]), r.value[i],
+  for (const fit::Region& g : o.regions) {
+    if (g.shape == fit::Region::Shape::kSphere) {
+      std::printf("  region %s: sphere at %g,%g,%g, r %g\n", g.name.c_str(), g.v[0], g.v[1], g.v[2], g.v[3]);
+    } else {
+      std::printf("  region %s: box %g,%g,%g to %g,%g,%g\n", g.name.c_str(), g.v[0], g.v[1], g.v[2], g.v[3], g.v[4],
+                  g.v[5]);
+    }
+  }
+  for (size_t i = 0; i < r.names.size(); ++i) {
+    std::printf("  %-14s %.6g +- %.2g  (x %.6g of the typed-in value)\n", r.names[i].c_str(), r.value[i],
                 r.value_sigma[i], r.scale[i]);
   }
   std::printf("force RMS error %.4g -> %.4g (%.2g%% of the peak); %d iterations, %d replays, %.2f s\n", r.rms_before,
@@ -95,17 +193,24 @@ void Setup(CLI::App& app) {
   cmd->add_option("--csv", a.csv, "The recording: a CSV as idms-sim run --csv writes it (t,x,y,z,fx,fy,fz,...)")
       ->required();
   cmd->add_option("--params", a.params,
-                  "Comma-separated groups to fit: home_k, home_b, surface_k, surface_b (each a factor on the model's "
-                  "values), tool_k (the MIO's contact stiffness)")
+                  "Comma-separated groups to fit: home_k, home_b, surface_k, surface_b, k, b (every element's) "
+                  "(each a factor on the model's values), tool_k (the MIO's contact stiffness)")
       ->capture_default_str();
+  cmd->add_option("--region", a.regions,
+                  "[NAME=]sphere:cx,cy,cz,r or [NAME=]box:x0,y0,z0,x1,y1,z1 (repeatable): fit each element "
+                  "parameter inside every region (elements by midpoint) and outside them all (NAME@rest)");
+  cmd->add_flag("--map", a.map,
+                "A scan's stiffness map: fit k on every press of the recording on its own and look for a lump "
+                "(--out PREFIX writes PREFIX.map.csv)");
   cmd->add_option("--preset", a.preset, "The step the recording was made with: default | thesis")
       ->capture_default_str();
   cmd->add_option("--integrator", a.integrator, "euler | symplectic | rk4 | implicit (default: the preset's)");
   cmd->add_option("--tool", a.tool,
                   "The recording's tool, as idms-sim run --tool takes it (default sphere r 1.5 k 400)");
   cmd->add_option("--stride", a.stride, "Compare every N-th tick")->capture_default_str()->check(CLI::PositiveNumber);
-  cmd->add_option("--out", a.out, "Write the fitted model to PREFIX.fem + PREFIX.plg");
-  cmd->add_option("--plot", a.plot, "Write a PNG of the recorded and the fitted f_z over time");
+  cmd->add_option("--out", a.out, "Write the fitted model to PREFIX.fem + PREFIX.plg (--map: PREFIX.map.csv)");
+  cmd->add_option("--plot", a.plot,
+                  "Write a PNG of the recorded and the fitted f_z over time (--map: the presses coloured by factor)");
   cmd->add_flag("--json", a.json, "Print the result as one JSON object");
   cmd->callback([] { RunFit(a); });
 }

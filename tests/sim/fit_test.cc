@@ -10,19 +10,22 @@
 #include <fstream>
 #include <string>
 
+#include "idms/sim/generate.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
 
 namespace idms::fit {
 namespace {
 
-Model Hex() {
+Model Shipped(const char* name) {
   Model m;
   LoadError error;
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
+  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/" + name;
   EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &m, &error)) << error.ToString();
   return m;
 }
+
+Model Hex() { return Shipped("hex_4x5_home"); }
 
 FitOptions Options(std::vector<Param> params) {
   FitOptions o;
@@ -44,7 +47,7 @@ TEST(Fit, RecoversStiffnessAndDampingFromANoisyStroke) {
   ASSERT_TRUE(r.ok) << r.message;
   const double want[] = {1.3, 0.8, 1.2};
   for (size_t i = 0; i < 3; ++i) {
-    EXPECT_NEAR(r.scale[i] / want[i], 1.0, 0.02) << ParamName(r.params[i]) << " x " << r.scale[i];
+    EXPECT_NEAR(r.scale[i] / want[i], 1.0, 0.02) << r.names[i] << " x " << r.scale[i];
     EXPECT_GT(r.scale_sigma[i], 0) << i;
     EXPECT_LT(r.scale_sigma[i], 0.02 * want[i]) << i;
   }
@@ -132,6 +135,93 @@ TEST(Fit, ParamsAreNamedEachOnceAndAGroupWithNothingToScaleIsRefused) {
   const FitResult r = Fit(springless, ScriptedTrace(Hex(), Script::kPalpate, 0.0, 7), Options({Param::kHomeK}));
   EXPECT_FALSE(r.ok);
   EXPECT_EQ(r.message, "home_k: the model has no home elements with a nonzero value to scale");
+}
+
+// Per region: an inclusion on the stroke's line (k x 3.3 inside, the rest x 1.1) is found again
+// in both parts from one noisy stroke, which crosses into it and out again.
+TEST(Fit, RecoversARegionsStiffnessFromANoisyStroke) {
+  const Model typed = Hex();
+  Model truth = typed;
+  Inclusion lump;
+  lump.center[0] = 2, lump.center[1] = 1.5, lump.radius = 0.9, lump.k_scale = 3;
+  ApplyInclusions({lump}, &truth);
+  ScaleGroup(truth, Param::kK, 1.1);
+  FitOptions o = Options({Param::kK});
+  Region region;
+  std::string error;
+  ASSERT_TRUE(ParseRegion("lump=sphere:2,1.5,0,0.9", 0, &region, &error)) << error;
+  o.regions = {region};
+  const FitResult r = Fit(typed, ScriptedTrace(truth, Script::kStrokeGentle, 0.01, 7), o);
+  ASSERT_TRUE(r.ok) << r.message;
+  ASSERT_EQ(r.names, (std::vector<std::string>{"k@lump", "k@rest"}));
+  EXPECT_NEAR(r.scale[0] / 3.3, 1.0, 0.02) << "k@lump x " << r.scale[0] << " +- " << r.scale_sigma[0];
+  EXPECT_NEAR(r.scale[1] / 1.1, 1.0, 0.02) << "k@rest x " << r.scale[1] << " +- " << r.scale_sigma[1];
+  // Without the region the one factor is neither.
+  const FitResult whole = Fit(typed, ScriptedTrace(truth, Script::kStrokeGentle, 0.01, 7), Options({Param::kK}));
+  ASSERT_TRUE(whole.ok) << whole.message;
+  EXPECT_GT(whole.rms_after, 2 * r.rms_after) << "one factor for the whole model fits worse";
+}
+
+TEST(Fit, RegionsAreParsedAndOneThatHoldsNothingIsRefused) {
+  Region g;
+  std::string error;
+  ASSERT_TRUE(ParseRegion("box:0,0,-1,1,2,0.5", 2, &g, &error)) << error;
+  EXPECT_EQ(g.name, "region3");
+  EXPECT_EQ(g.shape, Region::Shape::kBox);
+  const double inside[3] = {0.5, 1, 0}, outside[3] = {0.5, 1, 0.6};
+  EXPECT_TRUE(g.Contains(inside));
+  EXPECT_FALSE(g.Contains(outside));
+  EXPECT_FALSE(ParseRegion("lump=sphere:1,2,3", 0, &g, &error));
+  EXPECT_EQ(error, "--region 'lump=sphere:1,2,3': sphere takes 4 numbers, got 3");
+  EXPECT_FALSE(ParseRegion("sphere:1,2,x,1", 0, &g, &error));
+  EXPECT_NE(error.find("value 3 ('x') is not one"), std::string::npos) << error;
+  EXPECT_FALSE(ParseRegion("cone:1,2,3,4", 0, &g, &error));
+  EXPECT_NE(error.find("expected [NAME=]sphere"), std::string::npos) << error;
+  EXPECT_FALSE(ParseRegion("rest=sphere:1,2,3,4", 0, &g, &error));
+  EXPECT_NE(error.find("not 'rest'"), std::string::npos) << error;
+  EXPECT_FALSE(ParseRegion("sphere:1,2,3,0", 0, &g, &error));
+  EXPECT_NE(error.find("radius must be > 0"), std::string::npos) << error;
+  std::vector<Param> params;
+  EXPECT_FALSE(ParseParams("k,home_k", &params, &error));
+  EXPECT_EQ(error, "--params: k (every element) overlaps home_k; fit one or the other");
+  // A region away from the model holds no element: refused by name, before any replay.
+  FitOptions o = Options({Param::kSurfaceK});
+  ASSERT_TRUE(ParseRegion("far=sphere:50,50,50,1", 0, &g, &error)) << error;
+  o.regions = {g};
+  const FitResult r = Fit(Hex(), ScriptedTrace(Hex(), Script::kPalpate, 0.0, 7), o);
+  EXPECT_FALSE(r.ok);
+  EXPECT_EQ(r.message,
+            "surface_k@far: the model has no surface elements with a nonzero value to scale inside region far");
+  EXPECT_EQ(r.replays, 0);
+}
+
+// The lump a clinician palpates for (issue 34): a scan of slab_40x40_tumour (k x 8 in a sphere of
+// radius 4 at 20, 17, -0.4) with 1% noise, mapped against the plain slab, puts the lump's centre
+// within one element spacing (1) and its stiffness ratio within 10%; the plain slab's own scan
+// shows no lump. Every one of the 7 x 7 grid's presses touches the surface.
+TEST(FitMap, FindsTheTumourAndNothingOnThePlainSlab) {
+  const Model plain = Shipped("slab_40x40");
+  const FitOptions o = Options({});
+  const MapResult tumour = FitMap(plain, ScriptedTrace(Shipped("slab_40x40_tumour"), Script::kScan, 0.01, 11), o);
+  ASSERT_TRUE(tumour.ok) << tumour.message;
+  EXPECT_EQ(tumour.points.size(), size_t{kScanGrid * kScanGrid});
+  EXPECT_NEAR(tumour.background, 1.0, 0.01);
+  ASSERT_TRUE(tumour.lump.found);
+  EXPECT_LT(std::hypot(tumour.lump.x - 20, tumour.lump.y - 17), 1.0)
+      << "centre " << tumour.lump.x << ", " << tumour.lump.y;
+  EXPECT_NEAR(tumour.lump.ratio / 8, 1.0, 0.1) << "ratio " << tumour.lump.ratio;
+  std::printf("tumour: centre %.3f, %.3f +- %.2g, radius %.3f, ratio %.3f +- %.2g, %d replays, %.2f s\n", tumour.lump.x,
+              tumour.lump.y, tumour.lump.xy_sigma, tumour.lump.radius, tumour.lump.ratio, tumour.lump.ratio_sigma,
+              tumour.replays, tumour.seconds);
+  const MapResult none = FitMap(plain, ScriptedTrace(plain, Script::kScan, 0.01, 11), o);
+  ASSERT_TRUE(none.ok) << none.message;
+  EXPECT_EQ(none.points.size(), size_t{kScanGrid * kScanGrid});
+  EXPECT_FALSE(none.lump.found) << "a lump at " << none.lump.x << ", " << none.lump.y << " x " << none.lump.ratio;
+  for (const MapPoint& p : none.points) EXPECT_NEAR(p.scale, 1.0, 0.05) << p.x << ", " << p.y;
+  // A palpation is one press: no map.
+  const MapResult one = FitMap(plain, ScriptedTrace(plain, Script::kPalpate, 0.0, 7), o);
+  EXPECT_FALSE(one.ok);
+  EXPECT_NE(one.message.find("holds 1 separate presses; a map needs at least 3"), std::string::npos) << one.message;
 }
 
 TEST(Fit, TheCsvReaderTakesIdmsSimRunsColumnsAndRefusesOthers) {

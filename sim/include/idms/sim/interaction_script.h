@@ -1,6 +1,7 @@
 // The scripted interactions of thesis chapter 6 — palpation (6.1.1), slow and fast stroking
 // (6.1.2) at the thesis's speeds and plucking (6.1.3) — as reproducible MIO trajectories over any
-// model's surface; and a gentle stroke slow enough to watch.
+// model's surface; a gentle stroke slow enough to watch; and a scan, shallow palpations over a
+// grid for the fitter's stiffness map (thesis 7.2.5, issue 34).
 // Used by `idms-sim run`, the benches and the agent's scripted device.
 #pragma once
 
@@ -13,7 +14,10 @@ namespace idms {
 
 struct Model;
 
-enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle };
+enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan };
+
+// The scan's grid: kScanGrid x kScanGrid points over the middle 60% of the surface in x and y.
+inline constexpr int kScanGrid = 7;
 
 // Where a script acts: the model's surface seen from above. For the hex fragment the top lies
 // at z = 0 and the tool comes down along z (thesis figure 6-1).
@@ -23,6 +27,10 @@ struct ScriptGeometry {
   double stroke_y = 0;          // stroke line (thesis: y = 1.5 on the fragment)
   double top_z = 0;             // highest external atom near the centre
   double mio_radius = 1.5;      // the MIO radius r: contact starts when z = top_z + r
+  double y_min = 0, y_max = 0;  // the scan's extent along y (x: x_min..x_max)
+  // The scan: where the MIO first touches at each grid point, less its radius (as top_z), row-major
+  // with x fastest.
+  double scan_top_z[kScanGrid * kScanGrid] = {};
 };
 
 // One sample of the trajectory: the MIO centre in model units and the tweezers' state.
@@ -44,7 +52,10 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script);
 // Length of the script in seconds.
 double ScriptDuration(Script script);
 
-// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle".
+// The scan's grid point i (0 .. kScanGrid^2 - 1, x fastest): its x, y.
+std::array<double, 2> ScanPoint(const ScriptGeometry& geometry, int i);
+
+// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan".
 const char* ScriptName(Script script);
 bool ParseScriptName(std::string_view name, Script* script);
 
