@@ -1,7 +1,9 @@
 // The fitter's figures (issue 34, docs/fit.md): parameters hidden in synthetic recordings of every
 // shipped sphere script on the hex fragment, with Gaussian noise of 1% of the peak force, fitted
 // back; how close each comes (fitted / hidden) with its one-sigma uncertainty, the residual, and
-// what the fit cost. Deterministic but for the times. --quick: the palpation and the gentle stroke.
+// what the fit cost; then per region (an inclusion on the stroke's line) and the stiffness map of
+// a scan of slab_40x40_tumour and of the plain slab. Deterministic but for the times. --quick: the
+// palpation and the gentle stroke.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -10,8 +12,68 @@
 #include <vector>
 
 #include "fit.h"
+#include "idms/sim/generate.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
+
+namespace {
+
+bool Load(const char* name, idms::Model* m) {
+  idms::LoadError error;
+  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/" + name;
+  if (idms::LoadModel(prefix + ".fem", prefix + ".plg", {}, m, &error)) return true;
+  std::fprintf(stderr, "%s\n", error.ToString().c_str());
+  return false;
+}
+
+// Per region: k x 3.3 inside a sphere of radius 0.9 on the fragment's stroke line, x 1.1 outside;
+// and the scans' maps.
+int RegionsAndMaps(const idms::Model& typed) {
+  using namespace idms;
+  using namespace idms::fit;
+  Model truth = typed;
+  Inclusion lump;
+  lump.center[0] = 2, lump.center[1] = 1.5, lump.radius = 0.9, lump.k_scale = 3;
+  ApplyInclusions({lump}, &truth);
+  ScaleGroup(truth, Param::kK, 1.1);
+  FitOptions o;
+  o.params = {Param::kK};
+  o.tool.kind = ToolKind::kSphere;
+  Region region;
+  std::string error;
+  if (!ParseRegion("lump=sphere:2,1.5,0,0.9", 0, &region, &error)) return 1;
+  o.regions = {region};
+  std::printf("\nper region: hex fragment, hidden k x3.3 inside sphere 2,1.5,0 r 0.9, x1.1 outside; noise 1%%\n");
+  for (Script script : {Script::kStrokeGentle, Script::kPalpate}) {
+    const FitResult r = Fit(typed, ScriptedTrace(truth, script, 0.01, 7), o);
+    if (!r.ok) {
+      std::printf("%-14s %s\n", ScriptName(script), r.message.c_str());
+      continue;
+    }
+    std::printf("%-14s k@lump %.4f +- %.4f   k@rest %.4f +- %.4f  (fitted / hidden)   %.2f s\n", ScriptName(script),
+                r.scale[0] / 3.3, r.scale_sigma[0] / 3.3, r.scale[1] / 1.1, r.scale_sigma[1] / 1.1, r.seconds);
+  }
+  Model plain, tumour;
+  if (!Load("slab_40x40", &plain) || !Load("slab_40x40_tumour", &tumour)) return 1;
+  std::printf("\nstiffness map: 7 x 7 scan (scripted:scan), noise 1%%, seed 11, mapped against slab_40x40\n");
+  std::printf("%-18s %7s %9s | %5s %8s %8s %7s %7s %6s | %7s %6s\n", "recording", "presses", "backgr", "lump", "x", "y",
+              "radius", "ratio", "sigma", "replays", "s");
+  for (const auto& [name, truth_model] : {std::pair<const char*, const Model*>{"slab_40x40_tumour", &tumour},
+                                          std::pair<const char*, const Model*>{"slab_40x40", &plain}}) {
+    const MapResult m = FitMap(plain, ScriptedTrace(*truth_model, Script::kScan, 0.01, 11), o);
+    if (!m.ok) {
+      std::printf("%-18s %s\n", name, m.message.c_str());
+      continue;
+    }
+    std::printf("%-18s %7zu %9.4f | %5s %8.3f %8.3f %7.3f %7.3f %6.2g | %7d %6.2f\n", name, m.points.size(),
+                m.background, m.lump.found ? "yes" : "no", m.lump.x, m.lump.y, m.lump.radius, m.lump.ratio,
+                m.lump.ratio_sigma, m.replays, m.seconds);
+  }
+  std::printf("(slab_40x40_tumour: k x 8 in a sphere of radius 4 at 20, 17, -0.4)\n");
+  return 0;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace idms;
@@ -76,5 +138,5 @@ int main(int argc, char** argv) {
       "palpation, home_k alone (hidden x1.3): fitted / hidden %.4f +- %.4f in %.2f s; the held-out gentle stroke "
       "predicted with relative RMS error %.4f\n",
       r.scale[0] / 1.3, r.scale_sigma[0] / 1.3, s, std::sqrt(sum / static_cast<double>(predicted.size())) / peak);
-  return 0;
+  return quick ? 0 : RegionsAndMaps(typed);
 }

@@ -158,7 +158,7 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
   }
   if (!ParseScriptName(script_name, &target.script)) {
     *error = Cat({"unknown script '", script_name}) +
-             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or (scripted) drag";
+             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or (scripted) drag";
     return nullptr;
   }
   if (context.model == nullptr) {

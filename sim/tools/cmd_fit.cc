@@ -51,10 +51,14 @@ void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const
     if (presses.csv_path.empty()) Fail("fit", "--map --plot needs --out (the plot reads PREFIX.map.csv)");
     presses.x_column = "x", presses.y_column = "y", presses.color_column = "scale";
     spec.series = {presses};
-    if (r.lump.found) {
-      PlotSeries centre{.title = "", .style = "points", .options = "pt 6 ps 6 lw 3 lc rgb 'black'"};
+    if (r.lump.found) {  // the fitted lump: its centre, and its radius as a circle
+      PlotSeries centre{.title = "", .style = "points", .options = "pt 2 ps 3 lw 2 lc rgb 'black'"};
       centre.points = {{r.lump.x, r.lump.y}};
       spec.series.push_back(centre);
+      char circle[160];
+      std::snprintf(circle, sizeof(circle), "set object 1 circle at %g,%g size %g fs empty border lc rgb 'black' lw 2",
+                    r.lump.x, r.lump.y, r.lump.radius);
+      spec.preamble.push_back(circle);
     }
     if (!PlotPng(spec, a.plot, &error)) Fail("fit", "--plot: " + error);
   }

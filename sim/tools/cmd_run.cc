@@ -154,7 +154,8 @@ void Run(RunArgs& a) {
   const bool drag = a.script == "drag" || a.script.rfind("drag:", 0) == 0;
   if (!drag && !ParseScriptName(a.script, &script)) {
     Fail("run", "--script '" + a.script +
-                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or drag[:fraction=F,...]");
+                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or "
+                    "drag[:fraction=F,...]");
   }
   ToolCommand tool;
   tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
@@ -360,7 +361,8 @@ void Setup(CLI::App& app) {
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
   cmd->add_option("--script", a.script,
                   "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a "
-                  "slow stroke to watch) | drag[:fraction=F,depth=D,mass=M,damping=B,push=S] (press, then push "
+                  "slow stroke to watch) | scan (7 x 7 shallow presses, for fit --map) | "
+                  "drag[:fraction=F,depth=D,mass=M,damping=B,push=S] (press, then push "
                   "sideways at F mu_s f_n through a simulated hand; needs mu_s)")
       ->capture_default_str();
   cmd->add_option("--preset", a.preset,

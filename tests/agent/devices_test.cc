@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 
@@ -30,7 +31,7 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or (scripted) drag"),
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or (scripted) drag"),
             std::string::npos)
       << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
@@ -78,6 +79,28 @@ TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
   context.registration.DeviceToModel(r.pos, p_model);
   const ScriptSample s = SampleScript(Script::kStrokeSlow, MakeScriptGeometry(model, 1.5), 4.0);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(p_model[i], s.pos[i], 1e-12);
+}
+
+// scripted:scan (issue 34) plays the scan: at 0.9 s it holds the first press, at the first grid
+// point, below the height where the sphere first touches the surface there.
+TEST(Devices, TheScanDevicePressesAtTheGridPoints) {
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  std::string error;
+  auto device = agent::MakeDevice("scripted:scan", context, &error);
+  ASSERT_TRUE(device) << error;
+  agent::DeviceReading r;
+  device->Read(0, 0.9, &r);
+  double p[3];
+  context.registration.DeviceToModel(r.pos, p);
+  const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
+  const std::array<double, 2> first = ScanPoint(g, 0);
+  EXPECT_NEAR(p[0], first[0], 1e-12);
+  EXPECT_NEAR(p[1], first[1], 1e-12);
+  EXPECT_LT(p[2], g.scan_top_z[0] + 1.5);
+  EXPECT_GT(p[2], g.scan_top_z[0] + 1.5 - 0.1) << "a shallow press";
+  EXPECT_GT(ScriptDuration(Script::kScan), kScanGrid * kScanGrid * 0.9) << "every grid point visited";
 }
 
 // One contact law by default, the thesis's pseudo-code's (as idms-sim run); the prose's by name.

@@ -150,10 +150,9 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(
-      out.text.find(
-          "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle or drag[:fraction=F,...]"),
-      std::string::npos)
+  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or "
+                          "drag[:fraction=F,...]"),
+            std::string::npos)
       << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
   EXPECT_NE(out.status, 0);
