@@ -61,6 +61,19 @@ TEST(Devices, AHandItsOwnIntegratorCannotRunIsRefusedWithTheLimit) {
   EXPECT_TRUE(agent::MakeDevice("human:palpate", context, &error)) << error;
 }
 
+// The position device `spec` reports at t_s, mapped back into the model frame by the registration.
+std::array<double, 3> ModelPositionAt(const agent::DeviceContext& context, const std::string& spec, double t_s) {
+  std::string error;
+  auto device = agent::MakeDevice(spec, context, &error);
+  EXPECT_TRUE(device) << error;
+  std::array<double, 3> p = {NAN, NAN, NAN};
+  if (!device) return p;
+  agent::DeviceReading r;
+  device->Read(0, t_s, &r);
+  context.registration.DeviceToModel(r.pos, p.data());
+  return p;
+}
+
 TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
   // The scripted trajectory lives in the model frame; the device reports it in device
   // coordinates, so the loop's registration maps it back onto the surface.
@@ -71,12 +84,7 @@ TEST(Devices, ScriptedDeviceUndoesTheRegistration) {
   ASSERT_TRUE(agent::ParseRotation("rpy:10,20,30", context.registration.rot, &error));
   context.registration.scale = 2;
   context.registration.offset[2] = 5;
-  auto device = agent::MakeDevice("scripted:stroke-slow", context, &error);
-  ASSERT_TRUE(device) << error;
-  agent::DeviceReading r;
-  device->Read(0, 4.0, &r);
-  double p_model[3];
-  context.registration.DeviceToModel(r.pos, p_model);
+  const std::array<double, 3> p_model = ModelPositionAt(context, "scripted:stroke-slow", 4.0);
   const ScriptSample s = SampleScript(Script::kStrokeSlow, MakeScriptGeometry(model, 1.5), 4.0);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(p_model[i], s.pos[i], 1e-12);
 }
@@ -87,13 +95,7 @@ TEST(Devices, TheScanDevicePressesAtTheGridPoints) {
   const Model model = Hex();
   agent::DeviceContext context;
   context.model = &model;
-  std::string error;
-  auto device = agent::MakeDevice("scripted:scan", context, &error);
-  ASSERT_TRUE(device) << error;
-  agent::DeviceReading r;
-  device->Read(0, 0.9, &r);
-  double p[3];
-  context.registration.DeviceToModel(r.pos, p);
+  const std::array<double, 3> p = ModelPositionAt(context, "scripted:scan", 0.9);
   const ScriptGeometry g = MakeScriptGeometry(model, 1.5);
   const std::array<double, 2> first = ScanPoint(g, 0);
   EXPECT_NEAR(p[0], first[0], 1e-12);
