@@ -10,15 +10,19 @@
 #include "idms/sim/model_io.h"
 #include "idms/sim/preset.h"
 #include "plot.h"
+#if defined(IDMS_SIM_RECORDINGS)
+#include "fit_recording.h"
+#endif
 
 namespace idms::tool {
 namespace {
 
 struct FitArgs {
-  std::string model, csv, params = "home_k,surface_k", preset = "default", integrator, tool, out, plot;
+  std::string model, csv, recording, params = "home_k,surface_k", preset = "default", integrator, tool, out, plot;
   std::vector<std::string> regions;
   int stride = 1;
   bool json = false, map = false;
+  const std::string& source() const { return recording.empty() ? csv : recording; }
 };
 
 // The scan's stiffness map: a table (or JSON), PREFIX.map.csv, and a PNG of the presses coloured
@@ -40,7 +44,7 @@ void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const
   }
   if (!a.plot.empty()) {
     PlotSpec spec;
-    spec.title = "idms-sim fit --map: " + a.model + " from " + a.csv;
+    spec.title = "idms-sim fit --map: " + a.model + " from " + a.source();
     spec.x_label = "x";
     spec.y_label = "y";
     spec.color_label = "stiffness factor";
@@ -82,7 +86,7 @@ void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const
     return;
   }
   std::printf("stiffness map of %s from %s: %zu presses, background factor %.4g (scatter %.2g)\n", a.model.c_str(),
-              a.csv.c_str(), r.points.size(), r.background, r.spread);
+              a.source().c_str(), r.points.size(), r.background, r.spread);
   std::printf("  %10s %10s %10s %10s %10s\n", "x", "y", "factor", "sigma", "peak f");
   for (const fit::MapPoint& p : r.points) {
     std::printf("  %10.4g %10.4g %10.4g %10.2g %10.4g\n", p.x, p.y, p.scale, p.sigma, p.peak_force);
@@ -99,14 +103,44 @@ void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const
   if (!a.out.empty()) std::printf("wrote %s.map.csv\n", a.out.c_str());
 }
 
+// The recording as a trace, and the step and tool it was made with: from the CSV and the options,
+// or from a session recording and its scene.
+void ReadSource(const FitArgs& a, const Model& model, fit::Trace* trace, fit::FitOptions* o) {
+  std::string error;
+  if (a.csv.empty() == a.recording.empty())
+    Fail("fit", "give the recording as one of --csv FILE or --recording FILE.mcap");
+  if (!a.recording.empty()) {
+#if defined(IDMS_SIM_RECORDINGS)
+    if (!a.tool.empty() || !a.integrator.empty() || a.preset != "default") {
+      Fail("fit", "--recording: the session's scene gives the tool and the step; drop --tool, --preset, --integrator");
+    }
+    if (!ReadRecordingTrace(a.recording, model, trace, &o->step, &o->tool, &error)) Fail("fit", "--recording " + error);
+    return;
+#else
+    Fail("fit", "--recording: this idms-sim was built without the protocol (a CSV from idms-sim run works)");
+#endif
+  }
+  if (!fit::ReadTraceCsv(a.csv, trace, &error)) Fail("fit", "--csv " + error);
+  o->tool.kind = ToolKind::kSphere;
+  if (!a.tool.empty() && !ParseToolSpec(a.tool, &o->tool, &error)) Fail("fit", error);
+  Preset preset{};
+  if (!ParsePresetName(a.preset, &preset)) Fail("fit", "--preset '" + a.preset + "': expected default or thesis");
+  const PresetSettings settings = SettingsOf(preset);
+  o->step.integrator = settings.integrator;
+  if (!a.integrator.empty() && !ParseIntegratorName(a.integrator, &o->step.integrator)) {
+    Fail("fit", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
+  }
+  o->step.local_radius = settings.local_radius_per_tool_radius * o->tool.radius;
+}
+
 void RunFit(const FitArgs& a) {
   Model model;
   LoadError load_error;
   if (!LoadModel(a.model + ".fem", a.model + ".plg", {}, &model, &load_error)) Fail("fit", load_error.ToString());
   fit::Trace trace;
-  std::string error;
-  if (!fit::ReadTraceCsv(a.csv, &trace, &error)) Fail("fit", "--csv " + error);
   fit::FitOptions o;
+  ReadSource(a, model, &trace, &o);
+  std::string error;
   if (!fit::ParseParams(a.params, &o.params, &error)) Fail("fit", error);
   for (size_t i = 0; i < a.regions.size(); ++i) {
     fit::Region region;
@@ -117,16 +151,6 @@ void RunFit(const FitArgs& a) {
     }
     o.regions.push_back(region);
   }
-  o.tool.kind = ToolKind::kSphere;
-  if (!a.tool.empty() && !ParseToolSpec(a.tool, &o.tool, &error)) Fail("fit", error);
-  Preset preset{};
-  if (!ParsePresetName(a.preset, &preset)) Fail("fit", "--preset '" + a.preset + "': expected default or thesis");
-  const PresetSettings settings = SettingsOf(preset);
-  o.step.integrator = settings.integrator;
-  if (!a.integrator.empty() && !ParseIntegratorName(a.integrator, &o.step.integrator)) {
-    Fail("fit", "--integrator '" + a.integrator + "': expected euler, symplectic, rk4 or implicit");
-  }
-  o.step.local_radius = settings.local_radius_per_tool_radius * o.tool.radius;
   o.stride = a.stride;
   if (a.map) {
     if (!a.regions.empty()) Fail("fit", "--map fits every press on its own; it takes no --region");
@@ -139,7 +163,7 @@ void RunFit(const FitArgs& a) {
   if (!a.out.empty() && !SaveModel(r.fitted, a.out, &error)) Fail("fit", "--out " + error);
   if (!a.plot.empty()) {
     PlotSpec spec;
-    spec.title = "idms-sim fit: " + a.model + " against " + a.csv;
+    spec.title = "idms-sim fit: " + a.model + " against " + a.source();
     spec.x_label = "t (s)";
     spec.y_label = "f_z";
     spec.height_px = 500;
@@ -170,7 +194,7 @@ void RunFit(const FitArgs& a) {
     PrintJson(j);
     return;
   }
-  std::printf("fit of %s to %s: %d samples (every %d ticks), peak force %.4g\n", a.model.c_str(), a.csv.c_str(),
+  std::printf("fit of %s to %s: %d samples (every %d ticks), peak force %.4g\n", a.model.c_str(), a.source().c_str(),
               r.samples, o.stride, r.peak_force);
   for (const fit::Region& g : o.regions) {
     if (g.shape == fit::Region::Shape::kSphere) {
@@ -194,8 +218,10 @@ void Setup(CLI::App& app) {
   static FitArgs a;
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg): the parameters' starting point")
       ->required();
-  cmd->add_option("--csv", a.csv, "The recording: a CSV as idms-sim run --csv writes it (t,x,y,z,fx,fy,fz,...)")
-      ->required();
+  cmd->add_option("--csv", a.csv, "The recording: a CSV as idms-sim run --csv writes it (t,x,y,z,fx,fy,fz,...)");
+  cmd->add_option("--recording", a.recording,
+                  "The recording: a session's MCAP from idms-server (its /device ticks; the tool and the step "
+                  "from its scene)");
   cmd->add_option("--params", a.params,
                   "Comma-separated groups to fit: home_k, home_b, surface_k, surface_b, k, b (every element's) "
                   "(each a factor on the model's values), tool_k (the MIO's contact stiffness)")

@@ -100,6 +100,11 @@ std::optional<std::string> ChildProcess::ReadLine(std::chrono::milliseconds time
 
 std::string ChildProcess::Log() const { return ReadText(log_path_); }
 
+int RunCommand(const std::vector<std::string>& argv, const std::string& log) {
+  ChildProcess p(argv[0], std::vector<std::string>(argv.begin() + 1, argv.end()), log);
+  return p.Wait(std::chrono::seconds(120)).value_or(-1);
+}
+
 std::string TempDir(const std::string& name) {
   const char* base = std::getenv("TEST_TMPDIR");
   std::filesystem::path dir =

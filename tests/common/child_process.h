@@ -37,6 +37,10 @@ class ChildProcess {
   std::string log_path_;
 };
 
+// Runs a command to completion (two minutes at most), its stderr and stdout to `log`; its exit
+// status, or -1 if it did not end.
+int RunCommand(const std::vector<std::string>& argv, const std::string& log);
+
 // A fresh directory under the test's temporary directory.
 std::string TempDir(const std::string& name);
 std::string ReadText(const std::string& path);

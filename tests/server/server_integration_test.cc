@@ -47,12 +47,6 @@ HttpReply PutJson(uint16_t port, const std::string& name, const std::string& bod
                              body});
 }
 
-// Runs a command to completion; its exit status.
-int RunCommand(const std::vector<std::string>& argv, const std::string& log) {
-  ChildProcess p(argv[0], std::vector<std::string>(argv.begin() + 1, argv.end()), log);
-  return p.Wait(seconds(120)).value_or(-1);
-}
-
 // Opens /ws/library with a bearer token and reads its hello.
 void WatchLibrary(websocket::stream<beast::tcp_stream>& ws, uint16_t port, const std::string& token) {
   beast::get_lowest_layer(ws).connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));

@@ -1,0 +1,82 @@
+// idms-sim fit --recording on a real session recording (issue 34): the real idms-agent palpates
+// hex_4x5_home through the real idms-server, which records the session; the recording, downloaded
+// as a viewer would, fits back to the model it was made on (the scene's tool and step replayed, so
+// every factor is 1), and fitting it to another model is refused with the reason.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "idms/sim/model_io.h"
+#include "server_process.h"
+#include "session_checks.h"
+
+namespace idms::test {
+namespace {
+
+using std::chrono::seconds;
+
+TEST(FitRecording, ASessionRecordingFitsBackToItsModelAndAnotherModelIsRefused) {
+  const std::string dir = TempDir("fit-recording");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
+       "hex_4x5_home", "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "5.5"},
+      dir + "/agent.log");
+  const std::string id = WaitForLiveSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+  const std::string rec = dir + "/palpate.mcap";
+  ASSERT_TRUE(DownloadRecording(server.port(), id, observer, rec));
+
+  const std::string models = std::string(IDMS_SOURCE_DIR) + "/models/";
+  ASSERT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", rec, "--params",
+                        "home_k,tool_k", "--json"},
+                       dir + "/fit.json"),
+            0)
+      << ReadText(dir + "/fit.json");
+  const nlohmann::json fit = nlohmann::json::parse(ReadText(dir + "/fit.json"));
+  EXPECT_GE(fit["samples"].get<int>(), 5400) << "the whole palpation, tick by tick";
+  EXPECT_EQ(fit["rms_before"].get<double>(), 0.0) << "the replay gives the agent's forces to the bit";
+  EXPECT_GT(fit["peak_force"].get<double>(), 1.0);
+  for (const char* p : {"home_k", "tool_k"}) {
+    EXPECT_NEAR(fit["params"][p]["scale"].get<double>(), 1.0, 1e-6) << p;
+  }
+  EXPECT_EQ(fit["params"]["tool_k"]["value"].get<double>(), 400.0 * fit["params"]["tool_k"]["scale"].get<double>())
+      << "the scene's tool: the thesis's k = 400";
+
+  // The same model typed in 20% too soft: the recording gives the factor back.
+  Model soft;
+  LoadError load_error;
+  ASSERT_TRUE(LoadModel(models + "hex_4x5_home.fem", models + "hex_4x5_home.plg", {}, &soft, &load_error))
+      << load_error.ToString();
+  for (double& k : soft.elem_k) k *= 0.8;
+  std::string error;
+  ASSERT_TRUE(SaveModel(soft, dir + "/soft", &error)) << error;
+  ASSERT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", dir + "/soft", "--recording", rec, "--params", "k", "--json"},
+                       dir + "/soft.json"),
+            0)
+      << ReadText(dir + "/soft.json");
+  const nlohmann::json soft_fit = nlohmann::json::parse(ReadText(dir + "/soft.json"));
+  EXPECT_NEAR(soft_fit["params"]["k"]["scale"].get<double>(), 1.25, 1e-4) << soft_fit.dump();
+
+  // Another model's surface: refused, and why.
+  EXPECT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", models + "slab_40x40", "--recording", rec}, dir + "/other.log"),
+            1);
+  EXPECT_NE(ReadText(dir + "/other.log").find("palpate.mcap: its model has 22 surface vertices, the model given 1620"),
+            std::string::npos)
+      << ReadText(dir + "/other.log");
+  // One source only, and the scene's tool is not overridden.
+  EXPECT_EQ(RunCommand(
+                {IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", rec, "--tool", "sphere:k=500"},
+                dir + "/tool.log"),
+            1);
+  EXPECT_NE(ReadText(dir + "/tool.log").find("the session's scene gives the tool and the step"), std::string::npos)
+      << ReadText(dir + "/tool.log");
+}
+
+}  // namespace
+}  // namespace idms::test
