@@ -4,8 +4,10 @@
 // every factor is 1), and fitting it to another model is refused with the reason.
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <string>
 
+#include "idms/protocol/recording.h"
 #include "idms/sim/model_io.h"
 #include "server_process.h"
 #include "session_checks.h"
@@ -14,6 +16,26 @@ namespace idms::test {
 namespace {
 
 using std::chrono::seconds;
+
+// A copy of a recording with its metadata, every message kept but the /device batches `edit`
+// returns false for (it may change the ones it keeps).
+void Rewrite(const std::string& from, const std::string& to, const std::function<bool(int, v1::DeviceSamples*)>& edit) {
+  RecordingReader reader;
+  std::string error;
+  ASSERT_TRUE(reader.Open(from, {}, &error)) << error;
+  RecordingWriter writer;
+  RecordingWriterOptions options;
+  options.session = reader.session();
+  ASSERT_TRUE(writer.Open(to, options, &error)) << error;
+  RecordedMessage m;
+  int batch = 0;
+  while (reader.Next(&m, &error)) {
+    if (m.envelope.has_device_samples() && !edit(batch++, m.envelope.mutable_device_samples())) continue;
+    ASSERT_TRUE(writer.Write(m.envelope, m.log_time_ns, m.publish_time_ns, &error)) << error;
+  }
+  ASSERT_TRUE(error.empty()) << error;
+  ASSERT_TRUE(writer.Close(&error)) << error;
+}
 
 TEST(FitRecording, ASessionRecordingFitsBackToItsModelAndAnotherModelIsRefused) {
   const std::string dir = TempDir("fit-recording");
@@ -69,6 +91,32 @@ TEST(FitRecording, ASessionRecordingFitsBackToItsModelAndAnotherModelIsRefused) 
   EXPECT_NE(ReadText(dir + "/other.log").find("palpate.mcap: its model has 22 surface vertices, the model given 1620"),
             std::string::npos)
       << ReadText(dir + "/other.log");
+  // A recording that lost ticks, or whose force the passivity controller changed, is not the
+  // tissue's: refused, and why.
+  uint64_t lost[2] = {0, 0};  // the dropped batch's first and last tick
+  Rewrite(rec, dir + "/gap.mcap", [&](int batch, v1::DeviceSamples* samples) {
+    if (batch != 9) return true;
+    lost[0] = samples->samples(0).tick(), lost[1] = samples->samples(samples->samples_size() - 1).tick();
+    return false;
+  });
+  EXPECT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", dir + "/gap.mcap"},
+                       dir + "/gap.log"),
+            1);
+  EXPECT_NE(ReadText(dir + "/gap.log")
+                .find("gap.mcap: ticks " + std::to_string(lost[0]) + " to " + std::to_string(lost[1]) +
+                      " are missing (the session lost them)"),
+            std::string::npos)
+      << ReadText(dir + "/gap.log");
+  Rewrite(rec, dir + "/passive.mcap", [](int batch, v1::DeviceSamples* samples) {
+    if (batch == 50) samples->mutable_samples(3)->set_passivity_damping(0.5);
+    return true;
+  });
+  EXPECT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", dir + "/passive.mcap"},
+                       dir + "/passive.log"),
+            1);
+  EXPECT_NE(ReadText(dir + "/passive.log").find("the passivity controller added damping on 1 ticks"), std::string::npos)
+      << ReadText(dir + "/passive.log");
+
   // One source only, and the scene's tool is not overridden.
   EXPECT_EQ(RunCommand(
                 {IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", rec, "--tool", "sphere:k=500"},
