@@ -13,19 +13,14 @@
 #include "idms/sim/generate.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
+#include "step_test_util.h"
 
 namespace idms::fit {
 namespace {
 
-Model Shipped(const char* name) {
-  Model m;
-  LoadError error;
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/" + name;
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &m, &error)) << error.ToString();
-  return m;
-}
+using test::LoadShippedModel;
 
-Model Hex() { return Shipped("hex_4x5_home"); }
+Model Hex() { return LoadShippedModel("hex_4x5_home"); }
 
 FitOptions Options(std::vector<Param> params) {
   FitOptions o;
@@ -200,9 +195,10 @@ TEST(Fit, RegionsAreParsedAndOneThatHoldsNothingIsRefused) {
 // within one element spacing (1) and its stiffness ratio within 10%; the plain slab's own scan
 // shows no lump. Every one of the 7 x 7 grid's presses touches the surface.
 TEST(FitMap, FindsTheTumourAndNothingOnThePlainSlab) {
-  const Model plain = Shipped("slab_40x40");
+  const Model plain = LoadShippedModel("slab_40x40");
   const FitOptions o = Options({});
-  const MapResult tumour = FitMap(plain, ScriptedTrace(Shipped("slab_40x40_tumour"), Script::kScan, 0.01, 11), o);
+  const MapResult tumour =
+      FitMap(plain, ScriptedTrace(LoadShippedModel("slab_40x40_tumour"), Script::kScan, 0.01, 11), o);
   ASSERT_TRUE(tumour.ok) << tumour.message;
   EXPECT_EQ(tumour.points.size(), size_t{kScanGrid * kScanGrid});
   EXPECT_NEAR(tumour.background, 1.0, 0.01);

@@ -20,13 +20,7 @@
 namespace idms {
 namespace {
 
-Model Hex() {
-  Model model;
-  LoadError error;
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &model, &error)) << error.ToString();
-  return model;
-}
+Model Hex() { return test::LoadShippedModel("hex_4x5_home"); }
 
 ToolCommand Finger(double mu_s, double mu_d) {
   ToolCommand c;

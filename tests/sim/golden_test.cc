@@ -15,6 +15,7 @@
 #include "idms/sim/model_io.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
+#include "step_test_util.h"
 #include "warning_guard.h"
 
 namespace idms {
@@ -30,10 +31,7 @@ struct Fnv {
 
 // The four scripts of chapter 6 back to back, each from rest, the state hashed after each.
 uint64_t GoldenRun(Integrator integrator, bool full) {
-  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/hex_4x5_home";
-  Model model;
-  LoadError error;
-  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &model, &error)) << error.ToString();
+  const Model model = test::LoadShippedModel("hex_4x5_home");
   StepOptions o;
   o.integrator = integrator;
   o.full = full;

@@ -1,16 +1,30 @@
-// Helpers shared by the step, tool and stability tests: tiny hand-built models, tool inputs,
-// and a hash of a State's bits for determinism checks.
+// Helpers shared by the step, tool and stability tests: tiny hand-built models, the shipped ones,
+// tool inputs, and a hash of a State's bits for determinism checks.
 #pragma once
+
+#include <gtest/gtest.h>
 
 #include <cstdint>
 #include <cstring>
+#include <string>
 
 #include "idms/sim/model.h"
+#include "idms/sim/model_io.h"
 #include "idms/sim/state.h"
 #include "idms/sim/step.h"
 #include "idms/sim/tool.h"
 
 namespace idms::test {
+
+// A model shipped in models/ ("hex_4x5_home", "slab_40x40", ...), loaded as idms-sim loads it; a
+// test failure naming the file if it does not load.
+inline Model LoadShippedModel(const std::string& name) {
+  Model m;
+  LoadError error;
+  const std::string prefix = std::string(IDMS_SOURCE_DIR) + "/models/" + name;
+  EXPECT_TRUE(LoadModel(prefix + ".fem", prefix + ".plg", {}, &m, &error)) << error.ToString();
+  return m;
+}
 
 // Two atoms of `mass` joined by one element (k, b): atom 0 at the origin, atom 1 at `end`.
 struct SpringPair {
