@@ -190,6 +190,22 @@ TEST(Fit, RegionsAreParsedAndOneThatHoldsNothingIsRefused) {
   EXPECT_EQ(r.replays, 0);
 }
 
+// A region the tool never loads (a corner of the slab, far outside the palpation's haptic
+// window) cannot be fitted: its elements never move, its column of the Jacobian is zero, and the
+// fit says so instead of returning the starting value as if it were measured.
+TEST(Fit, ARegionTheRecordingNeverLoadsIsRefusedAsUndetermined) {
+  const Model slab = LoadShippedModel("slab_40x40");
+  FitOptions o = Options({Param::kK});
+  Region corner;
+  std::string error;
+  ASSERT_TRUE(ParseRegion("corner=box:0,0,-2,5,5,1", 0, &corner, &error)) << error;
+  o.regions = {corner};
+  const FitResult r = Fit(slab, ScriptedTrace(slab, Script::kPalpate, 0.01, 7), o);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.message.find("does not determine every parameter asked for"), std::string::npos) << r.message;
+  EXPECT_GT(r.replays, 0) << "found by the solver, not by a rule before it";
+}
+
 // The lump a clinician palpates for (issue 34): a scan of slab_40x40_tumour (k x 8 in a sphere of
 // radius 4 at 20, 17, -0.4) with 1% noise, mapped against the plain slab, puts the lump's centre
 // within one element spacing (1) and its stiffness ratio within 10%; the plain slab's own scan
