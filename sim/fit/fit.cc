@@ -129,6 +129,98 @@ struct LumpProfile {
   }
 };
 
+double Magnitude(const std::array<double, 3>& f) { return std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]); }
+
+double Median(std::vector<double> x) {
+  std::sort(x.begin(), x.end());
+  const size_t n = x.size();
+  return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
+}
+
+// The presses of a recording, [first, end) ticks: runs of ticks above 5% of the largest force
+// (well above a 1% noise), with gaps shorter than 50 ms bridged (noise at the edges) and runs
+// shorter than 20 ms dropped.
+std::vector<std::array<int64_t, 2>> FindPresses(const Trace& trace, double peak) {
+  const int64_t ticks = static_cast<int64_t>(trace.force.size());
+  const double threshold = 0.05 * peak;
+  const int64_t bridge = std::llround(0.05 / trace.dt_s), shortest = std::llround(0.02 / trace.dt_s);
+  std::vector<std::array<int64_t, 2>> presses;
+  for (int64_t n = 0; n < ticks; ++n) {
+    if (!(Magnitude(trace.force[n]) > threshold)) continue;
+    if (!presses.empty() && n - presses.back()[1] <= bridge) {
+      presses.back()[1] = n + 1;
+    } else {
+      presses.push_back({n, n + 1});
+    }
+  }
+  std::erase_if(presses, [&](const auto& p) { return p[1] - p[0] < shortest; });
+  return presses;
+}
+
+// The lump of a map whose largest excess over the background is points[top]: a first guess from
+// the presses above half that excess (their excess-weighted mean and extent), then the profile
+// fitted to every press, so the centre comes from the lump's edges, not from where the grid
+// happened to fall inside it. The first guess stands if the profile's fit fails.
+Lump FitLump(const std::vector<MapPoint>& points, double background, size_t top) {
+  Lump lump;
+  lump.found = true;
+  const double excess = points[top].scale - background;
+  double wsum = 0, cx = 0, cy = 0;
+  for (const MapPoint& p : points) {
+    const double w = p.scale - background;
+    if (w < 0.5 * excess) continue;
+    cx += w * p.x, cy += w * p.y, wsum += w;
+    ++lump.presses;
+  }
+  cx /= wsum, cy /= wsum;
+  double rho = 0, spacing = std::numeric_limits<double>::infinity();
+  for (const MapPoint& p : points) {
+    if (p.scale - background >= 0.5 * excess) rho = std::max(rho, std::hypot(p.x - cx, p.y - cy));
+    for (const MapPoint& q : points) {
+      const double d = std::hypot(p.x - q.x, p.y - q.y);
+      if (d > 0) spacing = std::min(spacing, d);
+    }
+  }
+  rho += 0.5 * spacing;
+
+  // The profile.
+  double x[5] = {cx, cy, std::log(rho), std::log(0.25 * rho), std::log(excess)};
+  ceres::Problem problem;
+  for (const MapPoint& p : points) {
+    problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<LumpProfile, 1, 5>(new LumpProfile{p.x, p.y, p.scale, background}), nullptr, x);
+  }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = 100;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  const double height = std::exp(x[4]);
+  const double ratio = (background + height) / background;
+  if (!summary.IsSolutionUsable() || !std::isfinite(ratio)) {
+    lump.x = cx, lump.y = cy, lump.radius = rho;
+    lump.ratio = points[top].scale / background;
+    return lump;
+  }
+  lump.x = x[0], lump.y = x[1], lump.radius = std::exp(x[2]), lump.ratio = ratio;
+
+  // Its uncertainty: the covariance (a pseudo-inverse: a profile with a flat edge leaves the width
+  // loose, not the rest) scaled by the residuals' variance.
+  ceres::Covariance::Options co;
+  co.algorithm_type = ceres::DENSE_SVD;
+  co.null_space_rank = -1;
+  ceres::Covariance covariance(co);
+  std::vector<std::pair<const double*, const double*>> blocks = {{x, x}};
+  double cov[25] = {};
+  if (covariance.Compute(blocks, &problem) && covariance.GetCovarianceBlock(x, x, cov)) {
+    const double s2 = 2 * summary.final_cost / std::max(1.0, static_cast<double>(points.size()) - 5);
+    lump.xy_sigma = std::sqrt(std::max(0.0, (cov[0] + cov[6]) * s2));
+    lump.ratio_sigma = height / background * std::sqrt(std::max(0.0, cov[24] * s2));
+  }
+  return lump;
+}
+
 }  // namespace
 
 const char* ParamName(Param p) {
@@ -364,7 +456,7 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   for (size_t n = 0; n < trace.force.size(); ++n) {
     if ((n + 1) % options.stride == 0) measured.push_back(trace.force[n]);
     const auto& f = trace.force[n];
-    r.peak_force = std::max(r.peak_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+    r.peak_force = std::max(r.peak_force, Magnitude(f));
   }
   r.samples = static_cast<int>(measured.size());
   if (!(r.peak_force > 1e-9)) {
@@ -438,40 +530,25 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
   const auto start = std::chrono::steady_clock::now();
   MapResult r;
   const int64_t ticks = static_cast<int64_t>(trace.force.size());
-  auto magnitude = [&](int64_t n) {
-    const auto& f = trace.force[n];
-    return std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
-  };
   double peak = 0;
-  for (int64_t n = 0; n < ticks; ++n) peak = std::max(peak, magnitude(n));
+  for (const auto& f : trace.force) peak = std::max(peak, Magnitude(f));
   if (!(peak > 1e-9)) {
     r.message = "the recording never touches the model: there is nothing to map";
     return r;
   }
-  // The presses: runs of ticks above 5% of the largest force (well above a 1% noise), with gaps
-  // shorter than 50 ms bridged (noise at the edges) and runs shorter than 20 ms dropped.
-  const double threshold = 0.05 * peak;
-  const int64_t bridge = std::llround(0.05 / trace.dt_s), shortest = std::llround(0.02 / trace.dt_s);
-  std::vector<std::array<int64_t, 2>> presses;
-  for (int64_t n = 0; n < ticks; ++n) {
-    if (!(magnitude(n) > threshold)) continue;
-    if (!presses.empty() && n - presses.back()[1] <= bridge) {
-      presses.back()[1] = n + 1;
-    } else {
-      presses.push_back({n, n + 1});
-    }
-  }
-  std::erase_if(presses, [&](const auto& p) { return p[1] - p[0] < shortest; });
+  const std::vector<std::array<int64_t, 2>> presses = FindPresses(trace, peak);
   if (presses.size() < 3) {
     r.message = "the recording holds " + std::to_string(presses.size()) +
                 " separate presses; a map needs at least 3 (a scan: idms-sim run --script scan)";
     return r;
   }
+
+  // Each press on its own: one factor on every element's k. A map needs each factor to a fraction
+  // of a percent, not to the last digit: a few replays per press fewer (a 7 x 7 scan of the 40 x 40
+  // slab: ~29 replays a press at 1e-12).
   FitOptions one = options;
   one.params = {Param::kK};
   one.regions.clear();
-  // A map needs each factor to a fraction of a percent, not to the last digit: a few replays per
-  // press fewer (a 7 x 7 scan of the 40 x 40 slab: ~29 replays a press at 1e-12).
   one.function_tolerance = std::max(options.function_tolerance, 1e-7);
   for (size_t i = 0; i < presses.size(); ++i) {
     // The ticks from halfway after the last press to halfway before the next, replayed from rest.
@@ -490,87 +567,29 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
     }
     int64_t top = presses[i][0];
     for (int64_t n = presses[i][0]; n < presses[i][1]; ++n) {
-      if (magnitude(n) > magnitude(top)) top = n;
+      if (Magnitude(trace.force[n]) > Magnitude(trace.force[top])) top = n;
     }
     r.points.push_back({.x = trace.pos[top][0],
                         .y = trace.pos[top][1],
                         .scale = f.scale[0],
                         .sigma = f.scale_sigma[0],
-                        .peak_force = magnitude(top),
+                        .peak_force = Magnitude(trace.force[top]),
                         .tick0 = t0,
                         .tick1 = t1});
   }
-  // The background and its scatter, robustly: a lump's presses must not raise them.
+
+  // The background and its scatter, robustly (a lump's presses must not raise them), and the lump.
   std::vector<double> v;
   for (const MapPoint& p : r.points) v.push_back(p.scale);
-  auto median = [](std::vector<double> x) {
-    std::sort(x.begin(), x.end());
-    const size_t n = x.size();
-    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
-  };
-  r.background = median(v);
+  r.background = Median(v);
   for (double& x : v) x = std::abs(x - r.background);
-  r.spread = 1.4826 * median(v);
+  r.spread = 1.4826 * Median(v);
   size_t top = 0;
   for (size_t i = 0; i < r.points.size(); ++i) {
     if (r.points[i].scale > r.points[top].scale) top = i;
   }
-  const double excess = r.points[top].scale - r.background;
-  r.lump.found = excess > std::max(0.25 * r.background, 5 * r.spread);
-  if (r.lump.found) {
-    // A first guess from the presses above half the largest excess (their excess-weighted mean and
-    // extent), then the profile fitted to every press: the centre comes from the lump's edges, not
-    // from where the grid happened to fall inside it.
-    double wsum = 0, cx = 0, cy = 0;
-    for (const MapPoint& p : r.points) {
-      const double w = p.scale - r.background;
-      if (w < 0.5 * excess) continue;
-      cx += w * p.x, cy += w * p.y, wsum += w;
-      ++r.lump.presses;
-    }
-    cx /= wsum, cy /= wsum;
-    double rho = 0, spacing = std::numeric_limits<double>::infinity();
-    for (const MapPoint& p : r.points) {
-      if (p.scale - r.background >= 0.5 * excess) rho = std::max(rho, std::hypot(p.x - cx, p.y - cy));
-      for (const MapPoint& q : r.points) {
-        const double d = std::hypot(p.x - q.x, p.y - q.y);
-        if (d > 0) spacing = std::min(spacing, d);
-      }
-    }
-    rho += 0.5 * spacing;
-    double x[5] = {cx, cy, std::log(rho), std::log(0.25 * rho), std::log(excess)};
-    ceres::Problem problem;
-    for (const MapPoint& p : r.points) {
-      problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<LumpProfile, 1, 5>(new LumpProfile{p.x, p.y, p.scale, r.background}), nullptr,
-          x);
-    }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 100;
-    so.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
-    r.lump.x = x[0], r.lump.y = x[1], r.lump.radius = std::exp(x[2]);
-    const double height = std::exp(x[4]);
-    r.lump.ratio = (r.background + height) / r.background;
-    ceres::Covariance::Options co;
-    co.algorithm_type = ceres::DENSE_SVD;
-    co.null_space_rank = -1;  // pseudo-inverse: a profile with a flat edge leaves w loose, not the rest
-    ceres::Covariance covariance(co);
-    std::vector<std::pair<const double*, const double*>> blocks = {{x, x}};
-    double cov[25] = {};
-    const bool have = covariance.Compute(blocks, &problem) && covariance.GetCovarianceBlock(x, x, cov);
-    const double dof = std::max(1.0, static_cast<double>(r.points.size()) - 5);
-    const double s2 = 2 * summary.final_cost / dof;
-    if (have) {
-      r.lump.xy_sigma = std::sqrt(std::max(0.0, (cov[0] + cov[6]) * s2));
-      r.lump.ratio_sigma = height / r.background * std::sqrt(std::max(0.0, cov[24] * s2));
-    }
-    if (!summary.IsSolutionUsable() || !std::isfinite(r.lump.ratio)) {
-      r.lump.x = cx, r.lump.y = cy, r.lump.radius = rho;  // the first guess stands
-      r.lump.ratio = r.points[top].scale / r.background;
-    }
+  if (r.points[top].scale - r.background > std::max(0.25 * r.background, 5 * r.spread)) {
+    r.lump = FitLump(r.points, r.background, top);
   }
   r.ok = true;
   r.message = std::to_string(r.points.size()) + " presses mapped";
@@ -592,7 +611,7 @@ Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t se
   tool.stiffness = tool_stiffness;
   t.force = Replay(truth, t, StepOptions{}, tool, 1);
   double peak = 0;
-  for (const auto& f : t.force) peak = std::max(peak, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
+  for (const auto& f : t.force) peak = std::max(peak, Magnitude(f));
   std::mt19937 rng(seed);
   std::normal_distribution<double> normal(0.0, noise * peak);
   for (auto& f : t.force) {

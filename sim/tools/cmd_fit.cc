@@ -25,47 +25,53 @@ struct FitArgs {
   const std::string& source() const { return recording.empty() ? csv : recording; }
 };
 
+// PREFIX.map.csv: a row per press (times in seconds).
+void WriteMapCsv(const std::string& path, const fit::MapResult& r, double dt_s) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) Fail("fit", "--out " + path + ": cannot write");
+  std::fprintf(f, "x,y,scale,sigma,peak_force,t0,t1\n");
+  for (const fit::MapPoint& p : r.points) {
+    std::fprintf(f, "%.6g,%.6g,%.6g,%.3g,%.6g,%.4f,%.4f\n", p.x, p.y, p.scale, p.sigma, p.peak_force,
+                 static_cast<double>(p.tick0) * dt_s, static_cast<double>(p.tick1) * dt_s);
+  }
+  if (std::fclose(f) != 0) Fail("fit", "--out " + path + ": write failed");
+}
+
+// The map's PNG: the presses (read back from the CSV) coloured by their factor, and the fitted
+// lump's centre and radius.
+void PlotMap(const FitArgs& a, const std::string& csv, const fit::MapResult& r) {
+  PlotSpec spec;
+  spec.title = "idms-sim fit --map: " + a.model + " from " + a.source();
+  spec.x_label = "x";
+  spec.y_label = "y";
+  spec.color_label = "stiffness factor";
+  spec.equal_aspect = true;
+  spec.key = "off";
+  PlotSeries presses{.title = "", .style = "points", .options = "pt 5 ps 4"};
+  presses.csv_path = csv;
+  presses.x_column = "x", presses.y_column = "y", presses.color_column = "scale";
+  spec.series = {presses};
+  if (r.lump.found) {
+    PlotSeries centre{.title = "", .style = "points", .options = "pt 2 ps 3 lw 2 lc rgb 'black'"};
+    centre.points = {{r.lump.x, r.lump.y}};
+    spec.series.push_back(centre);
+    char circle[160];
+    std::snprintf(circle, sizeof(circle), "set object 1 circle at %g,%g size %g fs empty border lc rgb 'black' lw 2",
+                  r.lump.x, r.lump.y, r.lump.radius);
+    spec.preamble.push_back(circle);
+  }
+  std::string error;
+  if (!PlotPng(spec, a.plot, &error)) Fail("fit", "--plot: " + error);
+}
+
 // The scan's stiffness map: a table (or JSON), PREFIX.map.csv, and a PNG of the presses coloured
 // by their factor.
 void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const fit::FitOptions& o) {
+  if (!a.plot.empty() && a.out.empty()) Fail("fit", "--map --plot needs --out (the plot reads PREFIX.map.csv)");
   const fit::MapResult r = fit::FitMap(model, trace, o);
   if (!r.ok) Fail("fit", "--map: " + r.message);
-  std::string error;
-  if (!a.out.empty()) {
-    const std::string path = a.out + ".map.csv";
-    std::FILE* f = std::fopen(path.c_str(), "w");
-    if (f == nullptr) Fail("fit", "--out " + path + ": cannot write");
-    std::fprintf(f, "x,y,scale,sigma,peak_force,t0,t1\n");
-    for (const fit::MapPoint& p : r.points) {
-      std::fprintf(f, "%.6g,%.6g,%.6g,%.3g,%.6g,%.4f,%.4f\n", p.x, p.y, p.scale, p.sigma, p.peak_force,
-                   static_cast<double>(p.tick0) * trace.dt_s, static_cast<double>(p.tick1) * trace.dt_s);
-    }
-    if (std::fclose(f) != 0) Fail("fit", "--out " + path + ": write failed");
-  }
-  if (!a.plot.empty()) {
-    PlotSpec spec;
-    spec.title = "idms-sim fit --map: " + a.model + " from " + a.source();
-    spec.x_label = "x";
-    spec.y_label = "y";
-    spec.color_label = "stiffness factor";
-    spec.equal_aspect = true;
-    spec.key = "off";
-    PlotSeries presses{.title = "", .style = "points", .options = "pt 5 ps 4"};
-    presses.csv_path = a.out.empty() ? "" : a.out + ".map.csv";
-    if (presses.csv_path.empty()) Fail("fit", "--map --plot needs --out (the plot reads PREFIX.map.csv)");
-    presses.x_column = "x", presses.y_column = "y", presses.color_column = "scale";
-    spec.series = {presses};
-    if (r.lump.found) {  // the fitted lump: its centre, and its radius as a circle
-      PlotSeries centre{.title = "", .style = "points", .options = "pt 2 ps 3 lw 2 lc rgb 'black'"};
-      centre.points = {{r.lump.x, r.lump.y}};
-      spec.series.push_back(centre);
-      char circle[160];
-      std::snprintf(circle, sizeof(circle), "set object 1 circle at %g,%g size %g fs empty border lc rgb 'black' lw 2",
-                    r.lump.x, r.lump.y, r.lump.radius);
-      spec.preamble.push_back(circle);
-    }
-    if (!PlotPng(spec, a.plot, &error)) Fail("fit", "--plot: " + error);
-  }
+  if (!a.out.empty()) WriteMapCsv(a.out + ".map.csv", r, trace.dt_s);
+  if (!a.plot.empty()) PlotMap(a, a.out + ".map.csv", r);
   nlohmann::json j = {{"presses", r.points.size()}, {"background", r.background}, {"spread", r.spread},
                       {"replays", r.replays},       {"seconds", r.seconds},       {"lump", {{"found", r.lump.found}}}};
   if (r.lump.found) {

@@ -22,10 +22,17 @@ using test::LoadShippedModel;
 
 Model Hex() { return LoadShippedModel("hex_4x5_home"); }
 
-FitOptions Options(std::vector<Param> params) {
+// The fit of `params` with the recordings' sphere; and, given a region's spec, inside it and outside.
+FitOptions Options(std::vector<Param> params, const std::string& region = "") {
   FitOptions o;
   o.params = std::move(params);
   o.tool.kind = ToolKind::kSphere;
+  if (!region.empty()) {
+    Region g;
+    std::string error;
+    EXPECT_TRUE(ParseRegion(region, 0, &g, &error)) << error;
+    o.regions = {g};
+  }
   return o;
 }
 
@@ -141,11 +148,7 @@ TEST(Fit, RecoversARegionsStiffnessFromANoisyStroke) {
   lump.center[0] = 2, lump.center[1] = 1.5, lump.radius = 0.9, lump.k_scale = 3;
   ApplyInclusions({lump}, &truth);
   ScaleGroup(truth, Param::kK, 1.1);
-  FitOptions o = Options({Param::kK});
-  Region region;
-  std::string error;
-  ASSERT_TRUE(ParseRegion("lump=sphere:2,1.5,0,0.9", 0, &region, &error)) << error;
-  o.regions = {region};
+  const FitOptions o = Options({Param::kK}, "lump=sphere:2,1.5,0,0.9");
   const FitResult r = Fit(typed, ScriptedTrace(truth, Script::kStrokeGentle, 0.01, 7), o);
   ASSERT_TRUE(r.ok) << r.message;
   ASSERT_EQ(r.names, (std::vector<std::string>{"k@lump", "k@rest"}));
@@ -180,10 +183,8 @@ TEST(Fit, RegionsAreParsedAndOneThatHoldsNothingIsRefused) {
   EXPECT_FALSE(ParseParams("k,home_k", &params, &error));
   EXPECT_EQ(error, "--params: k (every element) overlaps home_k; fit one or the other");
   // A region away from the model holds no element: refused by name, before any replay.
-  FitOptions o = Options({Param::kSurfaceK});
-  ASSERT_TRUE(ParseRegion("far=sphere:50,50,50,1", 0, &g, &error)) << error;
-  o.regions = {g};
-  const FitResult r = Fit(Hex(), ScriptedTrace(Hex(), Script::kPalpate, 0.0, 7), o);
+  const FitResult r =
+      Fit(Hex(), ScriptedTrace(Hex(), Script::kPalpate, 0.0, 7), Options({Param::kSurfaceK}, "far=sphere:50,50,50,1"));
   EXPECT_FALSE(r.ok);
   EXPECT_EQ(r.message,
             "surface_k@far: the model has no surface elements with a nonzero value to scale inside region far");
@@ -195,12 +196,8 @@ TEST(Fit, RegionsAreParsedAndOneThatHoldsNothingIsRefused) {
 // fit says so instead of returning the starting value as if it were measured.
 TEST(Fit, ARegionTheRecordingNeverLoadsIsRefusedAsUndetermined) {
   const Model slab = LoadShippedModel("slab_40x40");
-  FitOptions o = Options({Param::kK});
-  Region corner;
-  std::string error;
-  ASSERT_TRUE(ParseRegion("corner=box:0,0,-2,5,5,1", 0, &corner, &error)) << error;
-  o.regions = {corner};
-  const FitResult r = Fit(slab, ScriptedTrace(slab, Script::kPalpate, 0.01, 7), o);
+  const FitResult r =
+      Fit(slab, ScriptedTrace(slab, Script::kPalpate, 0.01, 7), Options({Param::kK}, "corner=box:0,0,-2,5,5,1"));
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.message.find("does not determine every parameter asked for"), std::string::npos) << r.message;
   EXPECT_GT(r.replays, 0) << "found by the solver, not by a rule before it";
