@@ -171,7 +171,10 @@ test('replay: ?t opens there, play moves time and URL, speed, seek by a mark, th
   await page.waitForFunction(() => new URL(location.href).searchParams.get('t') === '4.50');
   // Paused there, the force plot shows the samples that led to 4.5 s at once (the seek's
   // catch-up: the plots' 5 s window before it, here all since the start), not a blank until Play.
-  await page.waitForFunction(() => /** @type {any} */ (window).__idms.forceShown >= 1000, undefined, { timeout: 10000 }).catch(() => {});
+  // The catch-up comes in several batches: wait for its last (a loaded machine read the state
+  // halfway through, at 3.0 s).
+  await page.waitForFunction(() => { const s = /** @type {any} */ (window).__idms; return s.forceShown >= 1000 && Math.abs(s.timeS - 4.5) < 0.1; },
+    undefined, { timeout: 10000 }).catch(() => {});
   const paused = await state(page);
   assert.ok(paused.forceShown >= 1000, `the paused replay's force plot shows ${paused.forceShown} samples`);
   assert.ok(Math.abs(paused.timeS - 4.5) < 0.1, `the last sample shown is at ${paused.timeS} s`);
