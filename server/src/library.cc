@@ -18,8 +18,8 @@ bool ValidModelName(std::string_view name) {
 }
 
 std::optional<ModelVersion> Library::Upload(const std::string& name, std::string_view fem, std::string_view plg,
-                                            const std::string& description, UploadError* error,
-                                            UploadTimings* timings) {
+                                            const std::string& description, UploadError* error, UploadTimings* timings,
+                                            const std::string& metadata) {
   using Clock = std::chrono::steady_clock;
   const Clock::time_point t0 = Clock::now();
   if (!ValidModelName(name)) {
@@ -27,20 +27,24 @@ std::optional<ModelVersion> Library::Upload(const std::string& name, std::string
               0};
     return std::nullopt;
   }
+  if (metadata.size() > kMaxVersionMetadataBytes) {
+    *error = {400,
+              "model " + name + ": metadata of " + std::to_string(metadata.size()) + " bytes, at most " +
+                  std::to_string(kMaxVersionMetadataBytes),
+              "", 0, 0};
+    return std::nullopt;
+  }
   // Both files through the sim parsers, then the surface against the model.
-  const std::string fem_file = name + ".fem", plg_file = name + ".plg";
   Model model;
-  SurfaceMesh mesh;
   LoadError le;
-  const bool ok = ParseFem(fem, fem_file, &model, &le) && ParsePlg(plg, plg_file, &mesh, &le) &&
-                  AttachSurface(mesh, plg_file, ReadOptions{}.plg_tolerance, &model, &le);
-  if (!ok) {
+  if (!ParseModelText(fem, plg, name, &model, &le)) {
     *error = {400, le.ToString(), le.file, le.line, le.col};
     return std::nullopt;
   }
   ModelVersion v;
   v.name = name;
   v.description = description;
+  v.metadata = metadata;
   v.atoms = model.num_atoms;
   v.elements = model.num_elems;
   v.triangles = model.num_tris;

@@ -13,7 +13,9 @@ namespace {
 
 using json = nlohmann::json;
 
-json VersionJson(const ModelVersion& v) {
+}  // namespace
+
+json ModelVersionJson(const ModelVersion& v) {
   return json{{"name", v.name},
               {"version", v.version},
               {"description", v.description},
@@ -26,6 +28,8 @@ json VersionJson(const ModelVersion& v) {
               {"plg_sha256", v.plg_sha256},
               {"obj_sha256", v.obj_sha256}};
 }
+
+namespace {
 
 // ?version=N: 0 when absent, -1 when malformed.
 int64_t RequestedVersion(const ApiRequest& req) {
@@ -123,10 +127,20 @@ ApiResponse GetModel(ApiContext& ctx, ApiRequest& req) {
     if (chosen == nullptr) return NotFound(req, name, version);
   }
   // The chosen version's fields at the top level (what the agent's FetchModel reads), then all.
-  json out = VersionJson(*chosen);
+  // Its metadata too (a fit's report, for the model page); the list names only the session a
+  // version was fitted to.
+  json out = ModelVersionJson(*chosen);
   out["latest_version"] = rec->latest().version;
+  if (!chosen->metadata.empty()) out["metadata"] = json::parse(chosen->metadata, nullptr, false);
   json versions = json::array();
-  for (const ModelVersion& v : rec->versions) versions.push_back(VersionJson(v));
+  for (const ModelVersion& v : rec->versions) {
+    versions.push_back(ModelVersionJson(v));
+    if (v.metadata.empty()) continue;
+    const json m = json::parse(v.metadata, nullptr, false);
+    if (m.is_object() && m.contains("fit") && m["fit"].is_object() && m["fit"].contains("session")) {
+      versions.back()["fitted_to_session"] = m["fit"]["session"];
+    }
+  }
   out["versions"] = versions;
   return JsonResponse(req, http::status::ok, JsonText(out));
 }
@@ -185,8 +199,8 @@ ApiResponse PutModel(ApiContext& ctx, ApiRequest& req) {
        {"parse_ms", std::round(timings.parse_ms * 10) / 10},
        {"store_ms", std::round(timings.store_ms * 10) / 10}});
   if (ctx.publish_library_event)
-    ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", VersionJson(*v)}}));
-  ApiResponse res = JsonResponse(req, http::status::created, JsonText(VersionJson(*v)));
+    ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
+  ApiResponse res = JsonResponse(req, http::status::created, JsonText(ModelVersionJson(*v)));
   res.set(http::field::location, "/api/models/" + name + "?version=" + std::to_string(v->version));
   return res;
 }

@@ -80,6 +80,9 @@ CREATE TABLE session_leases (
   expires TIMESTAMPTZ NOT NULL
 );
 )sql"},
+    Migration{2, "model versions' metadata (a fit's report)", R"sql(
+ALTER TABLE model_versions ADD COLUMN metadata TEXT NOT NULL DEFAULT '';
+)sql"},
 };
 
 // pg_advisory_xact_lock's key for the migrations: "idms" in ASCII.

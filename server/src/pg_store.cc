@@ -8,7 +8,12 @@ namespace idms::server {
 namespace {
 
 constexpr const char* kColumns =
-    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256";
+    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256, "
+    "metadata";
+// The list of latest versions without the metadata (ModelVersion::metadata).
+constexpr const char* kListColumns =
+    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256, "
+    "'' AS metadata";
 
 ModelVersion RowToVersion(const pqxx::row& r) {
   ModelVersion v;
@@ -23,6 +28,7 @@ ModelVersion RowToVersion(const pqxx::row& r) {
   v.fem_sha256 = r[8].as<std::string>();
   v.plg_sha256 = r[9].as<std::string>();
   v.obj_sha256 = r[10].as<std::string>();
+  v.metadata = r[11].as<std::string>();
   return v;
 }
 
@@ -30,14 +36,14 @@ class PgModelStore final : public ModelStore {
  public:
   explicit PgModelStore(std::shared_ptr<PgDatabase> db) : db_(std::move(db)) {
     const std::string cols = kColumns;
-    db_->Prepare("models_latest",
-                 "SELECT DISTINCT ON (name) " + cols + " FROM model_versions ORDER BY name, version DESC");
+    db_->Prepare("models_latest", "SELECT DISTINCT ON (name) " + std::string(kListColumns) +
+                                      " FROM model_versions ORDER BY name, version DESC");
     db_->Prepare("models_get", "SELECT " + cols + " FROM model_versions WHERE name = $1 ORDER BY version");
     db_->Prepare("models_next_version",
                  "INSERT INTO model_names(name, next_version) VALUES ($1, 2) ON CONFLICT (name) DO UPDATE "
                  "SET next_version = model_names.next_version + 1 RETURNING next_version - 1");
     db_->Prepare("models_insert",
-                 "INSERT INTO model_versions(" + cols + ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)");
+                 "INSERT INTO model_versions(" + cols + ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)");
     db_->Prepare("models_delete_version", "DELETE FROM model_versions WHERE name = $1 AND version = $2");
     db_->Prepare("models_delete", "DELETE FROM model_versions WHERE name = $1");
     db_->Prepare("models_referenced",
@@ -72,7 +78,7 @@ class PgModelStore final : public ModelStore {
         pqxx::work w(c);
         const int64_t version = w.exec_prepared1("models_next_version", v->name)[0].as<int64_t>();
         w.exec_prepared0("models_insert", v->name, version, v->description, v->created, v->atoms, v->elements,
-                         v->triangles, v->bytes, v->fem_sha256, v->plg_sha256, v->obj_sha256);
+                         v->triangles, v->bytes, v->fem_sha256, v->plg_sha256, v->obj_sha256, v->metadata);
         w.commit();
         return version;
       });

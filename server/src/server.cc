@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "fit_jobs.h"
 #include "idms/server/bus.h"
 #include "idms/server/log.h"
 #include "idms/server/postgres.h"
@@ -50,6 +51,7 @@ struct Server::Impl {
   std::unique_ptr<Library> library;
   std::unique_ptr<Bus> bus;  // before the hub: its sessions' subscriptions go first
   std::unique_ptr<SessionHub> hub;
+  std::shared_ptr<FitJobs> fits;  // POST /api/sessions/{id}/fit
   std::unique_ptr<LoginSessions> logins;
   std::unique_ptr<LeaseStore> leases;
   std::mutex tokens_mu;
@@ -223,6 +225,7 @@ bool Server::Impl::Start(std::string* error) {
   AppendWebSocketRoutes(core, &core.routes);
   AppendSessionRoutes(core, &core.routes);
   AppendRenderRoutes(core, &core.routes);
+  fits = AppendFitRoutes(core, &core.routes);
   AnswerStoreFailures(&core.routes, !o.store.empty() || !o.blobs.empty() || !o.recordings.empty());
   // On the acceptor's strand, where Stop arms the timer: a connection's last close on another
   // I/O thread must not cancel it while Stop is setting it (a race TSan found).
@@ -315,6 +318,7 @@ void Server::Impl::Stop() {
     // Sessions first: their recordings are finished and they are marked interrupted (an agent
     // may resume them after a restart); then every connection drains.
     hub->StopAll();
+    StopFits(*fits);
     // Requests in flight get the grace period; then the I/O threads stop regardless.
     grace.expires_after(core.options.shutdown_grace);
     grace.async_wait([this](boost::system::error_code ec) {
@@ -343,6 +347,7 @@ int Server::Run() {
   // still on a worker finish before the database closes.
   impl_->core.recorder.join();
   impl_->core.workers.join();
+  JoinFits(*impl_->fits);
   Log(LogLevel::kInfo, "stopped");
   return 0;
 }

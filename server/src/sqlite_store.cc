@@ -37,8 +37,22 @@ CREATE INDEX IF NOT EXISTS model_versions_plg ON model_versions(plg_sha256);
 CREATE INDEX IF NOT EXISTS model_versions_obj ON model_versions(obj_sha256);
 )sql";
 
+// Columns added since the first schema, each with what brings an older table up to date.
+struct AddedColumn {
+  const char* name;
+  const char* sql;
+};
+constexpr AddedColumn kAddedColumns[] = {
+    {"metadata", "ALTER TABLE model_versions ADD COLUMN metadata TEXT NOT NULL DEFAULT ''"},
+};
+
 constexpr const char* kColumns =
-    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256";
+    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256, "
+    "metadata";
+// The list of latest versions without the metadata (ModelVersion::metadata).
+constexpr const char* kListColumns =
+    "name, version, description, created, atoms, elements, triangles, bytes, fem_sha256, plg_sha256, obj_sha256, "
+    "'' AS metadata";
 
 // A prepared statement, reset after each use.
 class Statement {
@@ -98,6 +112,7 @@ ModelVersion RowToVersion(const Statement& s) {
   v.fem_sha256 = s.Text(8);
   v.plg_sha256 = s.Text(9);
   v.obj_sha256 = s.Text(10);
+  v.metadata = s.Text(11);
   return v;
 }
 
@@ -140,11 +155,11 @@ class SqliteModelStore final : public ModelStore {
     if (!OpenConnection(path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, &db_, error)) return false;
     // WAL: readers never block the writer; synchronous FULL: a committed upload survives power loss.
     if (!Exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA foreign_keys=ON;", error) ||
-        !Exec(kSchema, error) || !OpenConnection(path, SQLITE_OPEN_READONLY, &rdb_, error))
+        !Exec(kSchema, error) || !AddMissingColumns(error) || !OpenConnection(path, SQLITE_OPEN_READONLY, &rdb_, error))
       return false;
     const std::string cols = kColumns;
     return list_latest_.Prepare(rdb_,
-                                "SELECT " + cols +
+                                std::string("SELECT ") + kListColumns +
                                     " FROM model_versions v WHERE version = "
                                     "(SELECT MAX(version) FROM model_versions w WHERE w.name = v.name) ORDER BY name",
                                 error) &&
@@ -155,7 +170,8 @@ class SqliteModelStore final : public ModelStore {
                                 "ON CONFLICT(name) DO UPDATE SET next_version = excluded.next_version",
                                 error) &&
            insert_.Prepare(
-               db_, "INSERT INTO model_versions(" + cols + ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+               db_,
+               "INSERT INTO model_versions(" + cols + ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
                error) &&
            delete_version_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1 AND version = ?2", error) &&
            delete_model_.Prepare(db_, "DELETE FROM model_versions WHERE name = ?1", error) &&
@@ -202,7 +218,7 @@ class SqliteModelStore final : public ModelStore {
     upsert_name_.Bind(1, v->name).Bind(2, next + 1);
     insert_.Bind(1, v->name).Bind(2, v->version).Bind(3, v->description).Bind(4, v->created);
     insert_.Bind(5, v->atoms).Bind(6, v->elements).Bind(7, v->triangles).Bind(8, v->bytes);
-    insert_.Bind(9, v->fem_sha256).Bind(10, v->plg_sha256).Bind(11, v->obj_sha256);
+    insert_.Bind(9, v->fem_sha256).Bind(10, v->plg_sha256).Bind(11, v->obj_sha256).Bind(12, v->metadata);
     if (!Run(upsert_name_, error) || !Run(insert_, error) || !Run(commit_, error)) {
       std::string ignored;
       Run(rollback_, &ignored);
@@ -253,6 +269,23 @@ class SqliteModelStore final : public ModelStore {
     *error = std::string("SQLite: ") + (msg ? msg : "error");
     sqlite3_free(msg);
     return false;
+  }
+
+  // The columns of kAddedColumns an older database lacks, added.
+  bool AddMissingColumns(std::string* error) {
+    for (const AddedColumn& c : kAddedColumns) {
+      sqlite3_stmt* s = nullptr;
+      if (sqlite3_prepare_v2(db_, "SELECT 1 FROM pragma_table_info('model_versions') WHERE name = ?1", -1, &s,
+                             nullptr) != SQLITE_OK) {
+        *error = std::string("SQLite: ") + sqlite3_errmsg(db_);
+        return false;
+      }
+      sqlite3_bind_text(s, 1, c.name, -1, SQLITE_STATIC);
+      const bool present = sqlite3_step(s) == SQLITE_ROW;
+      sqlite3_finalize(s);
+      if (!present && !Exec(c.sql, error)) return false;
+    }
+    return true;
   }
 
   bool Run(Statement& s, std::string* error) {

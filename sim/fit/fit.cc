@@ -415,6 +415,26 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
   return out;
 }
 
+namespace {
+
+// FitOptions::progress after every solver iteration; its false ends the solve (USER_FAILURE).
+class ProgressCallback final : public ceres::IterationCallback {
+ public:
+  ProgressCallback(const std::function<bool(const FitProgress&)>& progress, const int* replays, size_t samples)
+      : progress_(progress), replays_(replays), samples_(static_cast<double>(samples)) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    const FitProgress p{.iteration = s.iteration, .replays = *replays_, .rms = std::sqrt(2 * s.cost / samples_)};
+    return progress_(p) ? ceres::SOLVER_CONTINUE : ceres::SOLVER_ABORT;
+  }
+
+ private:
+  const std::function<bool(const FitProgress&)>& progress_;
+  const int* replays_;
+  double samples_;
+};
+
+}  // namespace
+
 FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   FitResult r;
@@ -477,6 +497,11 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   ceres::Problem problem;
   problem.AddResidualBlock(cost, nullptr, x.data());
   ceres::Solver::Options so;
+  ProgressCallback callback(options.progress, &r.replays, measured.size());
+  if (options.progress) {
+    so.callbacks.push_back(&callback);
+    so.update_state_every_iteration = false;
+  }
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = options.max_iterations;
   so.function_tolerance = options.function_tolerance;
@@ -487,6 +512,10 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   r.iterations = static_cast<int>(summary.iterations.size());
   r.rms_before = std::sqrt(2 * summary.initial_cost / static_cast<double>(measured.size()));
   r.rms_after = std::sqrt(2 * summary.final_cost / static_cast<double>(measured.size()));
+  if (summary.termination_type == ceres::USER_FAILURE) {
+    r.message = "stopped";
+    return r;
+  }
   if (!summary.IsSolutionUsable()) {
     r.message = "the solver found no usable solution: " + summary.message;
     return r;
@@ -550,7 +579,14 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
   one.params = {Param::kK};
   one.regions.clear();
   one.function_tolerance = std::max(options.function_tolerance, 1e-7);
+  one.progress = nullptr;
   for (size_t i = 0; i < presses.size(); ++i) {
+    if (options.progress && !options.progress({.replays = r.replays,
+                                               .presses_done = static_cast<int>(i),
+                                               .presses_total = static_cast<int>(presses.size())})) {
+      r.message = "stopped";
+      return r;
+    }
     // The ticks from halfway after the last press to halfway before the next, replayed from rest.
     const int64_t t0 = i == 0 ? 0 : (presses[i - 1][1] + presses[i][0]) / 2;
     const int64_t t1 = i + 1 == presses.size() ? ticks : (presses[i][1] + presses[i + 1][0]) / 2;

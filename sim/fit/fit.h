@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -76,6 +77,15 @@ struct Unknown {
   int part = -1;
 };
 
+// Where a fit has got to, for a caller that shows it (the server's fit jobs).
+struct FitProgress {
+  int iteration = 0;      // solver iterations done (Fit)
+  int replays = 0;        // whole-trace replays so far
+  double rms = 0;         // the force RMS error at the current estimate, force units (Fit)
+  int presses_done = 0;   // FitMap: presses fitted so far
+  int presses_total = 0;  // FitMap: presses found
+};
+
 struct FitOptions {
   std::vector<Param> params = {Param::kHomeK, Param::kSurfaceK};
   // With regions, every element parameter is fitted once per region and once outside them all.
@@ -86,6 +96,9 @@ struct FitOptions {
   int max_iterations = 50;
   // The solver stops when an iteration improves the cost by less than this fraction of it.
   double function_tolerance = 1e-12;
+  // Called on the fitting thread after every solver iteration (FitMap: after every press); false
+  // stops the fit, which then ends not ok with the message "stopped". May be empty.
+  std::function<bool(const FitProgress&)> progress;
 };
 
 struct FitResult {

@@ -427,6 +427,13 @@ bool LoadModel(const std::string& fem_path, const std::string& plg_path, const R
   return true;
 }
 
+bool ParseModelText(std::string_view fem, std::string_view plg, const std::string& name, Model* model,
+                    LoadError* error) {
+  SurfaceMesh mesh;
+  return ParseFem(fem, name + ".fem", model, error) && ParsePlg(plg, name + ".plg", &mesh, error) &&
+         AttachSurface(mesh, name + ".plg", ReadOptions{}.plg_tolerance, model, error);
+}
+
 std::string WriteFem(const Model& m) {
   std::string out;
   out.reserve(static_cast<size_t>(m.num_atoms) * 48 + static_cast<size_t>(m.num_elems) * 32 + 64);

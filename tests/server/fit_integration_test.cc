@@ -1,7 +1,9 @@
 // idms-sim fit --recording on a real session recording (issue 34): the real idms-agent palpates
 // hex_4x5_home through the real idms-server, which records the session; the recording, downloaded
 // as a viewer would, fits back to the model it was made on (the scene's tool and step replayed, so
-// every factor is 1), and fitting it to another model is refused with the reason.
+// every factor is 1), and fitting it to another model is refused with the reason; and the same
+// through the server's POST /api/sessions/{id}/fit, whose fitted model is the library's next
+// version with the fit's report in its metadata.
 #include <gtest/gtest.h>
 
 #include <functional>
@@ -124,6 +126,126 @@ TEST(FitRecording, ASessionRecordingFitsBackToItsModelAndAnotherModelIsRefused) 
             1);
   EXPECT_NE(ReadText(dir + "/tool.log").find("the session's scene gives the tool and the step"), std::string::npos)
       << ReadText(dir + "/tool.log");
+}
+
+HttpReply Call(uint16_t port, const std::string& method, const std::string& target, const std::string& token,
+               const std::string& body = "") {
+  return Http(
+      port,
+      HttpCall{method, target, {{"Authorization", "Bearer " + token}, {"Content-Type", "application/json"}}, body});
+}
+
+// The fit job of session `id` once it has finished (done, failed or stopped); null on a timeout.
+nlohmann::json FinishedFit(uint16_t port, const std::string& id, const std::string& token) {
+  nlohmann::json job;
+  Eventually(
+      [&] {
+        const HttpReply r = Get(port, "/api/sessions/" + id + "/fit", token);
+        job = nlohmann::json::parse(r.body, nullptr, false);
+        return r.status == 200 && job.is_object() && job["state"] != "queued" && job["state"] != "running";
+      },
+      seconds(120));
+  return job;
+}
+
+TEST(FitEndpoint, AnAdminFitsASessionAndTheLibraryGetsTheNextVersionWithTheReport) {
+  const std::string dir = TempDir("fit-endpoint");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string admin = server.Token("admin"), observer = server.Token("observer");
+  const std::string models = std::string(IDMS_SOURCE_DIR) + "/models/";
+  // hex_4x5_home typed in 20% too soft, as a model of its own.
+  Model soft;
+  LoadError load_error;
+  ASSERT_TRUE(LoadModel(models + "hex_4x5_home.fem", models + "hex_4x5_home.plg", {}, &soft, &load_error))
+      << load_error.ToString();
+  const std::vector<double> true_k = soft.elem_k;
+  for (double& k : soft.elem_k) k *= 0.8;
+  ASSERT_EQ(Call(server.port(), "PUT", "/api/models/hex_soft", admin,
+                 JsonUpload(WriteFem(soft), WritePlg(soft), "typed in too soft"))
+                .status,
+            201);
+  const nlohmann::json soft_v1 = nlohmann::json::parse(Get(server.port(), "/api/models/hex_soft", observer).body);
+
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
+       "hex_4x5_home", "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "5.5"},
+      dir + "/agent.log");
+  const std::string id = WaitForLiveSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
+  const std::string fit = "/api/sessions/" + id + "/fit";
+  // An observer may not; a live session's recording is not whole yet.
+  EXPECT_EQ(Call(server.port(), "POST", fit, observer).status, 403);
+  HttpReply r = Call(server.port(), "POST", fit, admin);
+  EXPECT_EQ(r.status, 409) << r.body;
+  EXPECT_NE(r.body.find("is live: fit it once it has ended"), std::string::npos) << r.body;
+  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+
+  // Bad requests say what is wrong; an unknown session is not found.
+  r = Call(server.port(), "POST", fit, admin, R"({"params": "home_k,stiffness"})");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(r.body.find("params: "), std::string::npos) << r.body;
+  r = Call(server.port(), "POST", fit, admin, R"({"regions": ["lump=cube:1,2"]})");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(r.body.find("regions: "), std::string::npos) << r.body;
+  EXPECT_EQ(Call(server.port(), "POST", fit, admin, R"({"modell": "x"})").status, 400);
+  EXPECT_EQ(Call(server.port(), "POST", "/api/sessions/nosuch/fit", admin).status, 404);
+  EXPECT_EQ(Get(server.port(), fit, observer).status, 404) << "no fit asked for yet";
+
+  // Fitted to the soft model: the factor that makes it the model the session ran.
+  r = Call(server.port(), "POST", fit, admin, R"({"model": "hex_soft", "params": ["k"]})");
+  ASSERT_EQ(r.status, 202) << r.body;
+  EXPECT_EQ(r.headers["location"], fit);
+  nlohmann::json job = FinishedFit(server.port(), id, observer);
+  ASSERT_EQ(job["state"], "done") << job.dump() << server.Log();
+  EXPECT_EQ(job["result"]["model"]["name"], "hex_soft");
+  EXPECT_EQ(job["result"]["model"]["version"], 2);
+  EXPECT_NEAR(job["result"]["params"][0]["scale"].get<double>(), 1.25, 1e-4) << job.dump();
+
+  // The library: version 2 with the report, version 1 as it was.
+  const nlohmann::json v2 = nlohmann::json::parse(Get(server.port(), "/api/models/hex_soft?version=2", observer).body);
+  const nlohmann::json& report = v2["metadata"]["fit"];
+  EXPECT_EQ(report["session"], id);
+  EXPECT_EQ(report["from"]["version"], 1);
+  EXPECT_EQ(report["params"][0]["name"], "k");
+  EXPECT_NEAR(report["params"][0]["scale"].get<double>(), 1.25, 1e-4);
+  EXPECT_LT(report["rms_after"].get<double>(), 1e-3 * report["rms_before"].get<double>()) << report.dump();
+  const size_t points = report["curve"]["t"].size();
+  EXPECT_GT(points, 100u);
+  EXPECT_LE(points, 500u);
+  EXPECT_EQ(report["curve"]["measured"].size(), points);
+  EXPECT_EQ(report["curve"]["fitted"].size(), points);
+  EXPECT_NE(v2["description"].get<std::string>().find("fitted to session " + id), std::string::npos);
+  EXPECT_EQ(v2["versions"][1]["fitted_to_session"], id);
+  EXPECT_FALSE(v2["versions"][0].contains("fitted_to_session"));
+  const nlohmann::json v1 = nlohmann::json::parse(Get(server.port(), "/api/models/hex_soft?version=1", observer).body);
+  EXPECT_EQ(v1["fem_sha256"], soft_v1["fem_sha256"]);
+  EXPECT_FALSE(v1.contains("metadata"));
+  // The fitted file itself: the stiffness the session ran, to the fit's precision.
+  const HttpReply fem = Get(server.port(), "/api/models/hex_soft/fem?version=2", observer);
+  ASSERT_EQ(fem.status, 200);
+  Model fitted;
+  ASSERT_TRUE(ParseFem(fem.body, "hex_soft.fem", &fitted, &load_error)) << load_error.ToString();
+  ASSERT_EQ(fitted.elem_k.size(), true_k.size());
+  for (size_t e = 0; e < true_k.size(); ++e) ASSERT_NEAR(fitted.elem_k[e], true_k[e], 1e-4 * true_k[e]) << e;
+
+  // With no model named: the one the session ran (hex_4x5_home v1), fitted back to itself.
+  ASSERT_EQ(Call(server.port(), "POST", fit, admin, R"({"params": "home_k"})").status, 202);
+  job = FinishedFit(server.port(), id, observer);
+  ASSERT_EQ(job["state"], "done") << job.dump() << server.Log();
+  EXPECT_EQ(job["result"]["model"]["name"], "hex_4x5_home");
+  EXPECT_EQ(job["result"]["model"]["version"], 2);
+  EXPECT_NEAR(job["result"]["params"][0]["scale"].get<double>(), 1.0, 1e-6);
+  // Another model's surface: the job fails with the reason, and the library is as it was.
+  ASSERT_EQ(Call(server.port(), "POST", fit, admin, R"({"model": "slab_40x40"})").status, 202);
+  job = FinishedFit(server.port(), id, observer);
+  EXPECT_EQ(job["state"], "failed");
+  EXPECT_NE(job["error"].get<std::string>().find("session " + id + "'s recording: its model has 22 surface vertices"),
+            std::string::npos)
+      << job.dump();
+  EXPECT_EQ(nlohmann::json::parse(Get(server.port(), "/api/models/slab_40x40", observer).body)["latest_version"], 1);
 }
 
 }  // namespace

@@ -21,7 +21,8 @@ TEST(PostgresMigrations, AFreshDatabaseGetsTheSchemaAndASecondStartAppliesNothin
   IDMS_REQUIRE_POSTGRES();
   std::string error;
   EXPECT_EQ(MigratePostgres(pg.Url(), &error), PostgresSchemaVersion()) << error;
-  EXPECT_EQ(pg.Psql("postgres", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"), "1");
+  EXPECT_EQ(pg.Psql("postgres", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
+            "1,2");
   EXPECT_EQ(pg.Psql("postgres",
                     "SELECT string_agg(tablename, ',' ORDER BY tablename) FROM pg_tables WHERE schemaname = 'public'"),
             "logins,model_names,model_versions,schema_migrations,session_leases,session_notes,sessions");
@@ -67,7 +68,7 @@ TEST(PostgresMigrations, ASchemaNewerThanTheServerIsRefused) {
       << error;
   PostgresStores stores;
   EXPECT_FALSE(OpenPostgres(pg.Url(), 3600s, 1, &stores, &error));
-  EXPECT_EQ(pg.Psql("postgres", "SELECT count(*) FROM schema_migrations"), "2");
+  EXPECT_EQ(pg.Psql("postgres", "SELECT count(*) FROM schema_migrations"), std::to_string(PostgresSchemaVersion() + 1));
 }
 
 TEST(PostgresMigrations, AnUnreachableDatabaseIsAClearError) {

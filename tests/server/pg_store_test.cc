@@ -71,6 +71,30 @@ class Stores : public testing::TestWithParam<Backend> {
 
 INSTANTIATE_TEST_SUITE_P(Backends, Stores, testing::Values(Backend::kSqlite, Backend::kPostgres), BackendName);
 
+// A version's metadata (a fit's report) is stored and read back by Get, on a reopen too; the list
+// of latest versions leaves it out.
+TEST_P(Stores, AVersionsMetadataIsKeptAndTheListLeavesItOut) {
+  std::string error;
+  {
+    Opened o = Open();
+    ASSERT_TRUE(o.models);
+    ModelVersion a = TestModelVersion("m", std::string(64, '1')), b = TestModelVersion("m", std::string(64, '2'));
+    b.metadata = R"({"fit":{"session":"s1","names":["home_k"],"scale":[1.25]}})";
+    ASSERT_TRUE(o.models->AddVersion(&a, &error)) << error;
+    ASSERT_TRUE(o.models->AddVersion(&b, &error)) << error;
+  }
+  Opened o = Open();
+  const std::optional<ModelRecord> rec = o.models->Get("m");
+  ASSERT_TRUE(rec);
+  ASSERT_EQ(rec->versions.size(), 2u);
+  EXPECT_EQ(rec->versions[0].metadata, "");
+  EXPECT_EQ(rec->versions[1].metadata, R"({"fit":{"session":"s1","names":["home_k"],"scale":[1.25]}})");
+  const std::vector<ModelVersion> list = o.models->ListLatest();
+  ASSERT_EQ(list.size(), 1u);
+  EXPECT_EQ(list[0].version, 2);
+  EXPECT_EQ(list[0].metadata, "");
+}
+
 TEST_P(Stores, ModelVersionsCountUpAndAreNeverReusedAfterDelete) {
   Opened o = Open();
   ASSERT_TRUE(o.models);

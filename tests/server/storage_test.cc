@@ -1,5 +1,5 @@
-// The data directory's stores: crash leftovers collected at start-up, an older session index
-// brought up to date.
+// The data directory's stores: crash leftovers collected at start-up, an older session index and
+// model library brought up to date.
 #include "idms/server/storage.h"
 
 #include <gtest/gtest.h>
@@ -71,6 +71,37 @@ TEST(SqliteSessionIndex, ADatabaseFromBeforeTheTraineeColumnIsBroughtUpToDate) {
   old->trainee = "Ada";
   ASSERT_TRUE(index->Put(*old, &error)) << error;
   EXPECT_EQ(index->Get("old")->trainee, "Ada");
+}
+
+TEST(SqliteModelStore, ALibraryFromBeforeTheMetadataColumnIsBroughtUpToDate) {
+  const std::string dir = test::TempDir("sqlite-old-models");
+  const std::string sha(64, 'a');
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir + "/idms.db").c_str(), &db), SQLITE_OK);
+    const std::string sql =
+        "CREATE TABLE model_names (name TEXT PRIMARY KEY, next_version INTEGER NOT NULL);"
+        "CREATE TABLE model_versions (name TEXT NOT NULL, version INTEGER NOT NULL, description TEXT NOT NULL, "
+        "created TEXT NOT NULL, atoms INTEGER NOT NULL, elements INTEGER NOT NULL, triangles INTEGER NOT NULL, "
+        "bytes INTEGER NOT NULL, fem_sha256 TEXT NOT NULL, plg_sha256 TEXT NOT NULL, obj_sha256 TEXT NOT NULL, "
+        "PRIMARY KEY (name, version));"
+        "INSERT INTO model_names VALUES ('hex', 2);"
+        "INSERT INTO model_versions VALUES ('hex', 1, 'typed in', '2026-11-01T10:00:00Z', 20, 30, 12, 900, '" +
+        sha + "', '" + sha + "', '" + sha + "');";
+    ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
+    sqlite3_close(db);
+  }
+  std::string error;
+  auto store = OpenSqliteModelStore(dir + "/idms.db", &error);
+  ASSERT_TRUE(store) << error;
+  ASSERT_TRUE(store->Get("hex"));
+  EXPECT_EQ(store->Get("hex")->latest().description, "typed in");
+  EXPECT_EQ(store->Get("hex")->latest().metadata, "");
+  ModelVersion fitted = TestModelVersion("hex", std::string(64, 'b'));
+  fitted.metadata = R"({"fit":{}})";
+  ASSERT_TRUE(store->AddVersion(&fitted, &error)) << error;
+  EXPECT_EQ(fitted.version, 2);
+  EXPECT_EQ(store->Get("hex")->latest().metadata, R"({"fit":{}})");
 }
 
 }  // namespace

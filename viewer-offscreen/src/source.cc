@@ -83,11 +83,8 @@ bool LoadRestState(const std::string& prefix, ViewerState* state, std::string* e
 bool LoadRestStateText(std::string_view fem, std::string_view plg, const std::string& name, ViewerState* state,
                        std::string* error) {
   Model model;
-  SurfaceMesh mesh;
   LoadError le;
-  if (!ParseFem(fem, name + ".fem", &model, &le) || !ParsePlg(plg, name + ".plg", &mesh, &le) ||
-      !AttachSurface(mesh, name + ".plg", ReadOptions{}.plg_tolerance, &model, &le))
-    return *error = le.ToString(), false;
+  if (!ParseModelText(fem, plg, name, &model, &le)) return *error = le.ToString(), false;
   FinalizeModel(model);
   return LoadRestState(model, state, error);
 }

@@ -113,6 +113,9 @@ std::string JsonText(const nlohmann::json& j);
 ApiResponse JsonError(const ApiRequest& req, http::status status, const std::string& message);
 ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::string& json_text);
 
+// A model version as the API shows it (without its metadata): the GET's fields and the library
+// events' "model".
+nlohmann::json ModelVersionJson(const ModelVersion& v);
 // Handlers of the model library (models_api.cc).
 ApiResponse ListModels(ApiContext& ctx, ApiRequest& req);
 ApiResponse GetModel(ApiContext& ctx, ApiRequest& req);

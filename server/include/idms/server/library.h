@@ -33,10 +33,12 @@ class Library {
  public:
   Library(BlobStore* blobs, ModelStore* models) : blobs_(blobs), models_(models) {}
 
-  // Validates the pair (fem, plg sharing the surface) and stores it as the next version of `name`.
+  // Validates the pair (fem, plg sharing the surface) and stores it as the next version of `name`,
+  // with `metadata` (ModelVersion::metadata: a JSON object's text or empty, at most
+  // kMaxVersionMetadataBytes).
   std::optional<ModelVersion> Upload(const std::string& name, std::string_view fem, std::string_view plg,
                                      const std::string& description, UploadError* error,
-                                     UploadTimings* timings = nullptr);
+                                     UploadTimings* timings = nullptr, const std::string& metadata = {});
   // One version (version > 0) or the whole model; blobs nobody names any more are removed.
   bool Delete(const std::string& name, int64_t version);
   // `version` 0 = the latest.

@@ -50,7 +50,12 @@ struct ModelVersion {
   int64_t atoms = 0, elements = 0, triangles = 0;
   int64_t bytes = 0;  // fem + plg
   std::string fem_sha256, plg_sha256, obj_sha256;
+  // A JSON object about how this version was made (a fit's report: POST /api/sessions/{id}/fit),
+  // at most kMaxVersionMetadataBytes; empty for an upload. Read by ModelStore::Get only (the
+  // list of latest versions leaves it empty: it is a page's worth, not a line's).
+  std::string metadata;
 };
+inline constexpr size_t kMaxVersionMetadataBytes = 64 * 1024;
 
 // A model and its versions, oldest first.
 struct ModelRecord {

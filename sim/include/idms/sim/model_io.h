@@ -48,6 +48,11 @@ bool ParseObj(std::string_view text, std::string_view file, SurfaceMesh* mesh, L
 // tolerance) and, if so, sets the model's triangles. `file` and mesh.vert_line locate the error.
 bool AttachSurface(const SurfaceMesh& mesh, std::string_view file, double tolerance, Model* model, LoadError* error);
 
+// A pair in memory (a library's blobs): NAME.fem and NAME.plg through the parsers, the surface
+// attached at the default tolerance. Errors name NAME.fem or NAME.plg.
+bool ParseModelText(std::string_view fem, std::string_view plg, const std::string& name, Model* model,
+                    LoadError* error);
+
 // Reads a whole file, refusing it when larger than max_bytes, empty, or not text.
 bool ReadTextFile(const std::string& path, int64_t max_bytes, std::string* text, LoadError* error);
 
