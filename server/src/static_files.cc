@@ -96,7 +96,7 @@ void AppendViewerRoutes(std::vector<Route>* routes) {
   using V = http::verb;
   // The viewer's own URLs (viewer-web/src/main.js); the page asks for a login itself.
   for (const char* pattern : {"/", "/login", "/sessions", "/session/{id}", "/replay/{id}", "/compare/{a}/{b}",
-                              "/report/{id}", "/trainee/{name}", "/models", "/models/{name}"})
+                              "/report/{id}", "/fit/{id}", "/trainee/{name}", "/models", "/models/{name}"})
     routes->push_back({V::get, pattern, std::nullopt, false, false, ServePage, true});
   routes->push_back({V::get, "/assets/{file}", std::nullopt, false, false, ServeAsset, true});
 }

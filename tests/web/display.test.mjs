@@ -64,5 +64,7 @@ test('the range rule: nice steps, exact at their boundaries', () => {
   assert.equal(colourIndex(5, 0, 0), 0);
   assert.equal(colourIndex(-1, 0, 1), 0);
   assert.equal(colourIndex(3, 0, 1), 255);
+  assert.equal(colourIndex(15.000000000000002, 15, 15.000000000000004), 0, 'a span of rounding is one colour');
+  assert.equal(colourIndex(15.5, 15, 16), 128);
   assert.equal(display.map.srgb.length, 256);
 });

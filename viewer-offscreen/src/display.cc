@@ -87,7 +87,8 @@ const Display& TheDisplay() {
 }
 
 int ColourIndex(double v, double lo, double hi) {
-  if (!(hi - lo > 0) || !std::isfinite(v)) return 0;
+  // A span within rounding of the values (a fitted model's k) is no span (display.js says why).
+  if (!(hi - lo > 1e-9 * std::max(std::abs(lo), std::abs(hi))) || !std::isfinite(v)) return 0;
   const double t = std::clamp((v - lo) / (hi - lo), 0.0, 1.0);
   return static_cast<int>(std::floor(t * 255 + 0.5));
 }

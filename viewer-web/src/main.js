@@ -10,6 +10,7 @@ import { modelPage } from './pages/model.js';
 import { traineePage } from './pages/trainee.js';
 import { comparePage } from './pages/compare.js';
 import { reportPage } from './pages/report.js';
+import { fitPage } from './pages/fit.js';
 import { h } from './pages/dom.js';
 
 /** @param {string} path */
@@ -21,6 +22,7 @@ function route(path) {
   if (first === 'session' && parts.length === 2) return (/** @type {string} */ role) => sessionPage(second, role, 'live');
   if (first === 'replay' && parts.length === 2) return (/** @type {string} */ role) => sessionPage(second, role, 'replay');
   if (first === 'compare' && parts.length === 3) return (/** @type {string} */ role) => comparePage(second, parts[2], role);
+  if (first === 'fit' && parts.length === 2) return (/** @type {string} */ role) => fitPage(second, role);
   if (first === 'report' && parts.length === 2) return (/** @type {string} */ role) => reportPage(second, role);
   if (first === 'trainee' && parts.length === 2) return (/** @type {string} */ role) => traineePage(second, role);
   if (first === 'models' && parts.length === 1) return (/** @type {string} */ role) => modelsPage(role);

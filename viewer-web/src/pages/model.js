@@ -1,10 +1,12 @@
 // /models/{name}: the model's versions with their hashes, a 3D preview of a version at rest (its
 // .obj surface) coloured by stiffness (each surface atom's mean element k, from its .fem: an
-// inclusion shows), and delete for admins.
+// inclusion shows), a fitted version's fit report (fit_report.js), and delete for admins.
+// ?version=N previews that version first.
 import { api } from '../net/api.js';
 import { parseObj } from '../codec/obj.js';
 import { SurfaceView } from '../view/surface.js';
 import { stiffnessPerVertex } from '../view/display.js';
+import { showFitReport } from './fit_report.js';
 import { h, page, formatDate } from './dom.js';
 
 const kVersionColumns = ['Version', '', 'Atoms', 'Elements', 'Triangles', 'Description', 'Added', 'fem SHA-256'];
@@ -16,6 +18,9 @@ export function modelPage(name, role) {
     [h('option', { value: 'stiffness', text: 'stiffness' }), h('option', { value: 'plain', text: 'plain' })]);
   const info = h('p', { class: 'meta', id: 'preview-info', role: 'status', text: 'Loading…' });
   const body = h('tbody');
+  const fitHost = h('div', { id: 'fit-report' });
+  const fitSection = h('section', { 'aria-labelledby': 'fit-title', id: 'fit-section', hidden: true },
+    [h('h2', { id: 'fit-title', text: 'Fit report' }), fitHost]);
   page(`Model ${name}`, [
     h('h1', {}, ['Model ', h('code', { text: name })]),
     info,
@@ -25,8 +30,11 @@ export function modelPage(name, role) {
         h('div', { class: 'scroll' }, [h('table', { class: 'list', id: 'versions' }, [
           h('thead', {}, [h('tr', {}, kVersionColumns.map((t) => h('th', { scope: 'col', text: t })))]), body])])]),
     ]),
+    fitSection,
   ]);
   const view = new SurfaceView(viewHost);
+  /** The fit report's plot, while one is shown. @type {{dispose: () => void} | null} */
+  let fitPlot = null;
   /** Per surface vertex of the version shown; null until its .fem is read (or when it cannot be). @type {Float64Array | null} */
   let stiffness = null;
   const applyColour = () => view.setColourBy(colour.value === 'stiffness' && stiffness ? 'stiffness' : 'plain', stiffness);
@@ -39,7 +47,16 @@ export function modelPage(name, role) {
       if (!res.ok) throw new Error(`${kind}: HTTP ${res.status}`);
       return res.text();
     });
-    const [obj, fem] = await Promise.all([file('obj'), file('fem')]);
+    const [obj, fem, meta] = await Promise.all([file('obj'), file('fem'),
+      api(`/api/models/${encodeURIComponent(name)}?version=${version}`)]);
+    // A fitted version's report under the preview; none for an upload.
+    fitPlot?.dispose();
+    fitPlot = null;
+    fitSection.hidden = !meta.metadata?.fit;
+    if (meta.metadata?.fit) {
+      fitPlot = showFitReport(fitHost, meta.metadata.fit);
+      /** @type {HTMLElement} */ (document.getElementById('fit-title')).textContent = `Fit report of version ${version}`;
+    }
     const surface = parseObj(obj);
     stiffness = stiffnessPerVertex(fem);
     if (stiffness.length !== surface.numVertices) stiffness = null;
@@ -49,7 +66,7 @@ export function modelPage(name, role) {
     let kRange = '';
     if (stiffness) kRange = `, stiffness k ${view.surface.lo.toPrecision(3)} to ${view.surface.hi.toPrecision(3)}`;
     info.textContent = `Version ${version} at rest: ${surface.numVertices} surface vertices, ${surface.numTriangles} triangles${kRange}`;
-    /** @type {any} */ (window).__idmsPreview = { version, vertices: surface.numVertices, triangles: surface.numTriangles,
+    /** @type {any} */ (window).__idmsPreview = { version, fitted: !!meta.metadata?.fit, vertices: surface.numVertices, triangles: surface.numTriangles,
       colourBy: view.surface.colourBy, lo: view.surface.lo, hi: view.surface.hi };
   }
   // For the tests: where the stiffer half of the range's vertices fall on the canvas (their centre
@@ -91,8 +108,13 @@ export function modelPage(name, role) {
       cell(6, { text: formatDate(v.created) }),
       cell(7, { class: 'hash' }, [h('code', { text: String(v.fem_sha256).slice(0, 12) + '…', title: v.fem_sha256 })]),
     ])));
-    if (versions.length) await preview(versions[0].version);
+    const asked = Number(new URL(location.href).searchParams.get('version'));
+    const first = versions.find((/** @type {any} */ v) => v.version === asked) ?? versions[0];
+    if (first) await preview(first.version);
   }
   load().catch((e) => { info.textContent = `Cannot load ${name}: ${e instanceof Error ? e.message : String(e)}`; });
-  return () => view.dispose();
+  return () => {
+    fitPlot?.dispose();
+    view.dispose();
+  };
 }

@@ -127,6 +127,7 @@ class SessionRow {
     this.set(1, `${href}|${started}`, () => [h('a', { href, text: id }), h('div', { class: 'under', text: started }),
       live ? null : h('div', { class: 'row-tools' }, [
         h('a', { class: 'report-link', href: `/report/${encodeURIComponent(id)}`, text: 'Report' }), ' ',
+        h('a', { class: 'fit-link', href: `/fit/${encodeURIComponent(id)}`, text: 'Fit' }), ' ',
         h('label', { class: 'compare-pick', title: 'Pick to compare side by side' }, [h('input', { type: 'checkbox', 'data-compare': id,
           'aria-label': `Pick session ${id} to compare`, checked: this.picker.has(id),
           onchange: (/** @type {Event} */ ev) => this.picker.pick(id, /** @type {HTMLInputElement} */ (ev.target).checked) }), ' compare'])])]);

@@ -30,8 +30,9 @@ const kHeight = 240;
 export class ProfilePlot {
   /**
    * @param {HTMLElement} host
-   * @param {{title: string, series: {label: string, color: string}[], legend?: boolean}} spec
-   *   the force's unit is in the section's heading (a long unit on the axis was cut)
+   * @param {{title: string, series: {label: string, color: string}[], legend?: boolean, yLabel?: string}} spec
+   *   the force's unit is in the section's heading (a long unit on the axis was cut); yLabel: the
+   *   force axis's label (peak |F| unless given)
    */
   constructor(host, spec) {
     this.host = host;
@@ -52,7 +53,7 @@ export class ProfilePlot {
       series: [{ label: 'session time (s)' },
         ...spec.series.map((s) => ({ label: s.label, stroke: s.color, width: 1.5, spanGaps: true, points: { show: false } }))],
       axes: [{ label: 'session time (s)' },
-        { label: 'peak |F|', size: 60, labelFont: '12px system-ui, sans-serif' }],
+        { label: spec.yLabel ?? 'peak |F|', size: 60, labelFont: '12px system-ui, sans-serif' }],
       hooks: { draw: [(u) => this.drawMark(u)] },
     }, [[], ...spec.series.map(() => [])], host));
     this.resizeObserver = new ResizeObserver(() => this.plot.setSize({ width: Math.max(280, host.clientWidth), height: kHeight }));

@@ -25,7 +25,9 @@ export const kMapRgba = (() => {
  * @param {number} v @param {number} lo @param {number} hi
  */
 export function colourIndex(v, lo, hi) {
-  if (!(hi - lo > 0) || !Number.isFinite(v)) return 0;
+  // A span within rounding of the values (a fitted model's k, 12 x 1.25 = 15.000000000000002 on
+  // some elements) is no span: one colour, not the whole map over the noise.
+  if (!(hi - lo > 1e-9 * Math.max(Math.abs(lo), Math.abs(hi))) || !Number.isFinite(v)) return 0;
   const t = Math.min(1, Math.max(0, (v - lo) / (hi - lo)));
   return Math.floor(t * 255 + 0.5);
 }

@@ -43,7 +43,8 @@ struct Display {
 const Display& TheDisplay();
 
 // The map's entry for v in [lo, hi]: round(clamp((v - lo) / (hi - lo), 0, 1) * 255); 0 when the
-// range has no width. viewer-web's colourIndex is the same arithmetic.
+// range has no width beyond rounding (a part in 10^9 of its ends). viewer-web's colourIndex is the
+// same arithmetic.
 int ColourIndex(double v, double lo, double hi);
 // The first of nice_steps times a power of ten at or above x (> 0), within a part in a million;
 // 1 for x <= 0 or not finite.
