@@ -7,9 +7,11 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
+#include <cstdio>
 #include <deque>
 #include <map>
 #include <mutex>
@@ -35,6 +37,12 @@ constexpr size_t kMaxJobsKept = 64;        // finished jobs answered by GET; the
 constexpr size_t kCurvePoints = 500;       // the report's force curve, measured against fitted
 constexpr size_t kMaxRegions = 8;          // in a request
 constexpr size_t kMaxRequestBytes = 4096;  // the request's JSON
+// A session longer than this is refused: the trace is held whole (48 bytes a tick) and every
+// replay steps it all (an hour of the 40 x 40 slab would hold the fit thread for hours).
+constexpr double kMaxSessionS = 600;
+// The residuals compared at most (every stride-th tick beyond): the solver's Jacobian is
+// 3 x this x the parameters, in doubles.
+constexpr size_t kMaxComparedSamples = 60000;
 
 // What was asked for, checked.
 struct FitRequest {
@@ -176,6 +184,7 @@ class FitJobs {
   void Stop() {
     std::lock_guard lock(mu_);
     stopping_ = true;
+    stop_flag_ = true;
     wake_.notify_all();
   }
   void Join() {
@@ -307,6 +316,12 @@ class FitJobs {
     FinalizeModel(model);
 
     // The recording, as the trace and the step and tool it was made with.
+    if (row->duration_s > kMaxSessionS) {
+      char text[160];
+      std::snprintf(text, sizeof text, "session %s lasts %.0f s; the fitter takes sessions of at most %.0f s",
+                    r.session.c_str(), row->duration_s, kMaxSessionS);
+      return *error = text, false;
+    }
     if (!core_.hub->recordings().Fetch(r.session, error)) return false;
     const std::string path = core_.hub->RecordingPath(*row);
     fit::Trace trace;
@@ -318,7 +333,10 @@ class FitJobs {
     }
     options.params = r.params;
     options.regions = r.regions;
+    options.stride = static_cast<int>((trace.force.size() + kMaxComparedSamples - 1) / kMaxComparedSamples);
+    options.stride = std::max(options.stride, 1);
     options.progress = [this, &r](const fit::FitProgress& p) { return SetProgress(r.session, p); };
+    options.stop = &stop_flag_;
     const fit::FitResult f = fit::Fit(model, trace, options);
     if (!f.ok) return *error = f.message, false;
 
@@ -355,6 +373,7 @@ class FitJobs {
                         {"rms_after", f.rms_after},
                         {"peak_force", f.peak_force},
                         {"samples", f.samples},
+                        {"stride", options.stride},
                         {"iterations", f.iterations},
                         {"replays", f.replays},
                         {"seconds", Round4(f.seconds)},
@@ -387,7 +406,8 @@ class FitJobs {
   uint64_t seq_ = 0;
   bool running_ = false;
   bool stopping_ = false;
-  std::thread thread_;  // last: starts once the rest is built
+  std::atomic<bool> stop_flag_{false};  // stopping_ for the fit's replays, read without the lock
+  std::thread thread_;                  // last: starts once the rest is built
 };
 
 std::shared_ptr<FitJobs> AppendFitRoutes(ServerCore& core, std::vector<Route>* routes) {

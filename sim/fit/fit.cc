@@ -99,7 +99,12 @@ struct ForceResidual {
   const std::vector<int>* parts;
   const std::vector<std::array<double, 3>>* measured;
   int* replays;
+  // While the solver runs, a stop fails the evaluation at once; the covariance's evaluations run
+  // to the end (Ceres 2.1's dense covariance went on to an SVD of what a failed one left, and
+  // crashed in it).
+  const bool* solving;
   bool operator()(double const* const* x, double* residuals) const {
+    if (*solving && options->stop != nullptr && options->stop->load(std::memory_order_relaxed)) return false;
     ToolCommand tool;
     const Model m = Scaled(*model, *options, *unknowns, *parts, x[0], &tool);
     const std::vector<std::array<double, 3>> f = Replay(m, *trace, options->step, tool, options->stride);
@@ -417,18 +422,21 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
 
 namespace {
 
-// FitOptions::progress after every solver iteration; its false ends the solve (USER_FAILURE).
+// FitOptions::progress after every solver iteration; its false, or a stop, ends the solve
+// (USER_FAILURE).
 class ProgressCallback final : public ceres::IterationCallback {
  public:
-  ProgressCallback(const std::function<bool(const FitProgress&)>& progress, const int* replays, size_t samples)
-      : progress_(progress), replays_(replays), samples_(static_cast<double>(samples)) {}
+  ProgressCallback(const FitOptions& options, const int* replays, size_t samples)
+      : options_(options), replays_(replays), samples_(static_cast<double>(samples)) {}
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
     const FitProgress p{.iteration = s.iteration, .replays = *replays_, .rms = std::sqrt(2 * s.cost / samples_)};
-    return progress_(p) ? ceres::SOLVER_CONTINUE : ceres::SOLVER_ABORT;
+    const bool go_on = !options_.progress || options_.progress(p);
+    const bool stopped = options_.stop != nullptr && options_.stop->load(std::memory_order_relaxed);
+    return go_on && !stopped ? ceres::SOLVER_CONTINUE : ceres::SOLVER_ABORT;
   }
 
  private:
-  const std::function<bool(const FitProgress&)>& progress_;
+  const FitOptions& options_;
   const int* replays_;
   double samples_;
 };
@@ -490,15 +498,16 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   }
 
   std::vector<double> x(p, 0.0);  // log scale factors, starting at the typed-in values
+  bool solving = true;
   auto* cost = new ceres::DynamicNumericDiffCostFunction<ForceResidual, ceres::CENTRAL>(
-      new ForceResidual{&model, &trace, &options, &r.unknowns, &parts, &measured, &r.replays});
+      new ForceResidual{&model, &trace, &options, &r.unknowns, &parts, &measured, &r.replays, &solving});
   cost->AddParameterBlock(static_cast<int>(p));
   cost->SetNumResiduals(static_cast<int>(3 * measured.size()));
   ceres::Problem problem;
   problem.AddResidualBlock(cost, nullptr, x.data());
   ceres::Solver::Options so;
-  ProgressCallback callback(options.progress, &r.replays, measured.size());
-  if (options.progress) {
+  ProgressCallback callback(options, &r.replays, measured.size());
+  if (options.progress || options.stop != nullptr) {
     so.callbacks.push_back(&callback);
     so.update_state_every_iteration = false;
   }
@@ -512,7 +521,8 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   r.iterations = static_cast<int>(summary.iterations.size());
   r.rms_before = std::sqrt(2 * summary.initial_cost / static_cast<double>(measured.size()));
   r.rms_after = std::sqrt(2 * summary.final_cost / static_cast<double>(measured.size()));
-  if (summary.termination_type == ceres::USER_FAILURE) {
+  const auto stopped = [&] { return options.stop != nullptr && options.stop->load(std::memory_order_relaxed); };
+  if (summary.termination_type == ceres::USER_FAILURE || stopped()) {
     r.message = "stopped";
     return r;
   }
@@ -529,6 +539,7 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   ceres::Covariance covariance(co);
   std::vector<std::pair<const double*, const double*>> blocks = {{x.data(), x.data()}};
   std::vector<double> cov(p * p, 0.0);
+  solving = false;
   if (!covariance.Compute(blocks, &problem) || !covariance.GetCovarianceBlock(x.data(), x.data(), cov.data())) {
     r.message =
         "the recording does not determine every parameter asked for (a singular Jacobian: a damping fitted "
@@ -581,9 +592,10 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
   one.function_tolerance = std::max(options.function_tolerance, 1e-7);
   one.progress = nullptr;
   for (size_t i = 0; i < presses.size(); ++i) {
-    if (options.progress && !options.progress({.replays = r.replays,
-                                               .presses_done = static_cast<int>(i),
-                                               .presses_total = static_cast<int>(presses.size())})) {
+    if ((options.stop != nullptr && options.stop->load(std::memory_order_relaxed)) ||
+        (options.progress && !options.progress({.replays = r.replays,
+                                                .presses_done = static_cast<int>(i),
+                                                .presses_total = static_cast<int>(presses.size())}))) {
       r.message = "stopped";
       return r;
     }

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <functional>
 #include <string>
 #include <vector>
@@ -99,6 +100,9 @@ struct FitOptions {
   // Called on the fitting thread after every solver iteration (FitMap: after every press); false
   // stops the fit, which then ends not ok with the message "stopped". May be empty.
   std::function<bool(const FitProgress&)> progress;
+  // Set (from any thread) to end the fit at its next replay, the solver's or the covariance's:
+  // it then ends not ok with the message "stopped". May be null.
+  const std::atomic<bool>* stop = nullptr;
 };
 
 struct FitResult {

@@ -6,6 +6,8 @@
 // version with the fit's report in its metadata.
 #include <gtest/gtest.h>
 
+#include <csignal>
+#include <cstdio>
 #include <functional>
 #include <string>
 
@@ -246,6 +248,67 @@ TEST(FitEndpoint, AnAdminFitsASessionAndTheLibraryGetsTheNextVersionWithTheRepor
             std::string::npos)
       << job.dump();
   EXPECT_EQ(nlohmann::json::parse(Get(server.port(), "/api/models/slab_40x40", observer).body)["latest_version"], 1);
+}
+
+// A fit running when the server stops ends at its solver's next iteration: the server exits at
+// once and cleanly, and the library is as it was (no half-stored version).
+TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
+  const std::string dir = TempDir("fit-stop");
+  std::string observer, admin, id;
+  {
+    ServerProcess server(dir + "/data");
+    ASSERT_TRUE(server.ready()) << server.Log();
+    observer = server.Token("observer"), admin = server.Token("admin");
+    // The slab typed in 20% too soft: the fit starts away from its answer (the session's own model
+    // is at it from the first evaluation, and a solve that has nothing to do ends at once).
+    Model soft;
+    LoadError load_error;
+    const std::string models = std::string(IDMS_SOURCE_DIR) + "/models/";
+    ASSERT_TRUE(LoadModel(models + "slab_40x40.fem", models + "slab_40x40.plg", {}, &soft, &load_error))
+        << load_error.ToString();
+    for (double& k : soft.elem_k) k *= 0.8;
+    ASSERT_EQ(Call(server.port(), "PUT", "/api/models/slab_soft", admin,
+                   JsonUpload(WriteFem(soft), WritePlg(soft), "typed in too soft"))
+                  .status,
+              201);
+    ChildProcess agent(
+        IDMS_AGENT_BIN,
+        {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
+         "slab_40x40", "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "3"},
+        dir + "/agent.log");
+    id = WaitForLiveSession(server.port(), observer);
+    ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
+    ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
+    ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+    ASSERT_EQ(
+        Call(
+            server.port(), "POST", "/api/sessions/" + id + "/fit", admin,
+            R"({"model": "slab_soft", "params": "home_k,home_b,surface_k,surface_b,tool_k", "regions": ["a=box:0,0,-99,20,17,99",
+                       "b=box:20,0,-99,40,17,99", "c=box:0,17,-99,20,34,99"]})")
+            .status,
+        202);
+    nlohmann::json job;
+    ASSERT_TRUE(Eventually(
+        [&] {
+          job = nlohmann::json::parse(Get(server.port(), "/api/sessions/" + id + "/fit", observer).body);
+          return job["state"] == "running" && job.contains("progress") && job["progress"]["replays"].get<int>() > 0;
+        },
+        seconds(60)))
+        << job.dump();
+    const auto t0 = std::chrono::steady_clock::now();
+    server.process().Signal(SIGTERM);
+    ASSERT_EQ(server.process().Wait(seconds(60)), 0) << server.Log();
+    const double stop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::printf("the server stopped %.2f s after SIGTERM, %d replays into the fit\n", stop_s,
+                job["progress"]["replays"].get<int>());
+    // 17 unknowns (4 groups in 4 parts, and the tool): hundreds of replays from the end.
+    EXPECT_NE(server.Log().find("the server stopped"), std::string::npos) << server.Log();
+    EXPECT_EQ(server.Log().find("fit done"), std::string::npos) << server.Log();
+  }
+  ServerProcess again(dir + "/data");
+  ASSERT_TRUE(again.ready()) << again.Log();
+  EXPECT_EQ(nlohmann::json::parse(Get(again.port(), "/api/models/slab_soft", observer).body)["latest_version"], 1);
+  EXPECT_EQ(Get(again.port(), "/api/sessions/" + id + "/fit", observer).status, 404) << "jobs are the process's";
 }
 
 }  // namespace

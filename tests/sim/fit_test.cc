@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -121,6 +122,47 @@ TEST(Fit, APathThatNeverTouchesIsRefused) {
   const FitResult r = Fit(typed, trace, Options({Param::kHomeK}));
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.message.find("never touches"), std::string::npos) << r.message;
+}
+
+// Progress is reported every solver iteration, and a stop set from another thread (here the
+// progress callback, at the first iteration) ends the fit at its next replay as "stopped"; the
+// progress callback's false does the same.
+TEST(Fit, ReportsProgressAndAStopEndsTheFitAtItsNextReplay) {
+  const Model truth = Hex();
+  Model typed = truth;
+  ScaleGroup(typed, Param::kHomeK, 0.8);
+  const Trace trace = ScriptedTrace(truth, Script::kPalpate, 0.01, 7);
+  FitOptions o = Options({Param::kHomeK, Param::kSurfaceK});
+  std::vector<FitProgress> seen;
+  o.progress = [&](const FitProgress& p) {
+    seen.push_back(p);
+    return true;
+  };
+  const FitResult whole = Fit(typed, trace, o);
+  ASSERT_TRUE(whole.ok) << whole.message;
+  ASSERT_GE(seen.size(), 2u);
+  EXPECT_EQ(seen.front().iteration, 0);
+  EXPECT_GT(seen.back().replays, seen.front().replays);
+  EXPECT_LT(seen.back().rms, seen.front().rms);
+
+  std::atomic<bool> stop{false};
+  int replays_at_stop = -1;
+  o.stop = &stop;
+  o.progress = [&](const FitProgress& p) {
+    if (replays_at_stop < 0) replays_at_stop = p.replays;
+    stop = true;
+    return true;
+  };
+  const FitResult stopped = Fit(typed, trace, o);
+  EXPECT_FALSE(stopped.ok);
+  EXPECT_EQ(stopped.message, "stopped");
+  EXPECT_EQ(stopped.replays, replays_at_stop) << "no replay after the stop";
+
+  o.stop = nullptr;
+  o.progress = [](const FitProgress&) { return false; };
+  const FitResult refused = Fit(typed, trace, o);
+  EXPECT_FALSE(refused.ok);
+  EXPECT_EQ(refused.message, "stopped");
 }
 
 TEST(Fit, ParamsAreNamedEachOnceAndAGroupWithNothingToScaleIsRefused) {
