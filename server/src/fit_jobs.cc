@@ -181,6 +181,23 @@ class FitJobs {
     return JsonResponse(req, http::status::ok, JsonText(JobJson(it->second)));
   }
 
+  // Prometheus lines: the jobs waiting and running, and the fits finished by how they ended.
+  std::string MetricsText() {
+    std::lock_guard lock(mu_);
+    std::string out =
+        "# HELP idms_fit_jobs Fits waiting and running (POST /api/sessions/{id}/fit).\n"
+        "# TYPE idms_fit_jobs gauge\n";
+    out += "idms_fit_jobs{state=\"queued\"} " + std::to_string(queue_.size()) + "\n";
+    out += "idms_fit_jobs{state=\"running\"} " + std::to_string(running_ ? 1 : 0) + "\n";
+    out += "# HELP idms_fits_total Fits finished, by how they ended.\n# TYPE idms_fits_total counter\n";
+    for (const char* state : {"done", "failed", "stopped"}) {
+      const auto it = finished_.find(state);
+      out += std::string("idms_fits_total{result=\"") + state + "\"} " +
+             std::to_string(it == finished_.end() ? 0 : it->second) + "\n";
+    }
+    return out;
+  }
+
   void Stop() {
     std::lock_guard lock(mu_);
     stopping_ = true;
@@ -254,6 +271,7 @@ class FitJobs {
         job.state = stopping_ && error == "stopped" ? "stopped" : "failed";
         job.error = error == "stopped" ? "the server stopped" : error;
       }
+      ++finished_[job.state];
       Log(ok ? LogLevel::kInfo : LogLevel::kWarn, ok ? "fit done" : "fit failed",
           {{"session", request.session}, {"error", job.error}});
       Trim();
@@ -404,6 +422,7 @@ class FitJobs {
   std::deque<std::string> queue_;    // session ids, oldest first
   std::map<std::string, Job> jobs_;  // by session: the latest fit of each
   uint64_t seq_ = 0;
+  std::map<std::string, uint64_t> finished_;  // by final state
   bool running_ = false;
   bool stopping_ = false;
   std::atomic<bool> stop_flag_{false};  // stopping_ for the fit's replays, read without the lock
@@ -422,6 +441,7 @@ std::shared_ptr<FitJobs> AppendFitRoutes(ServerCore& core, std::vector<Route>* r
 }
 
 void StopFits(FitJobs& jobs) { jobs.Stop(); }
+std::string FitMetrics(FitJobs& jobs) { return jobs.MetricsText(); }
 void JoinFits(FitJobs& jobs) { jobs.Join(); }
 
 }  // namespace idms::server

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "server_internal.h"
@@ -22,5 +23,7 @@ std::shared_ptr<FitJobs> AppendFitRoutes(ServerCore& core, std::vector<Route>* r
 // A running fit ends at its next solver iteration ("stopped"); queued ones do not start.
 void StopFits(FitJobs& jobs);
 void JoinFits(FitJobs& jobs);
+// idms_fit_jobs{state} and idms_fits_total{result}, for /metrics.
+std::string FitMetrics(FitJobs& jobs);
 
 }  // namespace idms::server

@@ -218,7 +218,7 @@ bool Server::Impl::Start(std::string* error) {
     return tokens;
   };
   core.ctx.publish_library_event = [this](std::string text) { core.Publish(text); };
-  core.ctx.more_metrics = [this] { return hub->MetricsText(); };
+  core.ctx.more_metrics = [this] { return hub->MetricsText() + (fits ? FitMetrics(*fits) : std::string()); };
   hub = std::make_unique<SessionHub>(core, storage.sessions.get(), storage.recordings.get());
   core.hub = hub.get();
   core.routes = MakeRoutes();

@@ -248,6 +248,11 @@ TEST(FitEndpoint, AnAdminFitsASessionAndTheLibraryGetsTheNextVersionWithTheRepor
             std::string::npos)
       << job.dump();
   EXPECT_EQ(nlohmann::json::parse(Get(server.port(), "/api/models/slab_40x40", observer).body)["latest_version"], 1);
+  // The gauges are back to nothing; the counters say how the fits ended.
+  EXPECT_EQ(MetricValue(server.port(), observer, "idms_fit_jobs{state=\"running\"}"), 0);
+  EXPECT_EQ(MetricValue(server.port(), observer, "idms_fit_jobs{state=\"queued\"}"), 0);
+  EXPECT_EQ(MetricValue(server.port(), observer, "idms_fits_total{result=\"done\"}"), 2);
+  EXPECT_EQ(MetricValue(server.port(), observer, "idms_fits_total{result=\"failed\"}"), 1);
 }
 
 // A fit running when the server stops ends at its solver's next iteration: the server exits at
