@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "fit.h"
+#include "fit_json.h"
 #include "fit_recording.h"
 #include "idms/protocol/scene.h"
 #include "idms/server/log.h"
@@ -52,7 +53,8 @@ struct FitRequest {
   std::vector<fit::Param> params = {fit::Param::kHomeK, fit::Param::kSurfaceK};
   std::vector<fit::Region> regions;
   std::vector<std::string> region_specs;
-  std::string by;  // who asked (the token's role)
+  bool map = false;  // a scan's stiffness map (FitMap) instead of a fit of `params`
+  std::string by;    // who asked (the token's role)
 };
 
 struct Job {
@@ -73,7 +75,8 @@ double Round4(double x) {
 }
 
 // The request's body: {} or {"model": NAME, "version": N, "params": "home_k,surface_k" (or a list),
-// "regions": ["lump=sphere:2,1.5,0,0.9", ...]}. False with *error naming the field.
+// "regions": ["lump=sphere:2,1.5,0,0.9", ...]} or {"model", "version", "map": true}. False with
+// *error naming the field.
 bool ParseFitRequest(const std::string& body, FitRequest* r, std::string* error) {
   if (body.size() > kMaxRequestBytes) return *error = "a fit request is at most 4096 bytes", false;
   if (body.empty()) return true;
@@ -114,15 +117,23 @@ bool ParseFitRequest(const std::string& body, FitRequest* r, std::string* error)
         r->regions.push_back(region);
         r->region_specs.push_back(s);
       }
+    } else if (key == "map") {
+      if (!value.is_boolean()) return *error = "map: true or false", false;
+      r->map = value;
     } else {
-      return *error = "unknown field '" + key + "' (model, version, params, regions)", false;
+      return *error = "unknown field '" + key + "' (model, version, params, regions, map)", false;
     }
+  }
+  if (r->map && (j.contains("params") || j.contains("regions"))) {
+    return *error = "map: a map fits every element's k press by press; give no params or regions with it", false;
   }
   return true;
 }
 
 json ProgressJson(const fit::FitProgress& p) {
-  return json{{"iteration", p.iteration}, {"replays", p.replays}, {"rms", Round4(p.rms)}};
+  json j{{"iteration", p.iteration}, {"replays", p.replays}, {"rms", Round4(p.rms)}};
+  if (p.presses_total > 0) j.update({{"presses_done", p.presses_done}, {"presses_total", p.presses_total}});
+  return j;
 }
 
 }  // namespace
@@ -355,6 +366,7 @@ class FitJobs {
     options.stride = std::max(options.stride, 1);
     options.progress = [this, &r](const fit::FitProgress& p) { return SetProgress(r.session, p); };
     options.stop = &stop_flag_;
+    if (r.map) return RunMap(r, name, *from, model, trace, options, result, error);
     const fit::FitResult f = fit::Fit(model, trace, options);
     if (!f.ok) return *error = f.message, false;
 
@@ -383,7 +395,8 @@ class FitJobs {
       fitted.push_back(Round4(f.fitted_force[i][2]));
     }
     const json report{{"fit",
-                       {{"session", r.session},
+                       {{"kind", "params"},
+                        {"session", r.session},
                         {"from", {{"name", name}, {"version", from->version}}},
                         {"regions", r.region_specs},
                         {"params", params},
@@ -408,11 +421,58 @@ class FitJobs {
       core_.ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
     }
     *result = {{"model", {{"name", v->name}, {"version", v->version}}},
+               {"kind", "params"},
                {"params", params},
                {"rms_before", f.rms_before},
                {"rms_after", f.rms_after},
                {"replays", f.replays},
                {"seconds", Round4(f.seconds)}};
+    return true;
+  }
+
+  // The scan's stiffness map: the next version is the model with every element's k times the map's
+  // background (what the scan says healthy tissue is), the map and the lump in its metadata.
+  bool RunMap(const FitRequest& r, const std::string& name, const ModelVersion& from, const Model& model,
+              const fit::Trace& trace, const fit::FitOptions& options, json* result, std::string* error) {
+    const fit::MapResult m = fit::FitMap(model, trace, options);
+    if (!m.ok) return *error = m.message, false;
+    Model fitted = model;
+    fit::ScaleGroup(fitted, fit::Param::kK, m.background);
+    json map = fit::MapJson(m);
+    for (json& p : map["points"]) {
+      for (auto& [key, value] : p.items()) value = Round4(value.get<double>());  // a plot's worth
+    }
+    const json report{{"fit",
+                       {{"kind", "map"},
+                        {"session", r.session},
+                        {"from", {{"name", name}, {"version", from.version}}},
+                        {"map", map},
+                        {"by", r.by}}}};
+    char summary[240];
+    if (m.lump.found) {
+      std::snprintf(summary, sizeof summary,
+                    "%zu presses, k x %.4g; a lump at x %.4g, y %.4g, radius %.3g, %.3g times as stiff",
+                    m.points.size(), m.background, m.lump.x, m.lump.y, m.lump.radius, m.lump.ratio);
+    } else {
+      std::snprintf(summary, sizeof summary, "%zu presses, k x %.4g; no lump", m.points.size(), m.background);
+    }
+    const std::string description =
+        "stiffness map of session " + r.session + " (from v" + std::to_string(from.version) + "): " + summary;
+    UploadError upload_error;
+    const std::optional<ModelVersion> v =
+        core_.ctx.library->Upload(name, WriteFem(fitted), WritePlg(fitted), description.substr(0, 1024), &upload_error,
+                                  nullptr, JsonText(report));
+    if (!v) return *error = "storing the mapped model: " + upload_error.message, false;
+    if (core_.ctx.publish_library_event) {
+      core_.ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
+    }
+    *result = {{"model", {{"name", v->name}, {"version", v->version}}},
+               {"kind", "map"},
+               {"presses", m.points.size()},
+               {"background", m.background},
+               {"lump", map["lump"]},
+               {"replays", m.replays},
+               {"seconds", Round4(m.seconds)}};
     return true;
   }
 

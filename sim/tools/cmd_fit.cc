@@ -7,6 +7,7 @@
 
 #include "command.h"
 #include "fit.h"
+#include "fit_json.h"
 #include "idms/sim/model_io.h"
 #include "idms/sim/preset.h"
 #include "plot.h"
@@ -72,23 +73,8 @@ void RunMap(const FitArgs& a, const Model& model, const fit::Trace& trace, const
   if (!r.ok) Fail("fit", "--map: " + r.message);
   if (!a.out.empty()) WriteMapCsv(a.out + ".map.csv", r, trace.dt_s);
   if (!a.plot.empty()) PlotMap(a, a.out + ".map.csv", r);
-  nlohmann::json j = {{"presses", r.points.size()}, {"background", r.background}, {"spread", r.spread},
-                      {"replays", r.replays},       {"seconds", r.seconds},       {"lump", {{"found", r.lump.found}}}};
-  if (r.lump.found) {
-    j["lump"].update({{"x", r.lump.x},
-                      {"y", r.lump.y},
-                      {"xy_sigma", r.lump.xy_sigma},
-                      {"radius", r.lump.radius},
-                      {"ratio", r.lump.ratio},
-                      {"ratio_sigma", r.lump.ratio_sigma},
-                      {"presses", r.lump.presses}});
-  }
-  for (const fit::MapPoint& p : r.points) {
-    j["points"].push_back(
-        {{"x", p.x}, {"y", p.y}, {"scale", p.scale}, {"sigma", p.sigma}, {"peak_force", p.peak_force}});
-  }
   if (a.json) {
-    PrintJson(j);
+    PrintJson(fit::MapJson(r));
     return;
   }
   std::printf("stiffness map of %s from %s: %zu presses, background factor %.4g (scatter %.2g)\n", a.model.c_str(),

@@ -316,5 +316,45 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
   EXPECT_EQ(Get(again.port(), "/api/sessions/" + id + "/fit", observer).status, 404) << "jobs are the process's";
 }
 
+// A scan of the tumour slab, mapped through the server against the plain slab (what the tissue was
+// believed to be): the job finds the lump where the tumour is, and the plain slab's next version
+// carries the map (49 presses) and the lump in its metadata.
+TEST(FitEndpoint, AScanIsMappedAndTheLumpIsFoundWhereTheTumourIs) {
+  const std::string dir = TempDir("fit-map");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string admin = server.Token("admin"), observer = server.Token("observer");
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
+       "slab_40x40_tumour", "--cache-dir", dir + "/cache", "--device", "scripted:scan", "--duration", "50"},
+      dir + "/agent.log");
+  const std::string id = WaitForLiveSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
+  ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
+  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+  const std::string fit = "/api/sessions/" + id + "/fit";
+  HttpReply r = Call(server.port(), "POST", fit, admin, R"({"map": true, "params": "k"})");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(r.body.find("give no params or regions"), std::string::npos) << r.body;
+  ASSERT_EQ(Call(server.port(), "POST", fit, admin, R"({"model": "slab_40x40", "map": true})").status, 202);
+  const nlohmann::json job = FinishedFit(server.port(), id, observer);
+  ASSERT_EQ(job["state"], "done") << job.dump() << server.Log();
+  const nlohmann::json& lump = job["result"]["lump"];
+  ASSERT_TRUE(lump["found"].get<bool>()) << job.dump();
+  // The tumour: a sphere of radius 4 at (20, 17, -0.4), k x 8; the slab's elements are 1 apart.
+  EXPECT_NEAR(lump["x"].get<double>(), 20.0, 1.0) << job.dump();
+  EXPECT_NEAR(lump["y"].get<double>(), 17.0, 1.0) << job.dump();
+  EXPECT_NEAR(lump["ratio"].get<double>(), 8.0, 0.8) << job.dump();
+  const nlohmann::json v2 =
+      nlohmann::json::parse(Get(server.port(), "/api/models/slab_40x40?version=2", observer).body);
+  const nlohmann::json& report = v2["metadata"]["fit"];
+  EXPECT_EQ(report["kind"], "map");
+  EXPECT_EQ(report["session"], id);
+  EXPECT_EQ(report["map"]["points"].size(), 49u);
+  EXPECT_EQ(report["map"]["lump"]["x"], lump["x"]);
+  EXPECT_NE(v2["description"].get<std::string>().find("stiffness map of session " + id), std::string::npos);
+}
+
 }  // namespace
 }  // namespace idms::test
