@@ -3,7 +3,9 @@
 // follows the job to its end and shows the factor that makes the copy the model the session ran,
 // with the recorded force against the fitted model's; the library's model page shows the same
 // report under the fitted version; an observer sees the fit but not the form; a bad region is
-// refused on the page with the server's reason.
+// refused on the page with the server's reason. And a scan of the tumour slab, mapped from the
+// page against the plain slab: the map shows the lump where the tumour is, on the fit page and on
+// the plain slab's model page.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
@@ -16,6 +18,8 @@ let server;
 let browser;
 /** @type {ReturnType<typeof startAgent>[]} */
 const agents = [];
+/** The scan (49.7 s), started during the first test. @type {ReturnType<typeof startAgent> | null} */
+let scan = null;
 
 before(async () => {
   server = await new Server(tempDir('fit')).start();
@@ -47,6 +51,9 @@ test('fit page: an admin fits a session to a soft copy; the report, the model pa
   const agent = startAgent(server, 4, 'scripted:palpate', { library: true });
   agents.push(agent);
   const id = await server.liveSession();
+  // The scan for the second test, meanwhile (its own session).
+  scan = startAgent(server, 50, 'scripted:scan', { library: true, model: 'slab_40x40_tumour' });
+  agents.push(scan);
   assert.equal(await agent.exited, 0, agent.log());
   for (let i = 0; i < 200; i++) {
     const { body } = await server.get(`/api/sessions/${id}`);
@@ -105,5 +112,54 @@ test('fit page: an admin fits a session to a soft copy; the report, the model pa
   await page.waitForFunction(() => /** @type {any} */ (window).__idmsFit?.state === 'done');
   assert.equal(await page.locator('#fit-form').count(), 0);
   assert.match(await page.locator('#fit-params tr[data-param="k"]').innerText(), /× 1\.25/);
+  assert.deepEqual(errors, []);
+});
+
+test('map: a scan mapped from the page against the plain slab shows the lump where the tumour is', async () => {
+  const { page, errors } = browser;
+  assert.ok(scan, 'the first test started the scan');
+  assert.equal(await scan.exited, 0, scan.log());
+  /** @type {string} */
+  let id = '';
+  for (let i = 0; i < 200 && !id; i++) {
+    const { body } = await server.get('/api/sessions');
+    const s = JSON.parse(body).sessions.find((/** @type {any} */ x) => x.device === 'scripted:scan' && x.state !== 'live');
+    if (s) id = String(s.id);
+    else await new Promise((r) => setTimeout(r, 100));
+  }
+  assert.ok(id, 'the scan session ended');
+  await login(page, server, 'admin', `/fit/${id}`);
+  await page.waitForFunction(() => /** @type {any} */ (window).__idmsFit?.state === 'none');
+  await page.waitForFunction(() => document.querySelectorAll('#fit-model-name option').length > 2);
+  await page.locator('#fit-model-name').selectOption('slab_40x40');
+  await page.locator('#fit-map-mode').check();
+  assert.equal(await page.locator('input[name="param"][value="k"]').isDisabled(), true);
+  await page.locator('#fit-start').click();
+  await page.waitForFunction(() => /** @type {any} */ (window).__idmsFit.state === 'done', undefined, { timeout: 180000 });
+  const fit = await page.evaluate(() => /** @type {any} */ (window).__idmsFit);
+  assert.equal(fit.kind, 'map');
+  assert.equal(fit.presses, 49);
+  assert.equal(fit.lump, true);
+  assert.equal(await page.locator('#fit-map circle[data-press]').count(), 49);
+  // The lump's circle around the tumour (20, 17), and its dots the stiffest colour's end.
+  const ring = page.locator('#map-lump');
+  assert.ok(Math.abs(Number(await ring.getAttribute('cx')) - 20) < 1);
+  assert.ok(Math.abs(-Number(await ring.getAttribute('cy')) - 17) < 1);
+  const stiffest = await page.evaluate(() => {
+    const dots = [...document.querySelectorAll('#fit-map circle[data-press]')];
+    const top = dots.reduce((a, b) => (Number(b.getAttribute('data-scale')) > Number(a.getAttribute('data-scale')) ? b : a));
+    return { x: Number(top.getAttribute('cx')), y: -Number(top.getAttribute('cy')), scale: Number(top.getAttribute('data-scale')) };
+  });
+  assert.ok(Math.hypot(stiffest.x - 20, stiffest.y - 17) < 4, `the stiffest press at ${stiffest.x}, ${stiffest.y}`);
+  assert.ok(stiffest.scale > 4, `its factor ${stiffest.scale}`);
+  assert.match(await page.locator('#map-lump-text').innerText(), /A lump at x 2\d\.?\d*, y 1\d/);
+  assert.deepEqual(await tooWide(page), [], 'nothing wider than the page');
+  await docShot(page.locator('#fit-report'), 'fit-map.png');
+  // The plain slab's model page: version 2 carries the map.
+  await page.locator('#fit-model').click();
+  await page.waitForFunction(() => /** @type {any} */ (window).__idmsPreview?.version === 2);
+  await page.locator('#fit-section').waitFor({ state: 'visible' });
+  assert.match(await page.locator('#fit-title').innerText(), /Stiffness map of version 2/);
+  assert.equal(await page.locator('#fit-map circle[data-press]').count(), 49);
   assert.deepEqual(errors, []);
 });

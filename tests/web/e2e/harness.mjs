@@ -95,14 +95,16 @@ export class Server {
 }
 
 /**
- * The real agent publishing a scripted palpation of the shipped hex model: its files, or with
- * `library` the server's library's copy by name (downloaded, as a deployed agent does); `args`: more
- * of the agent's options (--trainee NAME, --max-force F, --scene FILE).
- * @param {Server} server @param {number} durationS @param {string} [device] @param {{library?: boolean, args?: string[]}} [options]
+ * The real agent publishing a scripted palpation of a shipped model (`model`, the hex fragment
+ * unless named): its files, or with `library` the server's library's copy by name (downloaded, as a
+ * deployed agent does); `args`: more of the agent's options (--trainee NAME, --max-force F, --scene FILE).
+ * @param {Server} server @param {number} durationS @param {string} [device]
+ * @param {{library?: boolean, model?: string, args?: string[]}} [options]
  */
 export function startAgent(server, durationS, device = 'scripted:palpate', options = {}) {
-  const model = options.library ? ['--model', 'hex_4x5_home', '--cache-dir', tempDir('agent-cache')]
-    : ['--model-file', join(sourceDir(), 'models', 'hex_4x5_home')];
+  const name = options.model ?? 'hex_4x5_home';
+  const model = options.library ? ['--model', name, '--cache-dir', tempDir('agent-cache')]
+    : ['--model-file', join(sourceDir(), 'models', name)];
   const child = spawn(agentBin(), ['--server', `ws://127.0.0.1:${server.port}`, '--token', server.token('agent'),
     ...model, '--device', device, '--no-realtime', '--duration', String(durationS), ...(options.args ?? [])],
   { stdio: ['ignore', 'ignore', 'pipe'] });
@@ -139,7 +141,7 @@ export async function login(page, server, role, next = '/sessions') {
 
 /**
  * A screenshot kept under build/web-artifacts and in docs/web (the README shows them).
- * @param {import('playwright-core').Page} page @param {string} name
+ * @param {import('playwright-core').Page | import('playwright-core').Locator} page @param {string} name
  */
 export async function docShot(page, name) {
   await shot(page, name);

@@ -32,7 +32,7 @@ export function fitPage(id, role) {
     ...(form ? [form.el] : []), status, reportHost,
   ]);
   /** For the tests. */
-  const st = { state: '', iteration: 0, replays: 0, model: '', version: 0, points: 0 };
+  const st = { state: '', iteration: 0, replays: 0, model: '', version: 0, points: 0, kind: '', presses: 0, lump: false };
   /** @type {any} */ (window).__idmsFit = st;
   /** @type {{dispose: () => void} | null} */
   let plot = null;
@@ -51,7 +51,9 @@ export function fitPage(id, role) {
       const p = job.progress || {};
       st.iteration = p.iteration || 0;
       st.replays = p.replays || 0;
-      status.textContent = `Fitting: iteration ${st.iteration}, ${st.replays} replays of the session, force RMS error ${sig(p.rms)}.`;
+      status.textContent = p.presses_total
+        ? `Mapping: press ${p.presses_done + 1} of ${p.presses_total}, ${st.replays} replays so far.`
+        : `Fitting: iteration ${st.iteration}, ${st.replays} replays of the session, force RMS error ${sig(p.rms)}.`;
     } else if (job.state === 'done') {
       const m = job.result.model;
       status.replaceChildren('Done: the fitted model is ',
@@ -62,8 +64,12 @@ export function fitPage(id, role) {
         const v = await api(`/api/models/${encodeURIComponent(m.name)}?version=${m.version}`);
         if (disposed) return;
         plot?.dispose();
-        plot = showFitReport(reportHost, v.metadata.fit);
-        st.points = (v.metadata.fit.curve?.t || []).length;
+        const report = v.metadata.fit;
+        plot = showFitReport(reportHost, report);
+        st.kind = report.kind;
+        st.points = (report.curve?.t || []).length;
+        st.presses = (report.map?.points || []).length;
+        st.lump = !!report.map?.lump?.found;
         st.model = m.name;
         st.version = m.version;
       }
@@ -109,11 +115,17 @@ function fitForm(id, started) {
   const params = kParams.map(([name, what]) => h('label', { class: 'check', title: what }, [
     h('input', { type: 'checkbox', name: 'param', value: name, checked: name === 'home_k' || name === 'surface_k' }), ` ${name}`]));
   const regions = h('textarea', { id: 'fit-regions', rows: 2, placeholder: 'lump=sphere:2,1.5,0,0.9 (one a line; optional)' });
+  const map = h('input', { type: 'checkbox', id: 'fit-map-mode' });
+  map.addEventListener('change', () => {
+    for (const l of params) /** @type {HTMLInputElement} */ (l.firstChild).disabled = map.checked;
+    regions.disabled = map.checked;
+  });
   const start = h('button', { type: 'submit', id: 'fit-start', text: 'Fit' });
   const result = h('div', { id: 'fit-result', role: 'alert' });
   const el = h('form', { class: 'card', id: 'fit-form', 'aria-labelledby': 'fit-form-title' }, [
     h('h2', { id: 'fit-form-title', text: 'What to fit' }),
     h('label', { for: 'fit-model-name', text: 'Model (the fitted one is its next version)' }), model,
+    h('label', { class: 'check' }, [map, ' A scan: map the stiffness press by press and look for a lump (instead of the parameters below)']),
     h('fieldset', {}, [h('legend', { text: 'Parameters' }), ...params]),
     h('label', { for: 'fit-regions', text: 'Regions (each parameter is fitted inside each and outside them all)' }), regions,
     start, result,
@@ -124,7 +136,7 @@ function fitForm(id, started) {
   el.addEventListener('submit', async (ev) => {
     ev.preventDefault();
     /** @type {Record<string, any>} */
-    const body = {
+    const body = map.checked ? { map: true } : {
       params: params.map((l) => /** @type {HTMLInputElement} */ (l.firstChild)).filter((c) => c.checked).map((c) => c.value),
       regions: regions.value.split('\n').map((s) => s.trim()).filter(Boolean),
     };

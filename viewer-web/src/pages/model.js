@@ -55,7 +55,8 @@ export function modelPage(name, role) {
     fitSection.hidden = !meta.metadata?.fit;
     if (meta.metadata?.fit) {
       fitPlot = showFitReport(fitHost, meta.metadata.fit);
-      /** @type {HTMLElement} */ (document.getElementById('fit-title')).textContent = `Fit report of version ${version}`;
+      /** @type {HTMLElement} */ (document.getElementById('fit-title')).textContent =
+        `${meta.metadata.fit.kind === 'map' ? 'Stiffness map' : 'Fit report'} of version ${version}`;
     }
     const surface = parseObj(obj);
     stiffness = stiffnessPerVertex(fem);
