@@ -251,8 +251,10 @@ class FitJobs {
   }
 
   void Loop() {
-    // The lowest priority for this thread alone (Linux: a thread's nice value is its own).
-    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
+    // A lower priority for this thread alone (Linux: a thread's nice value is its own): sessions and
+    // requests first. Not 19 by default: beside busy neighbours a nice-19 thread gets ~1% of a core,
+    // and a fit of minutes would take hours.
+    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), core_.options.fit_nice);
     for (;;) {
       FitRequest request;
       {

@@ -85,6 +85,11 @@ int main(int argc, char** argv) {
   app.add_option("--threads", o.threads, "I/O threads (0: the number of cores)")->capture_default_str();
   app.add_option("--workers", o.workers, "Threads for handlers that parse, hash or touch the disk")
       ->capture_default_str();
+  app.add_option("--fit-nice", o.fit_nice,
+                 "Nice value of the thread that runs model fits (POST /api/sessions/{id}/fit): 0-19, higher "
+                 "yields more to everything else")
+      ->check(CLI::Range(0, 19))
+      ->capture_default_str();
   app.add_option("--log-format", o.log_format, "text or json")
       ->check(CLI::IsMember({"text", "json"}))
       ->capture_default_str();

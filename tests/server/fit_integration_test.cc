@@ -21,6 +21,9 @@ namespace {
 
 using std::chrono::seconds;
 
+// The fits at the sessions' priority: beside the other tests a lower one waits for minutes.
+const std::vector<std::string> kFitArgs = {"--fit-nice", "0"};
+
 // A copy of a recording with its metadata, every message kept but the /device batches `edit`
 // returns false for (it may change the ones it keeps).
 void Rewrite(const std::string& from, const std::string& to, const std::function<bool(int, v1::DeviceSamples*)>& edit) {
@@ -41,20 +44,38 @@ void Rewrite(const std::string& from, const std::string& to, const std::function
   ASSERT_TRUE(writer.Close(&error)) << error;
 }
 
+// The real agent runs `device` on library model `model` for `duration` seconds through `server`;
+// the session's id once it has ended ("" with a test failure otherwise).
+std::string RecordSession(ServerProcess& server, const std::string& dir, const std::string& model,
+                          const std::string& device, const std::string& duration) {
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
+                      model, "--cache-dir", dir + "/cache", "--device", device, "--duration", duration},
+                     dir + "/agent.log");
+  const std::string id = WaitForLiveSession(server.port(), observer);
+  if (id.empty()) {
+    ADD_FAILURE() << server.Log() << agent.Log();
+    return "";
+  }
+  if (agent.Wait(seconds(120)) != 0) {
+    ADD_FAILURE() << agent.Log();
+    return "";
+  }
+  if (!Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) {
+    ADD_FAILURE() << server.Log();
+    return "";
+  }
+  return id;
+}
+
 TEST(FitRecording, ASessionRecordingFitsBackToItsModelAndAnotherModelIsRefused) {
   const std::string dir = TempDir("fit-recording");
-  ServerProcess server(dir + "/data");
+  ServerProcess server(dir + "/data", kFitArgs);
   ASSERT_TRUE(server.ready()) << server.Log();
   const std::string observer = server.Token("observer");
-  ChildProcess agent(
-      IDMS_AGENT_BIN,
-      {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
-       "hex_4x5_home", "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "5.5"},
-      dir + "/agent.log");
-  const std::string id = WaitForLiveSession(server.port(), observer);
-  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
-  ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
-  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+  const std::string id = RecordSession(server, dir, "hex_4x5_home", "scripted:palpate", "5.5");
+  ASSERT_FALSE(id.empty());
   const std::string rec = dir + "/palpate.mcap";
   ASSERT_TRUE(DownloadRecording(server.port(), id, observer, rec));
 
@@ -152,7 +173,7 @@ nlohmann::json FinishedFit(uint16_t port, const std::string& id, const std::stri
 
 TEST(FitEndpoint, AnAdminFitsASessionAndTheLibraryGetsTheNextVersionWithTheReport) {
   const std::string dir = TempDir("fit-endpoint");
-  ServerProcess server(dir + "/data");
+  ServerProcess server(dir + "/data", kFitArgs);
   ASSERT_TRUE(server.ready()) << server.Log();
   const std::string admin = server.Token("admin"), observer = server.Token("observer");
   const std::string models = std::string(IDMS_SOURCE_DIR) + "/models/";
@@ -261,7 +282,7 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
   const std::string dir = TempDir("fit-stop");
   std::string observer, admin, id;
   {
-    ServerProcess server(dir + "/data");
+    ServerProcess server(dir + "/data", kFitArgs);
     ASSERT_TRUE(server.ready()) << server.Log();
     observer = server.Token("observer"), admin = server.Token("admin");
     // The slab typed in 20% too soft: the fit starts away from its answer (the session's own model
@@ -276,15 +297,8 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
                    JsonUpload(WriteFem(soft), WritePlg(soft), "typed in too soft"))
                   .status,
               201);
-    ChildProcess agent(
-        IDMS_AGENT_BIN,
-        {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
-         "slab_40x40", "--cache-dir", dir + "/cache", "--device", "scripted:palpate", "--duration", "3"},
-        dir + "/agent.log");
-    id = WaitForLiveSession(server.port(), observer);
-    ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
-    ASSERT_EQ(agent.Wait(seconds(60)), 0) << agent.Log();
-    ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+    id = RecordSession(server, dir, "slab_40x40", "scripted:palpate", "3");
+    ASSERT_FALSE(id.empty());
     ASSERT_EQ(
         Call(
             server.port(), "POST", "/api/sessions/" + id + "/fit", admin,
@@ -310,7 +324,7 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
     EXPECT_NE(server.Log().find("the server stopped"), std::string::npos) << server.Log();
     EXPECT_EQ(server.Log().find("fit done"), std::string::npos) << server.Log();
   }
-  ServerProcess again(dir + "/data");
+  ServerProcess again(dir + "/data", kFitArgs);
   ASSERT_TRUE(again.ready()) << again.Log();
   EXPECT_EQ(nlohmann::json::parse(Get(again.port(), "/api/models/slab_soft", observer).body)["latest_version"], 1);
   EXPECT_EQ(Get(again.port(), "/api/sessions/" + id + "/fit", observer).status, 404) << "jobs are the process's";
@@ -321,18 +335,11 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
 // carries the map (49 presses) and the lump in its metadata.
 TEST(FitEndpoint, AScanIsMappedAndTheLumpIsFoundWhereTheTumourIs) {
   const std::string dir = TempDir("fit-map");
-  ServerProcess server(dir + "/data");
+  ServerProcess server(dir + "/data", kFitArgs);
   ASSERT_TRUE(server.ready()) << server.Log();
   const std::string admin = server.Token("admin"), observer = server.Token("observer");
-  ChildProcess agent(
-      IDMS_AGENT_BIN,
-      {"--server", "ws://127.0.0.1:" + server.port_string(), "--token", server.Token("agent"), "--model",
-       "slab_40x40_tumour", "--cache-dir", dir + "/cache", "--device", "scripted:scan", "--duration", "50"},
-      dir + "/agent.log");
-  const std::string id = WaitForLiveSession(server.port(), observer);
-  ASSERT_FALSE(id.empty()) << server.Log() << agent.Log();
-  ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
-  ASSERT_TRUE(Eventually([&] { return Sessions(server.port(), observer)[0]["state"] == "ended"; })) << server.Log();
+  const std::string id = RecordSession(server, dir, "slab_40x40_tumour", "scripted:scan", "50");
+  ASSERT_FALSE(id.empty());
   const std::string fit = "/api/sessions/" + id + "/fit";
   HttpReply r = Call(server.port(), "POST", fit, admin, R"({"map": true, "params": "k"})");
   EXPECT_EQ(r.status, 400);

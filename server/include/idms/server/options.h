@@ -24,6 +24,7 @@ struct ServerOptions {
   std::vector<std::string> allowed_origins;  // besides the server's own, e.g. "https://lab.example"
   int threads = 0;                           // I/O threads; 0: the number of cores
   int workers = 4;                           // threads for handlers that parse, hash or touch the disk
+  int fit_nice = 10;                         // the fit jobs' thread's nice value (0-19): below sessions
   std::string log_format = "text";           // text | json
   std::string models_dir;                    // shipped models to import into an empty library; "none": never
   std::string web_root;                      // the built web viewer (index.html, assets/); empty: none served
