@@ -333,7 +333,7 @@ TEST(FitEndpoint, AFitRunningWhenTheServerStopsEndsThereAndTheServerExits) {
 // A scan of the tumour slab, mapped through the server against the plain slab (what the tissue was
 // believed to be): the job finds the lump where the tumour is, and the plain slab's next version
 // carries the map (49 presses) and the lump in its metadata.
-TEST(FitEndpoint, AScanIsMappedAndTheLumpIsFoundWhereTheTumourIs) {
+TEST(FitScanEndpoint, AScanIsMappedAndTheLumpIsFoundWhereTheTumourIs) {
   const std::string dir = TempDir("fit-map");
   ServerProcess server(dir + "/data", kFitArgs);
   ASSERT_TRUE(server.ready()) << server.Log();
