@@ -42,7 +42,8 @@ export function fitPage(id, role) {
 
   /** @param {any} job */
   async function show(job) {
-    st.state = job.state;
+    // "done" once its report is on the page (the version's metadata is one more request).
+    if (job.state !== 'done') st.state = job.state;
     if (form) form.busy(job.state === 'queued' || job.state === 'running');
     status.className = job.state === 'failed' ? 'error' : 'meta';
     if (job.state === 'queued') {
@@ -73,6 +74,7 @@ export function fitPage(id, role) {
         st.model = m.name;
         st.version = m.version;
       }
+      st.state = 'done';
     } else {
       status.replaceChildren(h('strong', { text: job.state === 'failed' ? 'The fit failed: ' : 'Stopped: ' }), String(job.error || ''));
     }
