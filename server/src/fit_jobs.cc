@@ -414,14 +414,8 @@ class FitJobs {
                         {"curve", {{"component", "fz"}, {"t", t}, {"measured", measured}, {"fitted", fitted}}}}}};
     const std::string description =
         "fitted to session " + r.session + " (from v" + std::to_string(from->version) + "): " + summary;
-    UploadError upload_error;
-    const std::optional<ModelVersion> v =
-        core_.ctx.library->Upload(name, WriteFem(f.fitted), WritePlg(f.fitted), description.substr(0, 1024),
-                                  &upload_error, nullptr, JsonText(report));
-    if (!v) return *error = "storing the fitted model: " + upload_error.message, false;
-    if (core_.ctx.publish_library_event) {
-      core_.ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
-    }
+    const std::optional<ModelVersion> v = StoreVersion(name, f.fitted, description, report, error);
+    if (!v) return false;
     *result = {{"model", {{"name", v->name}, {"version", v->version}}},
                {"kind", "params"},
                {"params", params},
@@ -430,6 +424,21 @@ class FitJobs {
                {"replays", f.replays},
                {"seconds", Round4(f.seconds)}};
     return true;
+  }
+
+  // `fitted` as `name`'s next version with `report` as its metadata, announced on /ws/library.
+  std::optional<ModelVersion> StoreVersion(const std::string& name, const Model& fitted, const std::string& description,
+                                           const json& report, std::string* error) {
+    UploadError upload_error;
+    std::optional<ModelVersion> v =
+        core_.ctx.library->Upload(name, WriteFem(fitted), WritePlg(fitted), description.substr(0, 1024), &upload_error,
+                                  nullptr, JsonText(report));
+    if (!v) {
+      *error = "storing the fitted model: " + upload_error.message;
+      return std::nullopt;
+    }
+    PublishModelAdded(core_.ctx, *v);
+    return v;
   }
 
   // The scan's stiffness map: the next version is the model with every element's k times the map's
@@ -460,14 +469,8 @@ class FitJobs {
     }
     const std::string description =
         "stiffness map of session " + r.session + " (from v" + std::to_string(from.version) + "): " + summary;
-    UploadError upload_error;
-    const std::optional<ModelVersion> v =
-        core_.ctx.library->Upload(name, WriteFem(fitted), WritePlg(fitted), description.substr(0, 1024), &upload_error,
-                                  nullptr, JsonText(report));
-    if (!v) return *error = "storing the mapped model: " + upload_error.message, false;
-    if (core_.ctx.publish_library_event) {
-      core_.ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
-    }
+    const std::optional<ModelVersion> v = StoreVersion(name, fitted, description, report, error);
+    if (!v) return false;
     *result = {{"model", {{"name", v->name}, {"version", v->version}}},
                {"kind", "map"},
                {"presses", m.points.size()},

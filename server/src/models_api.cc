@@ -29,6 +29,12 @@ json ModelVersionJson(const ModelVersion& v) {
               {"obj_sha256", v.obj_sha256}};
 }
 
+void PublishModelAdded(ApiContext& ctx, const ModelVersion& v) {
+  if (ctx.publish_library_event) {
+    ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(v)}}));
+  }
+}
+
 namespace {
 
 // ?version=N: 0 when absent, -1 when malformed.
@@ -198,8 +204,7 @@ ApiResponse PutModel(ApiContext& ctx, ApiRequest& req) {
        {"bytes", v->bytes},
        {"parse_ms", std::round(timings.parse_ms * 10) / 10},
        {"store_ms", std::round(timings.store_ms * 10) / 10}});
-  if (ctx.publish_library_event)
-    ctx.publish_library_event(JsonText(json{{"event", "model_added"}, {"model", ModelVersionJson(*v)}}));
+  PublishModelAdded(ctx, *v);
   ApiResponse res = JsonResponse(req, http::status::created, JsonText(ModelVersionJson(*v)));
   res.set(http::field::location, "/api/models/" + name + "?version=" + std::to_string(v->version));
   return res;

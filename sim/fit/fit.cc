@@ -90,6 +90,9 @@ Model Scaled(const Model& base, const FitOptions& o, const std::vector<Unknown>&
   return m;
 }
 
+// Whether FitOptions::stop has been set.
+bool Stopped(const FitOptions& o) { return o.stop != nullptr && o.stop->load(std::memory_order_relaxed); }
+
 // The residuals: simulated minus measured force at the compared ticks, 3 per sample.
 struct ForceResidual {
   const Model* model;
@@ -104,7 +107,7 @@ struct ForceResidual {
   // crashed in it).
   const bool* solving;
   bool operator()(double const* const* x, double* residuals) const {
-    if (*solving && options->stop != nullptr && options->stop->load(std::memory_order_relaxed)) return false;
+    if (*solving && Stopped(*options)) return false;
     ToolCommand tool;
     const Model m = Scaled(*model, *options, *unknowns, *parts, x[0], &tool);
     const std::vector<std::array<double, 3>> f = Replay(m, *trace, options->step, tool, options->stride);
@@ -431,8 +434,7 @@ class ProgressCallback final : public ceres::IterationCallback {
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
     const FitProgress p{.iteration = s.iteration, .replays = *replays_, .rms = std::sqrt(2 * s.cost / samples_)};
     const bool go_on = !options_.progress || options_.progress(p);
-    const bool stopped = options_.stop != nullptr && options_.stop->load(std::memory_order_relaxed);
-    return go_on && !stopped ? ceres::SOLVER_CONTINUE : ceres::SOLVER_ABORT;
+    return go_on && !Stopped(options_) ? ceres::SOLVER_CONTINUE : ceres::SOLVER_ABORT;
   }
 
  private:
@@ -521,8 +523,7 @@ FitResult Fit(const Model& model, const Trace& trace, const FitOptions& options)
   r.iterations = static_cast<int>(summary.iterations.size());
   r.rms_before = std::sqrt(2 * summary.initial_cost / static_cast<double>(measured.size()));
   r.rms_after = std::sqrt(2 * summary.final_cost / static_cast<double>(measured.size()));
-  const auto stopped = [&] { return options.stop != nullptr && options.stop->load(std::memory_order_relaxed); };
-  if (summary.termination_type == ceres::USER_FAILURE || stopped()) {
+  if (summary.termination_type == ceres::USER_FAILURE || Stopped(options)) {
     r.message = "stopped";
     return r;
   }
@@ -592,7 +593,7 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
   one.function_tolerance = std::max(options.function_tolerance, 1e-7);
   one.progress = nullptr;
   for (size_t i = 0; i < presses.size(); ++i) {
-    if ((options.stop != nullptr && options.stop->load(std::memory_order_relaxed)) ||
+    if (Stopped(options) ||
         (options.progress && !options.progress({.replays = r.replays,
                                                 .presses_done = static_cast<int>(i),
                                                 .presses_total = static_cast<int>(presses.size())}))) {

@@ -116,6 +116,8 @@ ApiResponse JsonResponse(const ApiRequest& req, http::status status, const std::
 // A model version as the API shows it (without its metadata): the GET's fields and the library
 // events' "model".
 nlohmann::json ModelVersionJson(const ModelVersion& v);
+// {"event": "model_added", "model": ModelVersionJson(v)} to the /ws/library watchers.
+void PublishModelAdded(ApiContext& ctx, const ModelVersion& v);
 // Handlers of the model library (models_api.cc).
 ApiResponse ListModels(ApiContext& ctx, ApiRequest& req);
 ApiResponse GetModel(ApiContext& ctx, ApiRequest& req);
