@@ -127,19 +127,21 @@ struct Batch {
   Real* new_len;       // (kBatch) eq. 4.6 outputs when they are scattered
   Real* new_rate;      // (kBatch)
   Real* end_len2;      // (kBatch) |s'|^2 at the tick's end, of an earlier batch (energy check)
+  Real *k, *b, *leq;   // (kBatch) gathered model values (CrossForces, CrossElasticAfter)
 };
 
-Batch BatchViews(FusedPass& fp) {
-  Real* p = fp.scratch.data();
+Batch BatchViews(Real* p) {
   Batch b;
   b.s4 = p, b.dv4 = p + 4 * kBatch;
   b.ex = p + 8 * kBatch, b.ey = p + 9 * kBatch, b.ez = p + 10 * kBatch;
   b.prev_len = p + 11 * kBatch, b.prev_rate = p + 12 * kBatch, b.fresh = p + 13 * kBatch;
   b.new_len = p + 14 * kBatch, b.new_rate = p + 15 * kBatch;
   b.end_len2 = p + 16 * kBatch;
+  b.k = p + 17 * kBatch, b.b = p + 18 * kBatch, b.leq = p + 19 * kBatch;
   return b;
 }
-constexpr int32_t kScratchPerElement = 17;
+constexpr int32_t kScratchPerElement = 20;
+constexpr int32_t kMaxSections = 64;
 
 // How far a substep got: atoms [0, atoms) by slot and elements [0, elems) by walk index have
 // been written (and copied). ok = false: it stopped at a non-finite input, or at the end of the
@@ -194,7 +196,11 @@ constexpr bool kRowBackup = false;
 // 2's lengths (`before`), and at its end (`after`) from the lengths of each batch whose atoms have
 // all been integrated, formed again a bandwidth behind the front (in renumbered models the atoms
 // and element arrays are still in cache there), so the check costs no pass of its own.
-template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy>
+//
+// kSections: one section of a sectioned walk (FusedPass::Section), on its own thread: elements
+// whose other endpoint lies past the section (or is fixed) read it from the tick-start copy, and
+// leave its sum alone (CrossForces added to it before the sweep).
+template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy, bool kSections>
 class Substep {
  public:
   static constexpr bool kFilter = IsFiltered(kRate);
@@ -202,21 +208,35 @@ class Substep {
   static constexpr bool kDirectIn = kIdentity && kRate == Rate::kFiltered;
   static constexpr bool kDirectOut = kIdentity;
 
-  Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after)
+  Substep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after, int32_t section)
       : m_(m),
         s_(s),
         ws_(ws),
         fp_(*ws.fused),
-        b_(BatchViews(*ws.fused)),
+        b_(BatchViews(ws.fused->scratch.data() + static_cast<size_t>(section) * kScratchPerElement * kBatch)),
         T_(T),
         backup_(backup),
         before_(kEnergy && before),
-        after_(kEnergy && after) {}
+        after_(kEnergy && after) {
+    if constexpr (kSections) {
+      const FusedPass::Section& sec = ws.fused->section[section];
+      slot_begin_ = sec.slot_begin, slot_end_ = sec.slot_end, w_begin_ = sec.w_begin, w_end_ = sec.w_end;
+      bound_ = static_cast<uint32_t>(sec.bound);
+      own_last_ = sec.bound == INT32_MAX ? last_ : sec.bound - 1;
+      ready_ = fp_.section_ready.data() + sec.ready_begin;
+      ghost_pos_ = ws.fused->ghost_pos.data(), ghost_vel_ = ws.fused->ghost_vel.data();
+    } else {
+      slot_end_ = ws.num_active, w_end_ = ws.num_elems;
+    }
+    trail_ = w_begin_;
+    if constexpr (kSections) prefetched_ = slot_begin_ < slot_end_ ? ws.active[slot_begin_] : 0;
+  }
 
   Progress Run() {
-    const int32_t n = ws_.num_active, ne = ws_.num_elems;
+    const int32_t n = slot_end_, ne = w_end_;
     Progress out;
-    if (n == 0) return out;
+    out.atoms = slot_begin_, out.elems = w_begin_;
+    if (n == slot_begin_) return out.atoms = n, out.elems = ne, out;
     // Locals, not members, in the loops: to the compiler the vector stores (memcpy) may write
     // anything, so it would reload each member after every one of them (7% at 10^6 atoms).
     const int32_t* const group_end = fp_.group_end.data();
@@ -225,14 +245,16 @@ class Substep {
     const Real *const ex = b_.ex, *const ey = b_.ey, *const ez = b_.ez;
     Real* const force = force_;
     const AtomIo atom_io = MakeAtomIo();
-    int32_t slot = 0;
-    int32_t g = active[0];
+    const uint32_t bound = bound_;
+    int32_t slot = slot_begin_;
+    int32_t g = active[slot];
     V4 acc = Load4(force + 4 * g);  // g's sum so far: field, tools, earlier groups
     V4 check = Make4(0, 0, 0);      // the integrated atoms' x - x: 0 while every result is finite
     V4 moved = Make4(0, 0, 0);      // the largest |p_new - p| so far, per component
     [[maybe_unused]] Kinetic kinetic;
-    for (int32_t w0 = 0; w0 < ne; w0 += kBatch) {
-      const int32_t nb = std::min(kBatch, ne - w0), w_end = w0 + nb;
+    for (int32_t w0 = w_begin_; w0 < ne;) {
+      // Batches at multiples of kBatch (a section's first one may be shorter; see Forces).
+      const int32_t w_end = std::min((w0 / kBatch + 1) * kBatch, ne), nb = w_end - w0;
       out.elems = w0;
       if (!Gather(w0, nb)) return Stop(out, slot);
       Forces(w0, nb);
@@ -248,8 +270,9 @@ class Substep {
         for (; j < stop; ++j) {
           const V4 e = Make4(ex[j], ey[j], ez[j]);
           acc += e;
+          // A free endpoint of this section (fixed ones are ~id < 0, so above `bound` unsigned).
           const int32_t raw = batch_other[j];
-          if (raw >= 0) Store4(force + 4 * raw, Load4(force + 4 * raw) - e);
+          if (static_cast<uint32_t>(raw) < bound) Store4(force + 4 * raw, Load4(force + 4 * raw) - e);
         }
         if (j == nb) break;
         if (group_end[slot] - w0 <= j) {
@@ -266,6 +289,7 @@ class Substep {
         FlushKinetic(kinetic, out);
         if (after_) ElasticAfter(slot, w_end, out);
       }
+      w0 = w_end;
     }
     // The last group, and free atoms after it whose elements all lie in earlier groups.
     for (;;) {
@@ -315,7 +339,7 @@ class Substep {
     const int32_t* const group_atom = fp_.elem_g.data() + w0;
     const Real *const pos = pos_, *const vel = vel_;
     Real *const s4 = b_.s4, *const dv4 = b_.dv4;
-    const int32_t last = last_;
+    const int32_t own_last = own_last_;
     [[maybe_unused]] const int32_t* const elems = ws_.elems.data();
     [[maybe_unused]] const Real *const elem_len = s_.elem_len.data(), *const elem_rate = s_.elem_rate.data();
     [[maybe_unused]] Real *const prev_len = b_.prev_len, *const prev_rate = b_.prev_rate, *const fresh_in = b_.fresh;
@@ -325,9 +349,9 @@ class Substep {
     for (int32_t j = 0; j < nb; ++j) {
       const int32_t raw = other[j], g = group_atom[j];
       if constexpr (kPrefetchReal) hi = std::max(hi, raw);
-      const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
-      StoreRow(s4 + 4 * j, LoadAtom(pos, o, last) - LoadAtom(pos, g, last));
-      if constexpr (kRate == Rate::kAnalytic) StoreRow(dv4 + 4 * j, LoadAtom(vel, o, last) - LoadAtom(vel, g, last));
+      StoreRow(s4 + 4 * j, Other(pos, ghost_pos_, raw) - LoadAtom(pos, g, own_last));
+      if constexpr (kRate == Rate::kAnalytic)
+        StoreRow(dv4 + 4 * j, Other(vel, ghost_vel_, raw) - LoadAtom(vel, g, own_last));
       if constexpr (kFilter && !kDirectIn) {
         const int32_t w = w0 + j;
         const int32_t e = kIdentity ? w : elems[w];
@@ -365,17 +389,25 @@ class Substep {
   // element: about a quarter of a substep's time, so only in the tick's last substep), summed by
   // BatchElastic. Rejected: rows of s' transposed as in phase 2 (no faster).
   void ElasticAfter(int32_t slot, int32_t w_end, Progress& out) {
-    const int32_t* const ready = fp_.batch_ready.data();
-    while (trail_ < w_end && ready[trail_ / kBatch] < slot) {
-      const int32_t nb = std::min(kBatch, ws_.num_elems - trail_);
+    const int32_t* const ready = ready_;
+    while (trail_ < w_end && ready[(trail_ - w_begin_) / kBatch] < slot) {
+      const int32_t nb = std::min(kBatch, w_end_ - trail_);
       const int32_t* const other = fp_.other.data() + trail_;
       const int32_t* const group_atom = fp_.elem_g.data() + trail_;
       const Real* const pos = pos_;
       Real* const len2 = b_.end_len2;
-      const int32_t last = last_;
+      [[maybe_unused]] const Real* const leq = fp_.elem_leq.data() + trail_;
       for (int32_t j = 0; j < nb; ++j) {
-        const int32_t raw = other[j], o = raw ^ (raw >> 31);
-        const V4 d = LoadAtom(pos, o, last) - LoadAtom(pos, group_atom[j], last);
+        const int32_t raw = other[j];
+        if constexpr (kSections) {
+          // A later section's atom may not have its end-of-tick position yet: RunSections adds
+          // these elements once every section is done.
+          if (raw >= 0 && static_cast<uint32_t>(raw) >= bound_) {
+            len2[j] = leq[j] * leq[j];
+            continue;
+          }
+        }
+        const V4 d = Other(pos, ghost_pos_, raw) - LoadAtom(pos, group_atom[j], own_last_);
         len2[j] = X(d) * X(d) + Y(d) * Y(d) + Z(d) * Z(d);
       }
       out.elastic_after +=
@@ -401,7 +433,18 @@ class Substep {
   void Forces(int32_t w0, int32_t nb) {
     Real* len = kDirectOut ? s_.elem_len.data() + w0 : b_.new_len;
     Real* rate = kDirectOut ? s_.elem_rate.data() + w0 : b_.new_rate;
-    const bool copy = kFilter && kDirectIn && backup_;
+    bool copy = kFilter && kDirectIn && backup_;
+    if constexpr (kSections) {
+      // A section's first batch may start anywhere; the vector code streams the copy 16 bytes at a
+      // time from the batch's start, which must then be aligned (as every later batch's is).
+      if (copy && w0 % kBatch != 0) {
+        for (int32_t j = 0; j < nb; ++j) {
+          StreamStore(ws_.backup_elem_len.data() + w0 + j, len[j]);
+          StreamStore(ws_.backup_elem_rate.data() + w0 + j, rate[j]);
+        }
+        copy = false;
+      }
+    }
     const BatchIo io{.n = nb,
                      .inv_t = Real(1) / T_,
                      .lambda = static_cast<Real>(ws_.options.lambda),
@@ -453,14 +496,26 @@ class Substep {
     // Atom 0 is pushed along -dir, atom 1 along +dir.
     const V4 f = push * Make4(dir[0], dir[1], dir[2]);
     const int32_t o = raw ^ (raw >> 31);
+    const bool mine = static_cast<uint32_t>(raw) < bound_;  // free, and in this section
     if (g == a0) {
       acc -= f;
-      if (raw >= 0) Store4(force_ + 4 * o, Load4(force_ + 4 * o) + f);
+      if (mine) Store4(force_ + 4 * o, Load4(force_ + 4 * o) + f);
     } else {
       acc += f;
-      if (raw >= 0) Store4(force_ + 4 * o, Load4(force_ + 4 * o) - f);
+      if (mine) Store4(force_ + 4 * o, Load4(force_ + 4 * o) - f);
     }
     return true;
+  }
+
+  // The other endpoint's row (raw as FusedPass::other): the tick-start copy when it is fixed or
+  // lies past this section (kSections), else from `own`.
+  V4 Other(const Real* own, [[maybe_unused]] const Real* ghost, int32_t raw) const {
+    const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
+    if constexpr (kSections) {
+      if (static_cast<uint32_t>(raw) >= bound_) return LoadAtom(ghost, o, last_);
+      return LoadAtom(own, o, own_last_);
+    }
+    return LoadAtom(own, o, last_);
   }
 
   // Eqs. 4.13-4.15 (or symplectic Euler) for atom g of slot i, with its rollback copy. check
@@ -487,7 +542,7 @@ class Substep {
             ws_.backup_vel.data(),
             backup_ ? ws_.fused->backup_rows.data() : nullptr,
             T_,
-            last_,
+            own_last_,
             before_,
             after_};
   }
@@ -544,43 +599,62 @@ class Substep {
   uint64_t degenerate_[kMaskWords] = {};  // the batch's degenerate elements not yet taken
   double energy_[3] = {0, 0, 0};          // BatchIo::energy at the substep's start
   int32_t trail_ = 0;                     // ElasticAfter has summed the elements before this
+  // The section (all of the walk without kSections).
+  int32_t slot_begin_ = 0, slot_end_ = 0, w_begin_ = 0, w_end_ = 0;
+  uint32_t bound_ = INT32_MAX;  // free atoms from here on belong to later sections
+  int32_t own_last_ = last_;    // the highest atom whose 4-wide row this section may load from State
+  const int32_t* ready_ = fp_.batch_ready.data();
+  const Real* ghost_pos_ = nullptr;
+  const Real* ghost_vel_ = nullptr;
 };
 
-template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy>
-Progress RunSubstep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after) {
-  return Substep<kSymplectic, kRate, kIdentity, kEnergy>(m, s, ws, T, backup, before, after).Run();
+template <bool kSymplectic, Rate kRate, bool kIdentity, bool kEnergy, bool kSections>
+Progress RunSubstep(const Model& m, State& s, Workspace& ws, Real T, bool backup, bool before, bool after,
+                    int32_t section) {
+  return Substep<kSymplectic, kRate, kIdentity, kEnergy, kSections>(m, s, ws, T, backup, before, after, section).Run();
 }
 
-using SubstepFn = Progress (*)(const Model&, State&, Workspace&, Real, bool, bool, bool);
+using SubstepFn = Progress (*)(const Model&, State&, Workspace&, Real, bool, bool, bool, int32_t);
 
-template <bool kSymplectic, bool kIdentity, bool kEnergy>
+// Sections only in renumbered models (identity): BuildSections makes one section otherwise.
+template <bool kSymplectic, bool kIdentity, bool kEnergy, bool kSections>
 SubstepFn PickRate(Rate rate) {
+  constexpr bool kSec = kSections && kIdentity;
   switch (rate) {
     case Rate::kNone:
-      return RunSubstep<kSymplectic, Rate::kNone, kIdentity, kEnergy>;
+      return RunSubstep<kSymplectic, Rate::kNone, kIdentity, kEnergy, kSec>;
     case Rate::kAnalytic:
-      return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity, kEnergy>;
+      return RunSubstep<kSymplectic, Rate::kAnalytic, kIdentity, kEnergy, kSec>;
     case Rate::kFiltered:
-      return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity, kEnergy>;
+      return RunSubstep<kSymplectic, Rate::kFiltered, kIdentity, kEnergy, kSec>;
   }
   return nullptr;
 }
 
-template <bool kEnergy>
+template <bool kEnergy, bool kSections>
 SubstepFn PickScheme(bool symplectic, Rate rate, bool identity) {
-  if (symplectic) return identity ? PickRate<true, true, kEnergy>(rate) : PickRate<true, false, kEnergy>(rate);
-  return identity ? PickRate<false, true, kEnergy>(rate) : PickRate<false, false, kEnergy>(rate);
+  if (symplectic) {
+    return identity ? PickRate<true, true, kEnergy, kSections>(rate) : PickRate<true, false, kEnergy, false>(rate);
+  }
+  return identity ? PickRate<false, true, kEnergy, kSections>(rate) : PickRate<false, false, kEnergy, false>(rate);
 }
 
-SubstepFn PickSubstep(bool symplectic, Rate rate, bool identity, bool energy) {
-  return energy ? PickScheme<true>(symplectic, rate, identity) : PickScheme<false>(symplectic, rate, identity);
+SubstepFn PickSubstep(bool symplectic, Rate rate, bool identity, bool energy, bool sections) {
+  if (sections) {
+    return energy ? PickScheme<true, true>(symplectic, rate, identity)
+                  : PickScheme<false, true>(symplectic, rate, identity);
+  }
+  return energy ? PickScheme<true, false>(symplectic, rate, identity)
+                : PickScheme<false, false>(symplectic, rate, identity);
 }
 
-// Back to the tick's start from the rollback copy: the atoms and elements a failed substep had
-// written (all of them after the first substep).
-void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool filter) {
+// Back to the tick's start from the rollback copy: the atoms (slots [atom_begin, atoms)) and
+// elements (walk [elem_begin, elems)) a failed substep had written (all of them after the first
+// substep).
+void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool filter, int32_t atom_begin = 0,
+                    int32_t elem_begin = 0) {
   StreamFence();
-  for (int32_t i = 0; i < atoms; ++i) {
+  for (int32_t i = atom_begin; i < atoms; ++i) {
     const int32_t a = ws.active[i];
     for (int c = 0; c < 3; ++c)
       if constexpr (kRowBackup) {
@@ -591,11 +665,239 @@ void RestoreWritten(State& s, Workspace& ws, int32_t atoms, int32_t elems, bool 
       }
   }
   if (!filter) return;
-  for (int32_t w = 0; w < elems; ++w) {
+  for (int32_t w = elem_begin; w < elems; ++w) {
     const int32_t e = ws.elems[w];
     s.elem_len[e] = ws.backup_elem_len[w];
     s.elem_rate[e] = ws.backup_elem_rate[w];
   }
+}
+
+// The walk in StepOptions::threads sections of about as many elements each (FusedPass::Section),
+// their cross elements and the atoms those read; one section in a model that is not renumbered
+// (the sections need the walk in element order), or where a section would have fewer than four
+// batches. Allocates where the sizes grow (a new topology, not a tick).
+void BuildSections(const Model& m, Workspace& ws) {
+  FusedPass& fp = *ws.fused;
+  const int32_t n = ws.num_active, ne = ws.num_elems;
+  int32_t want = std::clamp(ws.options.threads, 1, kMaxSections);
+  want = std::min(want, std::max(1, ne / (4 * kBatch)));
+  if (!fp.identity || n < 2) want = 1;
+  fp.sections = 1;
+  if (want == 1) return;  // allocates nothing
+  // Slot boundaries: section t ends with the group in which the walk passes ne (t + 1) / want.
+  std::vector<int32_t> cut = {0};
+  for (int32_t t = 1; t < want; ++t) {
+    const int64_t target = static_cast<int64_t>(ne) * t / want;
+    const int32_t slot = static_cast<int32_t>(std::lower_bound(fp.group_end.begin(), fp.group_end.begin() + n, target) -
+                                              fp.group_end.begin()) +
+                         1;
+    if (slot > cut.back() && slot < n) cut.push_back(slot);
+  }
+  cut.push_back(n);
+  fp.sections = static_cast<int32_t>(cut.size()) - 1;
+  if (fp.sections == 1) return;
+  for (int32_t i = 0; i + 1 < n; ++i) IDMS_CHECK(ws.active[i] < ws.active[i + 1]);  // full mode: atom order
+  const int32_t ns = fp.sections;
+  fp.section.assign(ns, {});
+  std::vector<int32_t> section_of_slot(n);
+  for (int32_t t = 0; t < ns; ++t) {
+    FusedPass::Section& sec = fp.section[t];
+    sec.slot_begin = cut[t], sec.slot_end = cut[t + 1];
+    sec.w_begin = sec.slot_begin == 0 ? 0 : fp.group_end[sec.slot_begin - 1];
+    sec.w_end = fp.group_end[sec.slot_end - 1];
+    sec.bound = sec.slot_end < n ? ws.active[sec.slot_end] : INT32_MAX;
+    std::fill(section_of_slot.begin() + sec.slot_begin, section_of_slot.begin() + sec.slot_end, t);
+  }
+  IDMS_CHECK(fp.section.back().w_end == ne);
+  // Cross elements by target section (a counting sort keeps walk order within each), the atoms
+  // they read once each, the fixed endpoints, and each section's batch_ready without the cross
+  // elements' far endpoints.
+  std::vector<int32_t> count(ns + 1, 0);
+  std::vector<uint8_t> seen(m.num_atoms, 0);
+  std::vector<int32_t> fixed;
+  fp.section_ready.clear();
+  for (int32_t t = 0; t < ns; ++t) {
+    FusedPass::Section& sec = fp.section[t];
+    sec.ready_begin = static_cast<int32_t>(fp.section_ready.size());
+    int32_t ready = 0;
+    for (int32_t w = sec.w_begin; w < sec.w_end; ++w) {
+      const int32_t raw = fp.other[w], slot = ws.atom_slot[fp.elem_g[w]];
+      ready = std::max(ready, slot);
+      if (raw < 0) {
+        if (!seen[~raw]) seen[~raw] = 1, fixed.push_back(~raw);
+      } else if (raw >= sec.bound) {
+        ++count[section_of_slot[ws.atom_slot[raw]] + 1];
+      } else {
+        ready = std::max(ready, ws.atom_slot[raw]);
+      }
+      if ((w + 1 - sec.w_begin) % kBatch == 0 || w + 1 == sec.w_end) fp.section_ready.push_back(ready);
+    }
+  }
+  for (int32_t t = 0; t < ns; ++t) count[t + 1] += count[t];
+  fp.cross.assign(count[ns], 0);
+  for (int32_t t = 0; t < ns; ++t) fp.section[t].cross_begin = count[t], fp.section[t].cross_end = count[t + 1];
+  for (int32_t w = 0; w < ne; ++w) {
+    const int32_t raw = fp.other[w];
+    if (raw < 0) continue;
+    const int32_t target = section_of_slot[ws.atom_slot[raw]];
+    if (target != section_of_slot[ws.atom_slot[fp.elem_g[w]]]) fp.cross[count[target]++] = w;
+  }
+  fp.ghost_atoms.clear();
+  for (int32_t t = 0; t < ns; ++t) {
+    FusedPass::Section& sec = fp.section[t];
+    sec.ghost_begin = static_cast<int32_t>(fp.ghost_atoms.size());
+    for (int32_t c = sec.cross_begin; c < sec.cross_end; ++c) {
+      const int32_t a = fp.other[fp.cross[c]];
+      if (!seen[a]) seen[a] = 1, fp.ghost_atoms.push_back(a);
+    }
+    sec.ghost_end = static_cast<int32_t>(fp.ghost_atoms.size());
+  }
+  fp.ghost_fixed_begin = static_cast<int32_t>(fp.ghost_atoms.size());
+  fp.ghost_atoms.insert(fp.ghost_atoms.end(), fixed.begin(), fixed.end());
+  const size_t rows = 3 * static_cast<size_t>(m.num_atoms);
+  if (fp.ghost_pos.size() != rows) fp.ghost_pos.assign(rows, Real(0)), fp.ghost_vel.assign(rows, Real(0));
+  const size_t scratch = static_cast<size_t>(ns) * kScratchPerElement * kBatch;
+  if (fp.scratch.size() < scratch) fp.scratch.assign(scratch, Real(0));
+  fp.pool.Ensure(ns);
+}
+
+// The cross elements into section u, before the sweep (on u's thread): the tick-start copies
+// of the atoms other sections read from u (and, on section 0's thread, of the fixed endpoints),
+// and the cross elements' forces on u's atoms, in walk order, as Substep would add them: each
+// such atom's sum then continues in u's sweep exactly as in one section's. Reads only tick-start
+// state, which no thread writes until every section has done this; writes only u's atoms' sums,
+// u's copies and u's scratch. The filter state is left alone (the sweep advances it).
+void CrossForces(const Model& m, State& s, Workspace& ws, int32_t u, Real T, Rate rate) {
+  FusedPass& fp = *ws.fused;
+  const FusedPass::Section& sec = fp.section[u];
+  const Real *const pos = s.atom_pos.data(), *const vel = s.atom_vel.data();
+  auto copy = [&](int32_t from, int32_t to) {
+    for (int32_t i = from; i < to; ++i) {
+      const int32_t a = fp.ghost_atoms[i];
+      for (int c = 0; c < 3; ++c) fp.ghost_pos[3 * a + c] = pos[3 * a + c], fp.ghost_vel[3 * a + c] = vel[3 * a + c];
+    }
+  };
+  copy(sec.ghost_begin, sec.ghost_end);
+  if (u == 0) copy(fp.ghost_fixed_begin, static_cast<int32_t>(fp.ghost_atoms.size()));
+  const Batch b = BatchViews(fp.scratch.data() + static_cast<size_t>(u) * kScratchPerElement * kBatch);
+  Real* const force = fp.force.data();
+  const int32_t last = m.num_atoms - 1;
+  uint64_t degenerate[kMaskWords];
+  for (int32_t c0 = sec.cross_begin; c0 < sec.cross_end; c0 += kBatch) {
+    const int32_t nb = std::min(kBatch, sec.cross_end - c0);
+    for (int32_t j = 0; j < nb; ++j) {
+      const int32_t w = fp.cross[c0 + j], o = fp.other[w], g = fp.elem_g[w];
+      StoreRow(b.s4 + 4 * j, LoadAtom(pos, o, last) - LoadAtom(pos, g, last));
+      if (rate == Rate::kAnalytic) StoreRow(b.dv4 + 4 * j, LoadAtom(vel, o, last) - LoadAtom(vel, g, last));
+      b.k[j] = fp.elem_k[w], b.b[j] = fp.elem_b[w], b.leq[j] = fp.elem_leq[w];
+      if (IsFiltered(rate)) {
+        const Real old_len = s.elem_len[w];  // identity: element w
+        b.prev_len[j] = old_len, b.prev_rate[j] = s.elem_rate[w];
+        b.fresh[j] = old_len != kFilterRestart ? Real(1) : Real(0);
+      }
+    }
+    const BatchIo io{.n = nb,
+                     .inv_t = Real(1) / T,
+                     .lambda = static_cast<Real>(ws.options.lambda),
+                     .k = b.k,
+                     .b = b.b,
+                     .leq = b.leq,
+                     .s4 = b.s4,
+                     .dv4 = b.dv4,
+                     .prev_len = b.prev_len,
+                     .prev_rate = b.prev_rate,
+                     .fresh = b.fresh,
+                     .len = b.new_len,
+                     .rate = b.new_rate,
+                     .backup_len = nullptr,
+                     .backup_rate = nullptr,
+                     .ex = b.ex,
+                     .ey = b.ey,
+                     .ez = b.ez,
+                     .degenerate = degenerate,
+                     .energy = nullptr};
+    BatchForces(rate, /*direct_in=*/false, ws.options.fused_avx2, io);
+    for (int32_t j = 0; j < nb; ++j) {
+      const int32_t w = fp.cross[c0 + j], o = fp.other[w];
+      if ((degenerate[j / 64] >> (j % 64) & 1) == 0) {
+        Store4(force + 4 * o, Load4(force + 4 * o) - Make4(b.ex[j], b.ey[j], b.ez[j]));
+        continue;
+      }
+      // Substep::Degenerate's push on the far endpoint.
+      const Real push = fp.elem_k[w] * fp.elem_leq[w];
+      if (push <= 0) continue;
+      const int32_t a0 = m.elem_atoms[2 * w], a1 = m.elem_atoms[2 * w + 1];
+      Real dir[3];
+      for (int c = 0; c < 3; ++c)
+        dir[c] = static_cast<Real>((m.atom_pos_eq[3 * a1 + c] - m.atom_pos_eq[3 * a0 + c]) / m.elem_leq[w]);
+      const V4 f = push * Make4(dir[0], dir[1], dir[2]);
+      Store4(force + 4 * o, fp.elem_g[w] == a0 ? Load4(force + 4 * o) + f : Load4(force + 4 * o) - f);
+    }
+  }
+}
+
+// The end-of-tick elastic energy of every cross element (Substep::ElasticAfter leaves them out),
+// once every section is done.
+double CrossElasticAfter(const Model& m, const State& s, Workspace& ws) {
+  FusedPass& fp = *ws.fused;
+  const Batch b = BatchViews(fp.scratch.data());
+  const Real* const pos = s.atom_pos.data();
+  const int32_t last = m.num_atoms - 1, total = static_cast<int32_t>(fp.cross.size());
+  double sum = 0;
+  for (int32_t c0 = 0; c0 < total; c0 += kBatch) {
+    const int32_t nb = std::min(kBatch, total - c0);
+    for (int32_t j = 0; j < nb; ++j) {
+      const int32_t w = fp.cross[c0 + j];
+      const V4 d = LoadAtom(pos, fp.other[w], last) - LoadAtom(pos, fp.elem_g[w], last);
+      b.end_len2[j] = X(d) * X(d) + Y(d) * Y(d) + Z(d) * Z(d);
+      b.k[j] = fp.elem_k[w], b.leq[j] = fp.elem_leq[w];
+    }
+    sum += BatchElastic(ws.options.fused_avx2, nb, b.end_len2, b.k, b.leq);
+  }
+  return sum;
+}
+
+// One substep of a sectioned walk: CrossForces, then the sections' sweeps, each on its thread.
+struct SectionsRun {
+  const Model* m;
+  State* s;
+  Workspace* ws;
+  Real T;
+  Rate rate;
+  bool backup, before, after;
+  SubstepFn substep;
+  Progress progress[kMaxSections];
+};
+
+void CrossTask(void* context, int32_t u) {
+  SectionsRun& r = *static_cast<SectionsRun*>(context);
+  CrossForces(*r.m, *r.s, *r.ws, u, r.T, r.rate);
+}
+
+void SweepTask(void* context, int32_t t) {
+  SectionsRun& r = *static_cast<SectionsRun*>(context);
+  r.progress[t] = r.substep(*r.m, *r.s, *r.ws, r.T, r.backup, r.before, r.after, t);
+  StreamFence();  // the rollback copy's non-temporal stores, before the join publishes them
+}
+
+// The sections' progress as one: sums in section order, the largest of the maxima; not ok if
+// any section stopped. atoms / elems are not used (RunFused restores section by section).
+Progress RunSections(SectionsRun& r) {
+  FusedPass& fp = *r.ws->fused;
+  WorkerPool& pool = fp.pool.Ensure(fp.sections);
+  pool.Run(CrossTask, &r);
+  pool.Run(SweepTask, &r);
+  Progress p;
+  for (int32_t t = 0; t < fp.sections; ++t) {
+    const Progress& q = r.progress[t];
+    p.ok = p.ok && q.ok;
+    p.kinetic_before += q.kinetic_before, p.kinetic_after += q.kinetic_after;
+    p.elastic_before += q.elastic_before, p.stretch_k += q.stretch_k, p.sum_k += q.sum_k;
+    p.elastic_after += q.elastic_after;
+    p.abs_pos = std::max(p.abs_pos, q.abs_pos), p.moved = std::max(p.moved, q.moved);
+  }
+  if (p.ok && r.after) p.elastic_after += CrossElasticAfter(*r.m, *r.s, *r.ws);
+  return p;
 }
 
 // The pass's arrays from the live lists: groups by lowest free endpoint (the order
@@ -647,6 +949,7 @@ void BuildFusedPass(const Model& m, Workspace& ws) {
   }
   fp.t_over_m_of = 0;
   fp.topology_version = m.topology_version;
+  BuildSections(m, ws);
 }
 
 }  // namespace
@@ -786,6 +1089,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     }
     ws.fused->t_over_m_of = T;
   }
+  SectionsRun sections;  // ws.fused->sections > 1
   for (int32_t k = 0; k < substeps; ++k) {
     // The energy check's sums: at the tick's start in the first substep, at its end in the last.
     const bool before = energy && k == 0, after = energy && k == substeps - 1;
@@ -802,9 +1106,16 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       }
       ws.fused->force_zero = false;
       const Rate rate = !m.has_damping ? Rate::kNone : filter ? Rate::kFiltered : Rate::kAnalytic;
+      const bool sectioned = ws.fused->sections > 1;
       const SubstepFn substep =
-          PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after);
-      p = substep(m, s, ws, T, /*backup=*/k == 0, before, after);
+          PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after, sectioned);
+      if (sectioned) {
+        sections.m = &m, sections.s = &s, sections.ws = &ws, sections.T = T, sections.rate = rate;
+        sections.backup = k == 0, sections.before = before, sections.after = after, sections.substep = substep;
+        p = RunSections(sections);
+      } else {
+        p = substep(m, s, ws, T, /*backup=*/k == 0, before, after, 0);
+      }
     }
     if (before) {
       energy->kinetic_before = p.kinetic_before;
@@ -816,6 +1127,14 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     }
     if (after) energy->kinetic_after = p.kinetic_after, energy->elastic_after = p.elastic_after;
     ws.reach_slack -= p.moved;  // the tools' next loops see whether an atom may have come in
+    if (!p.ok && ws.fused->sections > 1 && k == 0) {
+      for (int32_t t = 0; t < ws.fused->sections; ++t) {
+        const FusedPass::Section& sec = ws.fused->section[t];
+        const Progress& q = sections.progress[t];
+        RestoreWritten(s, ws, q.atoms, q.elems, filter, sec.slot_begin, sec.w_begin);
+      }
+      return false;
+    }
     if (!p.ok) {
       RestoreWritten(s, ws, k == 0 ? p.atoms : ws.num_active, k == 0 ? p.elems : ws.num_elems, filter);
       return false;
@@ -860,6 +1179,8 @@ FusedPassStatus GetFusedPassStatus(const Workspace& ws) {
   status.identity = ws.fused->identity;
   status.huge_bytes = ws.fused->huge_bytes;
   status.row_backup = internal::kRowBackup;
+  status.sections = ws.fused->sections;
+  status.cross_elements = ws.fused->sections > 1 ? static_cast<int64_t>(ws.fused->cross.size()) : 0;
   return status;
 }
 

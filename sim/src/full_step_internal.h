@@ -10,6 +10,7 @@
 #endif
 
 #include "idms/sim/state.h"
+#include "worker_pool.h"
 
 namespace idms::internal {
 
@@ -44,6 +45,31 @@ struct FusedPass {
   // and backup_vel).
   std::vector<Real> backup_rows;
   int64_t huge_bytes = 0;  // bytes AdviseHugePages moved to huge pages so far
+  // StepOptions::threads: the walk in contiguous sections, one per thread (renumbered models; 1
+  // otherwise). Section t holds the groups of active slots [slot_begin, slot_end) and so the walk
+  // [w_begin, w_end); a section reads no atom of an earlier one, only the tick-start state of some
+  // atoms of later ones, through the elements whose other endpoint lies past `bound` ("cross"
+  // elements). Their forces on those atoms (which come first in those atoms' sums, since every
+  // earlier section's group comes before) are added by the atoms' own section before the sweep,
+  // which reads the atoms from a copy made then (`ghost_*`, fixed endpoints too, so no thread reads
+  // a row another thread writes, not even the 4th lane of a vector load). The same bits as one
+  // section: each atom's sum is formed in walk order and no value is computed differently.
+  struct Section {
+    int32_t slot_begin = 0, slot_end = 0;    // active slots
+    int32_t w_begin = 0, w_end = 0;          // walk indices
+    int32_t bound = 0;                       // the next section's first atom (INT32_MAX for the last)
+    int32_t ready_begin = 0;                 // its batches' entries in section_ready
+    int32_t cross_begin = 0, cross_end = 0;  // cross elements into this section, in `cross`
+    int32_t ghost_begin = 0, ghost_end = 0;  // the atoms of this section they read, in ghost_atoms
+  };
+  int32_t sections = 1;
+  std::vector<Section> section;
+  std::vector<int32_t> cross;        // walk indices, by target section, in walk order
+  std::vector<int32_t> ghost_atoms;  // by section, then the fixed endpoints (ghost_fixed_begin..)
+  int32_t ghost_fixed_begin = 0;
+  std::vector<Real> ghost_pos, ghost_vel;  // (num_atoms x 3) tick-start copies of ghost_atoms
+  std::vector<int32_t> section_ready;      // batch_ready by section, batches from w_begin
+  WorkerPoolPtr pool;
   // Stable step of the configured integrator without tools (the minimum over free atoms), and
   // how many atoms reach it: a tick only re-examines the atoms a tool stiffens.
   double dt_free = 0;

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -531,6 +532,166 @@ TEST(FusedPass, HugePagesAreOptInAndChangeNoBits) {
   StepOptions local;
   Workspace ws_local = MakeWorkspace(model, local);
   EXPECT_EQ(AdviseHugePages(on, ws_local), 0);
+}
+
+// The walk in sections on threads (StepOptions::threads). A slab large enough for several
+// sections of four batches or more, renumbered (the sections need the walk in element order).
+Model SectionSlab(double b) {
+  SlabOptions so;
+  so.rows = 22, so.cols = 24;
+  so.b = so.home_b = b;
+  return ReorderForLocality(GenerateSlab(so));
+}
+
+struct Threaded {
+  uint64_t hash = 0;
+  double force_bits = 0;
+  int64_t warnings = 0, rollbacks = 0, fallbacks = 0, fused_ticks = 0;
+  std::vector<double> energy_before, energy_after;
+  FusedPassStatus status;
+};
+
+Threaded RunThreaded(const Model& model, const State& start, StepOptions o, int32_t threads, int ticks, bool tools,
+                     const std::function<void(int, State&)>& poke = {}) {
+  o.threads = threads;
+  Threaded out;
+  State s = start;
+  Workspace ws = MakeWorkspace(model, o);
+  for (int i = 0; i < ticks; ++i) {
+    if (poke) poke(i, s);
+    const StepReport r = Step(model, s, ws, tools ? Tools(i) : ToolInput{});
+    for (int t = 0; t < r.num_tools; ++t)
+      out.force_bits += r.tools[t].force[0] + r.tools[t].force[1] + r.tools[t].force[2];
+    out.fused_ticks += r.fused;
+    out.fallbacks += r.fallback;
+    out.energy_before.push_back(r.energy_before), out.energy_after.push_back(r.energy_after);
+  }
+  out.hash = HashState(s);
+  out.warnings = TotalWarnings(s.warnings);
+  out.rollbacks = s.warnings.rollback;
+  out.status = GetFusedPassStatus(ws);
+  return out;
+}
+
+// Same bits, same warnings, the same forces at the device; the energy check's sums (formed per
+// section, then added) agree up to the order of the sums.
+void ExpectThreadsAlike(const Threaded& one, const Threaded& many, int32_t threads) {
+  EXPECT_EQ(many.status.sections, threads);
+  EXPECT_GT(many.status.cross_elements, 0);
+  EXPECT_EQ(one.status.sections, 1);
+  EXPECT_EQ(many.hash, one.hash) << threads << " threads";
+  EXPECT_EQ(many.force_bits, one.force_bits);
+  EXPECT_EQ(many.warnings, one.warnings);
+  EXPECT_EQ(many.rollbacks, one.rollbacks);
+  EXPECT_EQ(many.fused_ticks, one.fused_ticks);
+  ASSERT_EQ(many.energy_before.size(), one.energy_before.size());
+  for (size_t i = 0; i < one.energy_before.size(); ++i) {
+    for (const auto& [a, b] : {std::pair{one.energy_before[i], many.energy_before[i]},
+                               std::pair{one.energy_after[i], many.energy_after[i]}}) {
+      if (std::isfinite(a)) {
+        EXPECT_NEAR(b, a, (sizeof(Real) == 4 ? 1e-5 : 1e-12) * (std::fabs(a) + 1e-9)) << i;
+      }
+    }
+  }
+}
+
+TEST(FusedSections, SameBitsAsOneThreadInEveryConfiguration) {
+  struct Config {
+    const char* name;
+    Integrator integrator;
+    double b;
+    LengthRate rate;
+    double lambda;
+    bool field, tools, check;
+  };
+  const Config configs[] = {
+      {"euler_filtered_tools", Integrator::kExplicitEuler, 0.2, LengthRate::kAuto, 1.0, false, true, false},
+      {"symplectic_lambda_field", Integrator::kSymplecticEuler, 0.2, LengthRate::kFiltered, 0.7, true, false, false},
+      {"euler_analytic_checked", Integrator::kExplicitEuler, 0.2, LengthRate::kAnalytic, 1.0, false, true, true},
+      {"symplectic_undamped_tools", Integrator::kSymplecticEuler, 0.0, LengthRate::kAuto, 1.0, false, true, false},
+      {"symplectic_everything_checked", Integrator::kSymplecticEuler, 0.2, LengthRate::kAuto, 0.7, true, true, true},
+  };
+  for (const Config& c : configs) {
+    SCOPED_TRACE(c.name);
+    const Model model = SectionSlab(c.b);
+    StepOptions o = FullNoCheck(c.integrator);
+    o.length_rate = c.rate, o.lambda = c.lambda, o.stability.energy_check = c.check;
+    if (c.field) o.gravity = true, o.air_damping = 3;
+    const Threaded one = RunThreaded(model, Deformed(model), o, 1, 300, c.tools);
+    EXPECT_EQ(one.warnings, c.check ? one.warnings : 0);
+    for (const int32_t threads : {2, 3, 7}) {
+      ExpectThreadsAlike(one, RunThreaded(model, Deformed(model), o, threads, 300, c.tools), threads);
+    }
+  }
+}
+
+TEST(FusedSections, AtRestWithRestartMarksAndDegenerateElements) {
+  // At rest, the home elements are degenerate (zero length) and their filters restart: the cross
+  // elements among them push the far endpoint before the sweep as the sweep would.
+  const Model model = SectionSlab(0.2);
+  const StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  const Threaded one = RunThreaded(model, MakeState(model), o, 1, 200, true);
+  ExpectThreadsAlike(one, RunThreaded(model, MakeState(model), o, 2, 200, true), 2);
+  ExpectThreadsAlike(one, RunThreaded(model, MakeState(model), o, 4, 200, true), 4);
+}
+
+TEST(FusedSections, FailuresRollBackAlike) {
+  // A NaN in an atom and in a filter mid-model: the section that meets it stops, every section's
+  // written part is restored, and the general path repairs the state.
+  const Model model = SectionSlab(0.2);
+  const Real nan = std::numeric_limits<Real>::quiet_NaN();
+  const auto poke = [&](int tick, State& s) {
+    if (tick != 50) return;
+    s.atom_vel[3 * (model.num_atoms / 3) + 1] = nan;
+    s.elem_rate[2 * model.num_elems / 3] = nan;
+  };
+  const StepOptions nocheck = FullNoCheck(Integrator::kSymplecticEuler);
+  const Threaded one = RunThreaded(model, Deformed(model), nocheck, 1, 100, false, poke);
+  EXPECT_GE(one.warnings, 1);
+  ExpectThreadsAlike(one, RunThreaded(model, Deformed(model), nocheck, 3, 100, false, poke), 3);
+  // Too long a tick for symplectic Euler with the energy check on: rolled back and taken by
+  // implicit Euler alike.
+  StepOptions checked;
+  checked.full = true, checked.integrator = Integrator::kSymplecticEuler;
+  checked.stability.predict = false, checked.dt_s = 3e-3;
+  const Threaded diverging = RunThreaded(model, Deformed(model), checked, 1, 100, true);
+  EXPECT_GT(diverging.rollbacks, 0);
+  EXPECT_GT(diverging.fallbacks, 0);
+  ExpectThreadsAlike(diverging, RunThreaded(model, Deformed(model), checked, 2, 100, true), 2);
+  // Undamped explicit Euler without the check grows until a result is not finite.
+  const Model undamped = SectionSlab(0.0);
+  StepOptions growing = FullNoCheck(Integrator::kExplicitEuler);
+  growing.stability.predict = false, growing.dt_s = 5e-3;
+  const Threaded grown = RunThreaded(undamped, Deformed(undamped), growing, 1, 1500, false);
+  EXPECT_GT(grown.warnings, 0);
+  ExpectThreadsAlike(grown, RunThreaded(undamped, Deformed(undamped), growing, 2, 1500, false), 2);
+}
+
+TEST(FusedSections, OneSectionWhereTheModelIsNotRenumberedOrTooSmall) {
+  SlabOptions so;
+  so.rows = 22, so.cols = 24;
+  const Model plain = GenerateSlab(so);
+  StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  const Threaded not_renumbered = RunThreaded(plain, Deformed(plain), o, 4, 3, false);
+  if (!not_renumbered.status.identity) {
+    EXPECT_EQ(not_renumbered.status.sections, 1);
+  }
+  const Model small = ReorderForLocality(GenerateSlab(SlabOptions{}));  // under two sections of 4 batches
+  EXPECT_EQ(RunThreaded(small, Deformed(small), o, 4, 3, false).status.sections, 1);
+}
+
+TEST(FusedSections, ACopiedWorkspaceStartsItsOwnThreads) {
+  const Model model = SectionSlab(0.2);
+  StepOptions o = FullNoCheck(Integrator::kSymplecticEuler);
+  o.threads = 2;
+  State s = Deformed(model);
+  Workspace ws = MakeWorkspace(model, o);
+  for (int i = 0; i < 20; ++i) Step(model, s, ws, Tools(i));
+  State s2 = s;
+  Workspace copy = ws;
+  for (int i = 20; i < 60; ++i) Step(model, s, ws, Tools(i)), Step(model, s2, copy, Tools(i));
+  EXPECT_EQ(HashState(s2), HashState(s));
+  EXPECT_EQ(GetFusedPassStatus(copy).sections, 2);
 }
 
 }  // namespace

@@ -113,6 +113,10 @@ struct StepOptions {
   // The fused kernel may use the AVX2 build of its vectorised phase where the CPU has AVX2 (the
   // same bits; off lets a test cover the baseline x86-64 code on any machine).
   bool fused_avx2 = true;
+  // Threads for the fused kernel (full mode): the walk in as many contiguous sections of a
+  // renumbered model (idms-sim reorder), the same bits as one thread. 1 in a model that is not
+  // renumbered, and fewer where a section would have under 256 elements (see GetFusedPassStatus).
+  int32_t threads = 1;
 };
 
 struct ToolReport {

@@ -198,10 +198,12 @@ void ResyncWorkspace(const Model& model, const State& state, Workspace& workspac
 
 // What full mode's fused kernel is doing, for tests and benches.
 struct FusedPassStatus {
-  bool live = false;        // its lists are built and kept from tick to tick
-  bool identity = false;    // the model's element order is the walk's (renumbered, reorder.h)
-  bool row_backup = false;  // the rollback copy of the atoms is two 4-wide rows per atom (float on SSE)
-  int64_t huge_bytes = 0;   // bytes AdviseHugePages moved to huge pages so far
+  bool live = false;           // its lists are built and kept from tick to tick
+  bool identity = false;       // the model's element order is the walk's (renumbered, reorder.h)
+  bool row_backup = false;     // the rollback copy of the atoms is two 4-wide rows per atom (float on SSE)
+  int32_t sections = 1;        // threads the walk runs on (StepOptions::threads, as the model allows)
+  int64_t cross_elements = 0;  // elements between sections, computed twice per substep
+  int64_t huge_bytes = 0;      // bytes AdviseHugePages moved to huge pages so far
 };
 FusedPassStatus GetFusedPassStatus(const Workspace& workspace);
 
