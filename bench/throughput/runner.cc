@@ -38,8 +38,6 @@ double StreamedBytes(const idms::Model& m, const idms::Workspace& ws) {
 
 }  // namespace
 
-double ThreadCpuSeconds();
-
 ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, ThroughputVariant variant) {
   using namespace idms;
   const int32_t side = static_cast<int32_t>(std::lround(std::sqrt(atoms / 3.0)));
@@ -50,6 +48,7 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   options.integrator = Integrator::kSymplecticEuler;
   options.stability.predict = false;
   options.stability.energy_check = variant.energy_check;
+  options.threads = variant.threads;
   State state = MakeState(model);
   Workspace workspace = MakeWorkspace(model, options);
   workspace.options.fused_pass = variant.fused;
@@ -66,14 +65,15 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   ThroughputResult r;
   const int64_t warnings_before = TotalWarnings(state.warnings);
   for (int rep = 0; rep < reps; ++rep) {
-    const double triad = TriadSample();
+    const double triad = variant.wall ? TriadSampleThreads(variant.threads) : TriadSample();
+    const auto now = variant.wall ? WallSeconds : ThreadCpuSeconds;
     int64_t steps = 0;
-    const double start = ThreadCpuSeconds();
+    const double start = now();
     double elapsed = 0;
     while (elapsed < seconds) {
       for (int k = 0; k < 10; ++k) Step(model, state, workspace, input);
       steps += 10;
-      elapsed = ThreadCpuSeconds() - start;
+      elapsed = now() - start;
     }
     rates.push_back(static_cast<double>(model.num_elems) * steps / elapsed);
     ratios.push_back(rates.back() * bytes_per_elem / triad);
@@ -93,5 +93,6 @@ ThroughputResult RUNNER_NAME(int64_t atoms, double seconds, int reps, Throughput
   r.identity = GetFusedPassStatus(workspace).identity;
   r.huge_mib = static_cast<double>(GetFusedPassStatus(workspace).huge_bytes) / (1 << 20);
   r.bytes_per_elem = bytes_per_elem;
+  r.sections = GetFusedPassStatus(workspace).sections;
   return r;
 }

@@ -10,6 +10,10 @@ struct ThroughputVariant {
   bool fused = true;          // full mode's fused pass (false: the general path, StepOptions::fused_pass = false)
   bool huge_pages = true;     // AdviseHugePages (the pass's arrays on 2 MiB pages where the kernel agrees)
   bool energy_check = false;  // StabilityOptions::energy_check (the pass then forms the energies)
+  // StepOptions::threads. With wall = true the rates are per wall-clock second and each
+  // repetition's triad runs on `threads` threads too (a sectioned pass's CPU time is on several).
+  int threads = 1;
+  bool wall = false;
 };
 
 struct ThroughputResult {
@@ -26,6 +30,7 @@ struct ThroughputResult {
   double huge_mib = 0;    // MiB of the pass's arrays the kernel put on huge pages (FusedPassStatus::huge_bytes)
   // Warnings counted while timed (a rollback or fallback there would time the general path).
   int64_t timed_warnings = 0;
+  int sections = 1;  // FusedPassStatus::sections: threads the pass ran on
 };
 
 // Steps a full (local simulation off) slab of about `atoms` atoms with symplectic Euler for at
@@ -41,6 +46,10 @@ double RunBulletSoftBody(int64_t atoms, double seconds, int reps, int64_t* links
 // them (24 per double element: two reads, one write; the write's read for ownership is not
 // counted), thread CPU time, median of a few passes. Taken before each repetition.
 double TriadSample();
+// The same triad split over `threads` threads in contiguous parts, wall clock.
+double TriadSampleThreads(int threads);
+// Wall-clock seconds (steady clock).
+double WallSeconds();
 
 // Seconds of CPU time this thread has used (the machine is shared: a descheduled run would
 // otherwise count someone else's time).

@@ -5,10 +5,12 @@
 #include <time.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "runner.h"
@@ -54,11 +56,77 @@ double TriadSample() {
   return Triad(t.a, t.b, t.c, 3);
 }
 
+double WallSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+double TriadSampleThreads(int threads) {
+  TriadArrays& t = PairedArrays();
+  const size_t n = t.a.size();
+  std::vector<double> rates;
+  for (int r = 0; r < 3; ++r) {
+    const double s = 0.5 + r;
+    const double start = WallSeconds();
+    std::vector<std::thread> pool;
+    for (int i = 0; i < threads; ++i) {
+      pool.emplace_back([&, i] {
+        for (size_t j = n * i / threads, end = n * (i + 1) / threads; j < end; ++j) t.a[j] = t.b[j] + s * t.c[j];
+      });
+    }
+    for (std::thread& th : pool) th.join();
+    rates.push_back(24.0 * static_cast<double>(n) / (WallSeconds() - start));
+  }
+  std::sort(rates.begin(), rates.end());
+  return rates[1];
+}
+
+namespace {
+
+// --threads N: the fused pass on one thread and on N, wall clock, each repetition against a triad
+// on as many threads; the speed-up and the fraction of the N-thread bandwidth bound.
+int RunThreads(const std::vector<long long>& sizes, int threads, double seconds, int reps, bool f64, bool f32,
+               bool huge, bool check) {
+  std::printf(
+      "full model, symplectic Euler, eq. 4.6 filter on, energy check %s; slabs renumbered; wall clock, median of %d;\n"
+      "each repetition paired with a triad (3 x 128 MiB) on as many threads, taken just before it\n\n",
+      check ? "on" : "off", reps);
+  std::printf("%9s %9s %4s | %10s %10s %6s %5s | %10s %10s %6s %5s | %7s %7s\n", "atoms", "elements", "sect",
+              "f64 1 thr", "f64 N thr", "ratio", "bound", "f32 1 thr", "f32 N thr", "ratio", "bound", "triad 1",
+              "triad N");
+  for (long long n : sizes) {
+    const ThroughputVariant one{.huge_pages = huge, .energy_check = check, .threads = 1, .wall = true};
+    ThroughputVariant many = one;
+    many.threads = threads;
+    const ThroughputResult d1 = f64 ? RunThroughputDouble(n, seconds, reps, one) : ThroughputResult{};
+    const ThroughputResult dn = f64 ? RunThroughputDouble(n, seconds, reps, many) : ThroughputResult{};
+    const ThroughputResult f1 = f32 ? RunThroughputFloat(n, seconds, reps, one) : ThroughputResult{};
+    const ThroughputResult fn = f32 ? RunThroughputFloat(n, seconds, reps, many) : ThroughputResult{};
+    auto ratio = [](const ThroughputResult& a, const ThroughputResult& b) {
+      return b.elem_updates_per_s > 0 ? a.elem_updates_per_s / b.elem_updates_per_s : 0.0;
+    };
+    const ThroughputResult& any = f64 ? dn : fn;
+    std::printf("%9lld %9lld %4d | %10.3e %10.3e %5.2fx %4.0f%% | %10.3e %10.3e %5.2fx %4.0f%% | %7.2f %7.2f\n",
+                static_cast<long long>(any.atoms), static_cast<long long>(any.elements), any.sections,
+                d1.elem_updates_per_s, dn.elem_updates_per_s, ratio(dn, d1), 100 * dn.bound_ratio,
+                f1.elem_updates_per_s, fn.elem_updates_per_s, ratio(fn, f1), 100 * fn.bound_ratio,
+                (f64 ? d1 : f1).triad_bytes_per_s / 1e9, any.triad_bytes_per_s / 1e9);
+    std::fflush(stdout);
+  }
+  std::printf(
+      "\nel/s = element updates per wall-clock second; sect = sections the N-thread pass ran in; ratio = N threads\n"
+      "over one; bound = el/s x bytes per element / the N-thread triad (the fraction of the machine's bandwidth\n"
+      "the N-thread pass uses); triad = GB/s on 1 and on N threads (medians).\n");
+  return 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   std::vector<long long> sizes = {1000, 10000, 100000, 1000000};
   double seconds = 0.5;
   int reps = 5;
   bool bullet = true, variants = true, f64 = true, f32 = true, huge = true, check = false;
+  int threads = 0;
   const char* csv_path = nullptr;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) {
@@ -83,15 +151,22 @@ int main(int argc, char** argv) {
       variants = false, bullet = false;
     } else if (!std::strcmp(argv[i], "--energy-check")) {
       check = true;
+    } else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) {
+      threads = std::atoi(argv[++i]);
+      if (threads < 1 || threads > 64) {
+        std::fprintf(stderr, "--threads: expected 1..64, got '%s'\n", argv[i]);
+        return 2;
+      }
     } else {
       std::fprintf(stderr,
                    "usage: %s [--quick] [--no-bullet] [--main-only] [--no-huge-pages] [--energy-check] "
-                   "[--precision f32|f64|both] [--atoms N] [--csv FILE]\n",
+                   "[--precision f32|f64|both] [--atoms N] [--threads N] [--csv FILE]\n",
                    argv[0]);
       return 2;
     }
   }
 
+  if (threads > 0) return RunThreads(sizes, threads, seconds, reps, f64, f32, huge, check);
   double triad = 0;
   {
     std::vector<double> a(size_t{40} << 20, 0.0), b(size_t{40} << 20, 1.0), c(size_t{40} << 20, 2.0);

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 
 namespace {
@@ -207,6 +208,41 @@ TEST(RunCli, DragHoldsBelowMuSAndSlidesAboveWithFrictionColumns) {
   EXPECT_NE(out.text.find("bad item 'mu_s=nan'"), std::string::npos) << out.text;
   out = RunSim("run --model " + kHex + " --script drag:fraction=-1 --tool sphere:mu_s=0.5");
   EXPECT_NE(out.text.find("bad item 'fraction=-1'"), std::string::npos) << out.text;
+}
+
+// Every column of a CSV but compute_us (the 10th, how long the tick took).
+std::string WithoutTimes(const std::string& path) {
+  std::ifstream in(path);
+  std::string line, out;
+  while (std::getline(in, line)) {
+    size_t at = 0;
+    for (int comma = 0; comma < 9 && at != std::string::npos; ++comma) at = line.find(',', at + 1);
+    out += line.substr(0, at) + "\n";
+  }
+  return out;
+}
+
+TEST(RunCli, FullModeOnSeveralThreadsGivesOneThreadsColumns) {
+  const std::string dir = testing::TempDir();
+  ASSERT_EQ(RunSim("generate slab --rows 24 --cols 24 --out " + dir + "/t_slab").status, 0);
+  ASSERT_EQ(RunSim("reorder --model " + dir + "/t_slab --out " + dir + "/t_ordered").status, 0);
+  std::string columns[2];
+  for (const int threads : {1, 2}) {
+    const std::string csv = dir + "/threads" + std::to_string(threads) + ".csv";
+    const Output out = RunSim("run --model " + dir + "/t_ordered --full --threads " + std::to_string(threads) +
+                              " --script palpate --ticks 2800 --json --csv " + csv);
+    ASSERT_EQ(out.status, 0) << out.text;
+    const auto j = nlohmann::json::parse(out.text);
+    EXPECT_EQ(j["threads"], threads);
+    EXPECT_GT(j["element_updates_per_s"].get<double>(), 0);
+    EXPECT_GT(j["max_force"].get<double>(), 0.01) << "the press touched nothing";
+    columns[threads - 1] = WithoutTimes(csv);
+  }
+  EXPECT_GT(columns[0].size(), 2800u * 20);
+  EXPECT_EQ(columns[1], columns[0]);
+  // --threads is full mode's.
+  EXPECT_NE(RunSim("run --model " + dir + "/t_ordered --threads 2 --script pluck").status, 0);
+  EXPECT_NE(RunSim("run --model " + dir + "/t_ordered --full --threads 0 --script pluck").status, 0);
 }
 
 }  // namespace
