@@ -507,12 +507,16 @@ class Substep {
     return true;
   }
 
-  // The other endpoint's row (raw as FusedPass::other): the tick-start copy when it is fixed or
-  // lies past this section (kSections), else from `own`.
+  // The other endpoint's row (raw as FusedPass::other). kSections: the tick-start copy when it
+  // lies past this section; a fixed one from `own` without the 4th lane (the next atom's x, which
+  // another section may be writing); else from `own`.
   V4 Other(const Real* own, [[maybe_unused]] const Real* ghost, int32_t raw) const {
     const int32_t o = raw ^ (raw >> 31);  // ~raw for a fixed atom
     if constexpr (kSections) {
-      if (static_cast<uint32_t>(raw) >= bound_) return LoadAtom(ghost, o, last_);
+      if (static_cast<uint32_t>(raw) >= bound_) {
+        if (raw < 0) return Make4(own[3 * o], own[3 * o + 1], own[3 * o + 2]);
+        return LoadAtom(ghost, o, last_);
+      }
       return LoadAtom(own, o, own_last_);
     }
     return LoadAtom(own, o, last_);
@@ -710,11 +714,10 @@ void BuildSections(const Model& m, Workspace& ws) {
   }
   IDMS_CHECK(fp.section.back().w_end == ne);
   // Cross elements by target section (a counting sort keeps walk order within each), the atoms
-  // they read once each, the fixed endpoints, and each section's batch_ready without the cross
-  // elements' far endpoints.
+  // they read once each, and each section's batch_ready without the cross elements' far
+  // endpoints.
   std::vector<int32_t> count(ns + 1, 0);
   std::vector<uint8_t> seen(m.num_atoms, 0);
-  std::vector<int32_t> fixed;
   fp.section_ready.clear();
   for (int32_t t = 0; t < ns; ++t) {
     FusedPass::Section& sec = fp.section[t];
@@ -724,7 +727,7 @@ void BuildSections(const Model& m, Workspace& ws) {
       const int32_t raw = fp.other[w], slot = ws.atom_slot[fp.elem_g[w]];
       ready = std::max(ready, slot);
       if (raw < 0) {
-        if (!seen[~raw]) seen[~raw] = 1, fixed.push_back(~raw);
+        // fixed: read in place
       } else if (raw >= sec.bound) {
         ++count[section_of_slot[ws.atom_slot[raw]] + 1];
       } else {
@@ -752,8 +755,6 @@ void BuildSections(const Model& m, Workspace& ws) {
     }
     sec.ghost_end = static_cast<int32_t>(fp.ghost_atoms.size());
   }
-  fp.ghost_fixed_begin = static_cast<int32_t>(fp.ghost_atoms.size());
-  fp.ghost_atoms.insert(fp.ghost_atoms.end(), fixed.begin(), fixed.end());
   const size_t rows = 3 * static_cast<size_t>(m.num_atoms);
   if (fp.ghost_pos.size() != rows) fp.ghost_pos.assign(rows, Real(0)), fp.ghost_vel.assign(rows, Real(0));
   const size_t scratch = static_cast<size_t>(ns) * kScratchPerElement * kBatch;
@@ -762,7 +763,7 @@ void BuildSections(const Model& m, Workspace& ws) {
 }
 
 // The cross elements into section u, before the sweep (on u's thread): the tick-start copies
-// of the atoms other sections read from u (and, on section 0's thread, of the fixed endpoints),
+// of the atoms other sections read from u,
 // and the cross elements' forces on u's atoms, in walk order, as Substep would add them: each
 // such atom's sum then continues in u's sweep exactly as in one section's. Reads only tick-start
 // state, which no thread writes until every section has done this; writes only u's atoms' sums,
@@ -778,7 +779,6 @@ void CrossForces(const Model& m, State& s, Workspace& ws, int32_t u, Real T, Rat
     }
   };
   copy(sec.ghost_begin, sec.ghost_end);
-  if (u == 0) copy(fp.ghost_fixed_begin, static_cast<int32_t>(fp.ghost_atoms.size()));
   const Batch b = BatchViews(fp.scratch.data() + static_cast<size_t>(u) * kScratchPerElement * kBatch);
   Real* const force = fp.force.data();
   const int32_t last = m.num_atoms - 1;

@@ -51,9 +51,10 @@ struct FusedPass {
   // atoms of later ones, through the elements whose other endpoint lies past `bound` ("cross"
   // elements). Their forces on those atoms (which come first in those atoms' sums, since every
   // earlier section's group comes before) are added by the atoms' own section before the sweep,
-  // which reads the atoms from a copy made then (`ghost_*`, fixed endpoints too, so no thread reads
-  // a row another thread writes, not even the 4th lane of a vector load). The same bits as one
-  // section: each atom's sum is formed in walk order and no value is computed differently.
+  // which reads the atoms from a copy made then (`ghost_*`; fixed endpoints in place, three values
+  // each: no thread reads a row another thread writes, not even as the 4th lane of a vector load).
+  // The same bits as one section: each atom's sum is formed in walk order and no value is computed
+  // differently.
   struct Section {
     int32_t slot_begin = 0, slot_end = 0;    // active slots
     int32_t w_begin = 0, w_end = 0;          // walk indices
@@ -64,9 +65,8 @@ struct FusedPass {
   };
   int32_t sections = 1;
   std::vector<Section> section;
-  std::vector<int32_t> cross;        // walk indices, by target section, in walk order
-  std::vector<int32_t> ghost_atoms;  // by section, then the fixed endpoints (ghost_fixed_begin..)
-  int32_t ghost_fixed_begin = 0;
+  std::vector<int32_t> cross;              // walk indices, by target section, in walk order
+  std::vector<int32_t> ghost_atoms;        // by section
   std::vector<Real> ghost_pos, ghost_vel;  // (num_atoms x 3) tick-start copies of ghost_atoms
   std::vector<int32_t> section_ready;      // batch_ready by section, batches from w_begin
   WorkerPoolPtr pool;
