@@ -13,6 +13,7 @@
 
 #include "idms/sim/check.h"
 #include "idms/sim/integrate.h"
+#include "idms/sim/reorder.h"
 #include "idms/sim/stability.h"
 #include "idms/sim/workspace.h"
 #include "step_internal.h"
@@ -274,8 +275,14 @@ Model HardenDrape(const Model& slab, const State& state, double home_k, double h
 DrapeResult Drape(const Model& slab, const DrapeOptions& o, const std::function<void(const DrapeProgress&)>& progress) {
   IDMS_CHECK(o.form.radius > 0 && o.form.k_out >= 0 && o.form.k_in >= 0 && o.form.b >= 0);
   IDMS_CHECK(o.max_time_s > 0 && o.settle_hold_s >= 0 && o.progress_every_s > 0 && o.gap >= 0);
-  const Model m = HasHomeElements(slab) ? StripHomeElements(slab) : slab;
-  IDMS_CHECK(m.num_atoms > 0);
+  const Model stripped = HasHomeElements(slab) ? StripHomeElements(slab) : slab;
+  IDMS_CHECK(stripped.num_atoms > 0);
+  // On several threads the pass needs the model renumbered (reorder.h): stage 2 runs on the
+  // renumbered slab, and its end state is mapped back to the slab's numbering for stage 3.
+  Reordering order;
+  const bool renumber = o.step.threads > 1;
+  const Model renumbered = renumber ? ReorderForLocality(stripped, {}, &order) : Model{};
+  const Model& m = renumber ? renumbered : stripped;
   StepOptions step = o.step;
   step.full = true;
   IDMS_CHECK(step.dt_s <= DrapeStableDt(m, o.form, step));
@@ -325,10 +332,21 @@ DrapeResult Drape(const Model& slab, const DrapeOptions& o, const std::function<
     Step(m, s, ws, no_tools);
   }
   result.warnings = TotalWarnings(s.warnings);
-  MeasureLayers(m, o.form, s, &result);
+  if (renumber) {
+    State back = MakeState(stripped);
+    for (int32_t a = 0; a < stripped.num_atoms; ++a) {
+      const int32_t b = order.atom_new_id[a];
+      for (int c = 0; c < 3; ++c) {
+        back.atom_pos[3 * a + c] = s.atom_pos[3 * b + c], back.atom_vel[3 * a + c] = s.atom_vel[3 * b + c];
+      }
+    }
+    back.time_s = s.time_s;
+    s = std::move(back);
+  }
+  MeasureLayers(stripped, o.form, s, &result);
 
   // Stage 3: the equilibrium becomes the rest shape, hardened by home elements.
-  result.model = HardenDrape(m, s, o.home_k, o.home_b, o.decimals, o.name);
+  result.model = HardenDrape(stripped, s, o.home_k, o.home_b, o.decimals, o.name);
   return result;
 }
 

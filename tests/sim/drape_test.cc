@@ -260,5 +260,32 @@ TEST(Drape, DeterministicAndStableStepBoundShrinksWithTheForm) {
   EXPECT_GE(DrapeStableDt(bare, soft, o.step), o.step.dt_s);  // the default tick is stable
 }
 
+TEST(Drape, OnTwoThreadsTheRenumberedSlabGivesTheSameDrape) {
+  // Stage 2 on two threads runs the slab renumbered (the sections need it) and maps the end state
+  // back: the same slab within rounding of the sums' order, in the slab's own numbering.
+  SlabOptions slab;
+  slab.rows = 16, slab.cols = 16;
+  DrapeOptions o;
+  o.form.radius = 8;
+  o.max_time_s = 0.6;
+  const DrapeResult one = Drape(GenerateSlab(slab), o);
+  o.step.threads = 2;
+  const DrapeResult two = Drape(GenerateSlab(slab), o);
+  EXPECT_EQ(two.warnings, 0);
+  ASSERT_EQ(two.model.num_atoms, one.model.num_atoms);
+  ASSERT_EQ(two.model.num_elems, one.model.num_elems);
+  double max_diff = 0, travel = 0;
+  for (size_t i = 0; i < one.model.atom_pos_eq.size(); ++i) {
+    max_diff = std::max(max_diff, std::fabs(two.model.atom_pos_eq[i] - one.model.atom_pos_eq[i]));
+  }
+  const Model start = GenerateSlab(slab);
+  for (int32_t a = 0; a < start.num_atoms && a < one.model.num_atoms; ++a) {
+    travel = std::max(travel, std::fabs(one.model.atom_pos_eq[3 * a + 2] - start.atom_pos_eq[3 * a + 2]));
+  }
+  EXPECT_GT(travel, 0.5) << "the slab did not drape";
+  EXPECT_LT(max_diff, 2e-3) << "of " << travel;
+  EXPECT_EQ(two.model.elem_atoms, one.model.elem_atoms) << "the slab's own numbering";
+}
+
 }  // namespace
 }  // namespace idms
