@@ -315,6 +315,7 @@ void Run(RunArgs& a) {
                                           (1e-6 * Percentile(sections > 1 ? compute_us : cpu_us, 0.5))
                                     : 0.0},
       {"threads", sections},
+      {"cross_elements", GetFusedPassStatus(workspace).cross_elements},
       {"compute_us",
        {{"p50", Percentile(compute_us, 0.5)},
         {"p99", Percentile(compute_us, 0.99)},
