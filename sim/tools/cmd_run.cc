@@ -7,11 +7,14 @@
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <memory>
 #include <sstream>
+#include <thread>
 
 #include "command.h"
 #include "idms/sim/drag.h"
 #include "idms/sim/edit.h"
+#include "idms/sim/global.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/model_io.h"
 #include "idms/sim/preset.h"
@@ -29,7 +32,9 @@ struct RunArgs {
   int64_t max_ticks = -1;                            // -1 = the whole script
   bool full = false, json = false;
   int threads = 1;
-  bool friction = false;  // the tool has friction (set by Run): the plot draws f_t and f_n
+  double global_rate = 0;      // --global-rate: the whole model at this rate beside the local pass
+  bool global_thread = false;  // --global-thread: on a thread of its own
+  bool friction = false;       // the tool has friction (set by Run): the plot draws f_t and f_n
 };
 
 // Figures of merit of one crossing of a stroke (thesis 6.1.2): the forces while the MIO moves
@@ -181,9 +186,11 @@ void Run(RunArgs& a) {
     Fail("run", "--local-radius " + std::to_string(a.local_radius) + ": expected at least the tool's radius " +
                     std::to_string(tool.radius) + " (so that every contact atom is simulated)");
   }
+  if (a.threads > 1 && !a.full && !(a.global_rate > 0))
+    Fail("run", "--threads is for the whole model's pass: give --full or --global-rate");
   options.dt_s = a.dt;
   options.full = a.full;
-  options.threads = a.threads;
+  options.threads = a.full ? a.threads : 1;
   options.local_radius = a.local_radius > 0 ? a.local_radius : settings.local_radius_per_tool_radius * tool.radius;
   options.lambda = a.lambda;
 
@@ -194,6 +201,12 @@ void Run(RunArgs& a) {
   if (options.full) AdviseHugePages(state, workspace);
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
   DragHand hand(geometry, drag_options);
+  std::unique_ptr<GlobalDynamics> global;
+  if (a.global_rate > 0) {
+    global = std::make_unique<GlobalDynamics>(
+        model, state, options,
+        GlobalOptions{.rate_hz = a.global_rate, .threaded = a.global_thread, .threads = a.threads});
+  }
   const int64_t script_ticks = std::llround((drag ? hand.Duration() : ScriptDuration(script)) / a.dt);
   const int64_t ticks = a.max_ticks >= 0 ? std::min(a.max_ticks, script_ticks) : script_ticks;
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
@@ -220,6 +233,7 @@ void Run(RunArgs& a) {
   std::vector<Crossing> crossings;
   for (const auto& [t0, t1] : StrokeCrossings(drag ? Script::kPalpate : script))
     crossings.push_back({.t0 = t0, .t1 = t1});
+  const auto run_start = std::chrono::steady_clock::now();
   for (int64_t n = 0; n < ticks; ++n) {
     const ScriptSample sample =
         drag ? hand.Next((n + 1) * a.dt, last_force) : SampleScript(script, geometry, (n + 1) * a.dt);
@@ -230,8 +244,14 @@ void Run(RunArgs& a) {
     const double cpu_start = a.full ? ThreadCpuSeconds() : 0.0;  // a system call: full mode only
     const StepReport report = Step(model, state, workspace, input);
     if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
+    if (global) global->AfterTick(state, workspace);
     const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - start).count();
     compute_us.push_back(us);
+    // On its own thread the global pass runs at its wall-clock rate: the ticks are paced at T, as
+    // a device's are, so that it can keep up (unpaced, every exchange would find it stepping).
+    if (global && a.global_thread) {
+      std::this_thread::sleep_until(run_start + std::chrono::duration<double>((n + 1) * a.dt));
+    }
     if (a.full) cpu_us.push_back(1e6 * (ThreadCpuSeconds() - cpu_start));
     const double* f = report.tools[0].force;
     std::copy(f, f + 3, last_force);
@@ -315,6 +335,14 @@ void Run(RunArgs& a) {
                                           (1e-6 * Percentile(sections > 1 ? compute_us : cpu_us, 0.5))
                                     : 0.0},
       {"threads", sections},
+      {"global", global ? nlohmann::json{{"rate_hz", 1.0 / (global->ticks_per_step() * a.dt)},
+                                         {"ticks_per_step", global->ticks_per_step()},
+                                         {"threaded", a.global_thread},
+                                         {"steps", global->stats().steps},
+                                         {"late", global->stats().late},
+                                         {"last_step_ms", global->stats().last_step_ms},
+                                         {"reachable_hz", global->stats().reachable_hz}}
+                        : nlohmann::json(nullptr)},
       {"cross_elements", GetFusedPassStatus(workspace).cross_elements},
       {"compute_us",
        {{"p50", Percentile(compute_us, 0.5)},
@@ -381,11 +409,19 @@ void Setup(CLI::App& app) {
   cmd->add_option("--dt", a.dt, "Time step T, s")->capture_default_str();
   auto* radius = cmd->add_option("--local-radius", a.local_radius, "Haptic window radius r_l (default: the preset's)");
   auto* full = cmd->add_flag("--full", a.full, "Simulate every atom (local simulation off)")->excludes(radius);
+  auto* global_rate =
+      cmd->add_option("--global-rate", a.global_rate,
+                      "The whole model at this rate (Hz) beside the local pass (thesis 7.2.2); 0 = local only")
+          ->check(CLI::Range(0.0, 1000.0))
+          ->excludes(full);
+  cmd->add_flag("--global-thread", a.global_thread,
+                "Run the global pass on a thread of its own (else at each exchange: reproducible)")
+      ->needs(global_rate);
   cmd->add_option("--threads", a.threads,
-                  "Full mode: threads for the model's pass, in sections of a renumbered model (idms-sim reorder); "
+                  "Full mode or the global pass: threads for the whole model's pass, in sections of a renumbered "
+                  "model (idms-sim reorder); "
                   "the same results as one")
       ->check(CLI::Range(1, 64))
-      ->needs(full)
       ->capture_default_str();
   cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
   cmd->add_option("--ticks", a.max_ticks, "Stop after this many ticks (default: the whole script)")

@@ -1,0 +1,103 @@
+// Global dynamics at a slower rate beside local simulation (thesis 7.2.2). Local simulation moves
+// only the haptic window, so a pluck that should lift a membrane lifts a dimple. Here a second
+// pass steps the whole model every K local ticks (global_rate_hz = 1 / (K T)): it takes the
+// atoms the local pass moved as boundary conditions (held at their latest local state through
+// its step), steps the rest in full mode with the local tick as its substep (the fused pass, on
+// its own threads if asked), and hands its result back; the local pass then moves every atom
+// outside its window from where it is to that result, linearly over the next K ticks, so nothing
+// jumps. A result lags the local state by one slow step (the step it took to compute), in both
+// modes below, so an offline run shows what a device sees.
+//
+// Two modes. Synchronous: the global step runs inside AfterTick at the exchange (offline runs,
+// `idms-sim run --global-rate`, reproducible to the bit). Threaded: it runs on a thread of its
+// own; AfterTick never waits for it (no lock, no allocation: it publishes the window through an
+// atomic hand-off and takes a result only when one is ready), and a global step that takes longer
+// than K ticks is counted (`late`) and its rate reported (`reachable_hz`), instead of the local
+// pass falling behind.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "idms/sim/model.h"
+#include "idms/sim/state.h"
+#include "idms/sim/step.h"
+#include "idms/sim/workspace.h"
+
+namespace idms {
+
+struct GlobalOptions {
+  double rate_hz = 0;     // 0 = off (the thesis's local-only mode); else rounded to K = 1 / (rate T) ticks
+  bool threaded = false;  // the global step on its own thread (else inside AfterTick)
+  int32_t threads = 1;    // StepOptions::threads of the global pass (full mode, renumbered models)
+  // Tests only: the global thread sleeps this long after each step (a pass made artificially slow).
+  int32_t extra_delay_us = 0;
+};
+
+struct GlobalStats {
+  int64_t steps = 0;        // global steps taken
+  int64_t exchanges = 0;    // exchanges at which a result was taken
+  int64_t late = 0;         // exchanges at which the threaded step had not finished (nothing taken)
+  double last_step_ms = 0;  // wall time of the last global step
+  double reachable_hz = 0;  // 1 / (its mean step time): the rate this model can run at
+};
+
+class GlobalDynamics {
+ public:
+  // A copy of `state` becomes the global state; `local` are the local pass's options (its tick
+  // T, integrator and damping; the global pass runs them in full mode, energy check off: the
+  // local pass is what the device feels and keeps its own). Allocates; starts the thread.
+  GlobalDynamics(const Model& model, const State& state, const StepOptions& local, const GlobalOptions& options);
+  ~GlobalDynamics();
+  GlobalDynamics(const GlobalDynamics&) = delete;
+  GlobalDynamics& operator=(const GlobalDynamics&) = delete;
+
+  // After each local Step(model, s, ws, ...): the atoms outside the local window move toward the
+  // last global result (refiled in ws's spatial hash); every K ticks the window goes to the
+  // global pass and its latest result becomes the target. O(atoms) per tick; no allocation, no
+  // lock, no wait.
+  void AfterTick(State& s, Workspace& ws);
+
+  int32_t ticks_per_step() const { return k_; }
+  GlobalStats stats() const;
+
+ private:
+  void Exchange(const State& s);
+  void RunJob();  // one global step from the published window (either mode)
+  void ThreadMain();
+
+  const Model& m_;
+  const GlobalOptions options_;
+  int32_t k_ = 1;
+  int64_t ticks_ = 0;
+  // The global pass's own state (only RunJob touches it once the thread runs).
+  State gs_;
+  Workspace gws_;
+  // The window hand-off: the atoms the local pass moved since the last exchange, with their
+  // state then (written by AfterTick, read by RunJob after job_ready_).
+  std::vector<int32_t> window_;
+  int32_t window_n_ = 0;
+  std::vector<Real> window_pos_, window_vel_;
+  std::vector<uint8_t> local_moved_;  // (atoms) moved by the local pass since the last exchange
+  // The result: the global positions at the end of its step (written by RunJob, read by
+  // Exchange after result_ready_).
+  std::vector<Real> result_pos_;
+  // The blend: atoms outside the window go from `from_` to `to_` over K ticks.
+  std::vector<Real> from_, to_;
+  std::vector<uint8_t> blend_;  // (atoms) 1 = the blend moves it this period
+  int32_t phase_ = 0;           // ticks into the blend period
+  bool have_target_ = false;
+  // Threaded mode's hand-offs: 0 idle, 1 job published, 2 result ready.
+  std::atomic<int32_t> slot_{0};
+  std::atomic<bool> quit_{false};
+  std::atomic<int64_t> steps_{0};
+  std::atomic<int64_t> step_ns_total_{0};
+  std::atomic<int64_t> last_step_ns_{0};
+  int64_t exchanges_ = 0, late_ = 0;
+  std::thread thread_;
+};
+
+}  // namespace idms

@@ -1,0 +1,166 @@
+#include "idms/sim/global.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "idms/sim/check.h"
+#include "idms/sim/spatial_hash.h"
+
+namespace idms {
+namespace {
+
+// Hand-off states of GlobalDynamics::slot_.
+constexpr int32_t kIdle = 0, kJob = 1, kResult = 2;
+
+StepOptions GlobalStepOptions(const StepOptions& local, const GlobalOptions& o) {
+  StepOptions g = local;
+  g.full = true;
+  g.threads = std::max(1, o.threads);
+  // The local pass is what the device feels and keeps its own check; the global one keeps the
+  // stable-step prediction (its substeps) and the finiteness checks.
+  g.stability.energy_check = false;
+  return g;
+}
+
+int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+GlobalDynamics::GlobalDynamics(const Model& model, const State& state, const StepOptions& local,
+                               const GlobalOptions& options)
+    : m_(model), options_(options), gs_(state), gws_(MakeWorkspace(model, GlobalStepOptions(local, options))) {
+  IDMS_CHECK(options.rate_hz > 0 && local.dt_s > 0);
+  k_ = std::max(1, static_cast<int32_t>(std::lround(1.0 / (options.rate_hz * local.dt_s))));
+  const size_t rows = 3 * static_cast<size_t>(model.num_atoms);
+  window_.assign(model.num_atoms, 0);
+  window_pos_.assign(rows, Real(0)), window_vel_.assign(rows, Real(0));
+  local_moved_.assign(model.num_atoms, 0);
+  result_pos_.assign(rows, Real(0));
+  from_.assign(rows, Real(0)), to_.assign(rows, Real(0));
+  blend_.assign(model.num_atoms, 0);
+  if (options.threaded) thread_ = std::thread([this] { ThreadMain(); });
+}
+
+GlobalDynamics::~GlobalDynamics() {
+  if (!thread_.joinable()) return;
+  quit_.store(true, std::memory_order_release);
+  slot_.store(-1, std::memory_order_release);  // a changed value: wait() returns only on one
+  slot_.notify_all();
+  thread_.join();
+}
+
+GlobalStats GlobalDynamics::stats() const {
+  GlobalStats st;
+  st.steps = steps_.load(std::memory_order_relaxed);
+  st.exchanges = exchanges_;
+  st.late = late_;
+  st.last_step_ms = 1e-6 * static_cast<double>(last_step_ns_.load(std::memory_order_relaxed));
+  const int64_t total = step_ns_total_.load(std::memory_order_relaxed);
+  st.reachable_hz = total > 0 ? 1e9 * static_cast<double>(st.steps) / static_cast<double>(total) : 0.0;
+  return st;
+}
+
+void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
+  // The local pass owns what it moved: no blend moves it until the global pass has seen it.
+  for (int32_t i = 0; i < s.num_active; ++i) {
+    const int32_t a = s.active_atoms[i];
+    local_moved_[a] = 1;
+    blend_[a] = 0;
+  }
+  ++phase_;
+  if (have_target_) {
+    const Real alpha = static_cast<Real>(std::min(1.0, static_cast<double>(phase_) / k_));
+    for (int32_t a = 0; a < m_.num_atoms; ++a) {
+      if (!blend_[a]) continue;
+      Real* p = &s.atom_pos[3 * a];
+      for (int c = 0; c < 3; ++c) p[c] = from_[3 * a + c] + alpha * (to_[3 * a + c] - from_[3 * a + c]);
+      UpdateSpatialHash(ws.hash, a, p);
+    }
+    if (phase_ >= k_) have_target_ = false;  // arrived: hold until the next result
+  }
+  if (++ticks_ % k_ == 0) Exchange(s);
+}
+
+void GlobalDynamics::Exchange(const State& s) {
+  bool take = false, publish = false;
+  if (options_.threaded) {
+    const int32_t slot = slot_.load(std::memory_order_acquire);
+    take = slot == kResult;
+    publish = slot != kJob;
+    late_ += slot == kJob;
+  } else {
+    take = steps_.load(std::memory_order_relaxed) > 0;
+    publish = true;
+  }
+  if (take) {
+    // Every free atom the local pass has not moved since the last exchange goes from where it is
+    // to the result over the next K ticks.
+    for (int32_t a = 0; a < m_.num_atoms; ++a) {
+      blend_[a] = !m_.atom_fixed[a] && !local_moved_[a];
+      if (!blend_[a]) continue;
+      for (int c = 0; c < 3; ++c) from_[3 * a + c] = s.atom_pos[3 * a + c], to_[3 * a + c] = result_pos_[3 * a + c];
+    }
+    phase_ = 0;
+    have_target_ = true;
+    ++exchanges_;
+  }
+  if (!publish) return;  // the global thread is still stepping: the window waits for the next exchange
+  window_n_ = 0;
+  for (int32_t a = 0; a < m_.num_atoms; ++a) {
+    if (!local_moved_[a]) continue;
+    window_[window_n_++] = a;
+    for (int c = 0; c < 3; ++c) {
+      window_pos_[3 * a + c] = s.atom_pos[3 * a + c], window_vel_[3 * a + c] = s.atom_vel[3 * a + c];
+    }
+    local_moved_[a] = 0;
+  }
+  if (options_.threaded) {
+    slot_.store(kJob, std::memory_order_release);
+    slot_.notify_one();
+  } else {
+    RunJob();
+  }
+}
+
+void GlobalDynamics::RunJob() {
+  const int64_t start = NowNs();
+  auto hold = [&] {
+    for (int32_t i = 0; i < window_n_; ++i) {
+      const int32_t a = window_[i];
+      for (int c = 0; c < 3; ++c) {
+        gs_.atom_pos[3 * a + c] = window_pos_[3 * a + c], gs_.atom_vel[3 * a + c] = window_vel_[3 * a + c];
+      }
+    }
+  };
+  hold();
+  const ToolInput none;
+  for (int32_t j = 0; j < k_; ++j) {
+    Step(m_, gs_, gws_, none);
+    hold();  // the window's atoms are boundary conditions: held at the local state
+  }
+  std::copy(gs_.atom_pos.begin(), gs_.atom_pos.end(), result_pos_.begin());
+  const int64_t ns = NowNs() - start;
+  last_step_ns_.store(ns, std::memory_order_relaxed);
+  step_ns_total_.fetch_add(ns, std::memory_order_relaxed);
+  steps_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void GlobalDynamics::ThreadMain() {
+  for (;;) {
+    int32_t slot = slot_.load(std::memory_order_acquire);
+    while (slot != kJob && !quit_.load(std::memory_order_acquire)) {
+      slot_.wait(slot, std::memory_order_acquire);
+      slot = slot_.load(std::memory_order_acquire);
+    }
+    if (quit_.load(std::memory_order_acquire)) return;
+    RunJob();
+    if (options_.extra_delay_us > 0) std::this_thread::sleep_for(std::chrono::microseconds(options_.extra_delay_us));
+    slot_.store(kResult, std::memory_order_release);
+  }
+}
+
+}  // namespace idms
