@@ -36,10 +36,13 @@ GlobalDynamics::GlobalDynamics(const Model& model, const State& state, const Ste
   IDMS_CHECK(options.rate_hz > 0 && local.dt_s > 0);
   k_ = std::max(1, static_cast<int32_t>(std::lround(1.0 / (options.rate_hz * local.dt_s))));
   const size_t rows = 3 * static_cast<size_t>(model.num_atoms);
+  local_moved_.assign(model.num_atoms, 0);
+  moved_.assign(model.num_atoms, 0);
   window_.assign(model.num_atoms, 0);
   window_pos_.assign(rows, Real(0)), window_vel_.assign(rows, Real(0));
-  local_moved_.assign(model.num_atoms, 0);
-  result_pos_.assign(rows, Real(0));
+  for (Result& r : results_) r.atoms.assign(model.num_atoms, 0), r.pos.assign(rows, Real(0));
+  sent_ = state.atom_pos;
+  blend_list_.assign(model.num_atoms, 0);
   from_.assign(rows, Real(0)), to_.assign(rows, Real(0));
   blend_.assign(model.num_atoms, 0);
   if (options.threaded) thread_ = std::thread([this] { ThreadMain(); });
@@ -68,13 +71,14 @@ void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
   // The local pass owns what it moved: no blend moves it until the global pass has seen it.
   for (int32_t i = 0; i < s.num_active; ++i) {
     const int32_t a = s.active_atoms[i];
-    local_moved_[a] = 1;
+    if (!local_moved_[a]) local_moved_[a] = 1, moved_[moved_n_++] = a;
     blend_[a] = 0;
   }
-  ++phase_;
+  phase_ = std::min(phase_ + 1, k_);
   if (have_target_) {
     const Real alpha = static_cast<Real>(std::min(1.0, static_cast<double>(phase_) / k_));
-    for (int32_t a = 0; a < m_.num_atoms; ++a) {
+    for (int32_t i = 0; i < blend_n_; ++i) {
+      const int32_t a = blend_list_[i];
       if (!blend_[a]) continue;
       Real* p = &s.atom_pos[3 * a];
       for (int c = 0; c < 3; ++c) p[c] = from_[3 * a + c] + alpha * (to_[3 * a + c] - from_[3 * a + c]);
@@ -93,31 +97,37 @@ void GlobalDynamics::Exchange(const State& s) {
     publish = slot != kJob;
     late_ += slot == kJob;
   } else {
-    take = steps_.load(std::memory_order_relaxed) > 0;
+    take = jobs_ > 0;
     publish = true;
   }
   if (take) {
-    // Every free atom the local pass has not moved since the last exchange goes from where it is
-    // to the result over the next K ticks.
-    for (int32_t a = 0; a < m_.num_atoms; ++a) {
-      blend_[a] = !m_.atom_fixed[a] && !local_moved_[a];
-      if (!blend_[a]) continue;
-      for (int c = 0; c < 3; ++c) from_[3 * a + c] = s.atom_pos[3 * a + c], to_[3 * a + c] = result_pos_[3 * a + c];
+    // The atoms the result moved, except those the local pass has moved since the last exchange,
+    // go from where they are to the result over the next K ticks.
+    const Result& r = results_[(jobs_ - 1) % 2];
+    blend_n_ = 0;
+    for (int32_t i = 0; i < r.n; ++i) {
+      const int32_t a = r.atoms[i];
+      if (local_moved_[a]) continue;
+      blend_[a] = 1;
+      blend_list_[blend_n_++] = a;
+      for (int c = 0; c < 3; ++c) from_[3 * a + c] = s.atom_pos[3 * a + c], to_[3 * a + c] = r.pos[3 * i + c];
     }
     phase_ = 0;
     have_target_ = true;
     ++exchanges_;
   }
   if (!publish) return;  // the global thread is still stepping: the window waits for the next exchange
-  window_n_ = 0;
-  for (int32_t a = 0; a < m_.num_atoms; ++a) {
-    if (!local_moved_[a]) continue;
-    window_[window_n_++] = a;
+  window_n_ = moved_n_;
+  for (int32_t i = 0; i < moved_n_; ++i) {
+    const int32_t a = moved_[i];
+    window_[i] = a;
     for (int c = 0; c < 3; ++c) {
-      window_pos_[3 * a + c] = s.atom_pos[3 * a + c], window_vel_[3 * a + c] = s.atom_vel[3 * a + c];
+      window_pos_[3 * i + c] = s.atom_pos[3 * a + c], window_vel_[3 * i + c] = s.atom_vel[3 * a + c];
     }
     local_moved_[a] = 0;
   }
+  moved_n_ = 0;
+  ++jobs_;
   if (options_.threaded) {
     slot_.store(kJob, std::memory_order_release);
     slot_.notify_one();
@@ -132,7 +142,7 @@ void GlobalDynamics::RunJob() {
     for (int32_t i = 0; i < window_n_; ++i) {
       const int32_t a = window_[i];
       for (int c = 0; c < 3; ++c) {
-        gs_.atom_pos[3 * a + c] = window_pos_[3 * a + c], gs_.atom_vel[3 * a + c] = window_vel_[3 * a + c];
+        gs_.atom_pos[3 * a + c] = window_pos_[3 * i + c], gs_.atom_vel[3 * a + c] = window_vel_[3 * i + c];
       }
     }
   };
@@ -142,7 +152,21 @@ void GlobalDynamics::RunJob() {
     Step(m_, gs_, gws_, none);
     hold();  // the window's atoms are boundary conditions: held at the local state
   }
-  std::copy(gs_.atom_pos.begin(), gs_.atom_pos.end(), result_pos_.begin());
+  // The atoms that moved by more than kGlobalEpsilon from what was last handed over for them.
+  Result& r = results_[(jobs_ - 1) % 2];
+  r.n = 0;
+  for (int32_t a = 0; a < m_.num_atoms; ++a) {
+    if (m_.atom_fixed[a]) continue;
+    const Real* p = &gs_.atom_pos[3 * a];
+    Real* sent = &sent_[3 * a];
+    if (!(std::fabs(p[0] - sent[0]) > kGlobalEpsilon || std::fabs(p[1] - sent[1]) > kGlobalEpsilon ||
+          std::fabs(p[2] - sent[2]) > kGlobalEpsilon)) {
+      continue;
+    }
+    r.atoms[r.n] = a;
+    for (int c = 0; c < 3; ++c) r.pos[3 * r.n + c] = p[c], sent[c] = p[c];
+    ++r.n;
+  }
   const int64_t ns = NowNs() - start;
   last_step_ns_.store(ns, std::memory_order_relaxed);
   step_ns_total_.fetch_add(ns, std::memory_order_relaxed);

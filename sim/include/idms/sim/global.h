@@ -37,6 +37,10 @@ struct GlobalOptions {
   int32_t extra_delay_us = 0;
 };
 
+// Model units: a result moves an atom only when it differs by more than this from the position
+// last handed over for it (a tenth of the viewer stream's quantization step).
+inline constexpr double kGlobalEpsilon = 1e-5;
+
 struct GlobalStats {
   int64_t steps = 0;        // global steps taken
   int64_t exchanges = 0;    // exchanges at which a result was taken
@@ -57,8 +61,10 @@ class GlobalDynamics {
 
   // After each local Step(model, s, ws, ...): the atoms outside the local window move toward the
   // last global result (refiled in ws's spatial hash); every K ticks the window goes to the
-  // global pass and its latest result becomes the target. O(atoms) per tick; no allocation, no
-  // lock, no wait.
+  // global pass and its latest result becomes the target. O(window + atoms the result moved) per
+  // tick: the global pass lists the atoms whose result differs by more than kGlobalEpsilon from
+  // what it last handed over (so no atom drifts further than that from the global state). No
+  // allocation, no lock, no wait.
   void AfterTick(State& s, Workspace& ws);
 
   int32_t ticks_per_step() const { return k_; }
@@ -76,19 +82,34 @@ class GlobalDynamics {
   // The global pass's own state (only RunJob touches it once the thread runs).
   State gs_;
   Workspace gws_;
-  // The window hand-off: the atoms the local pass moved since the last exchange, with their
-  // state then (written by AfterTick, read by RunJob after job_ready_).
+  // The atoms the local pass moved since the last exchange (AfterTick's alone).
+  std::vector<uint8_t> local_moved_;  // (atoms)
+  std::vector<int32_t> moved_;
+  int32_t moved_n_ = 0;
+  // The window hand-off: those atoms with their state at the exchange (written by AfterTick,
+  // read by RunJob after the hand-off).
   std::vector<int32_t> window_;
   int32_t window_n_ = 0;
-  std::vector<Real> window_pos_, window_vel_;
-  std::vector<uint8_t> local_moved_;  // (atoms) moved by the local pass since the last exchange
-  // The result: the global positions at the end of its step (written by RunJob, read by
-  // Exchange after result_ready_).
-  std::vector<Real> result_pos_;
-  // The blend: atoms outside the window go from `from_` to `to_` over K ticks.
-  std::vector<Real> from_, to_;
-  std::vector<uint8_t> blend_;  // (atoms) 1 = the blend moves it this period
-  int32_t phase_ = 0;           // ticks into the blend period
+  std::vector<Real> window_pos_, window_vel_;  // by index in window_
+  // Results, two so that the loop blends from one while the thread writes the other: the atoms
+  // whose position changed by more than kGlobalEpsilon and their new positions (by index).
+  struct Result {
+    std::vector<int32_t> atoms;
+    std::vector<Real> pos;
+    int32_t n = 0;
+  };
+  Result results_[2];
+  std::vector<Real> sent_;  // (atoms x 3) the position last handed over per atom (RunJob's)
+  // Jobs published; job j (from 1) writes results_[(j - 1) % 2]. Changed by AfterTick only while
+  // no job runs, read by the job after the hand-off.
+  int64_t jobs_ = 0;
+  // The blend: these atoms go from `from_` to `to_` over K ticks (blend_[a] = 0 once the local
+  // pass takes one).
+  std::vector<int32_t> blend_list_;
+  int32_t blend_n_ = 0;
+  std::vector<Real> from_, to_;  // (atoms x 3)
+  std::vector<uint8_t> blend_;   // (atoms)
+  int32_t phase_ = 0;            // ticks into the blend period
   bool have_target_ = false;
   // Threaded mode's hand-offs: 0 idle, 1 job published, 2 result ready.
   std::atomic<int32_t> slot_{0};
