@@ -49,7 +49,8 @@ Loop::Loop(Model model, const StepOptions& step_options, const ToolCommand& tool
   // Filed now, so the first tick does not refile every atom (O(atoms): ~1 ms at 10^5). The rest
   // copy is filed too, so a reset swaps in a workspace that needs no refiling either.
   ResyncWorkspace(sim.model, sim.state, sim.workspace);
-  rest_ = std::make_unique<const SimSet>(sim);
+  rest_ = std::make_unique<const SimSet>(SimSet{sim.model, sim.state, sim.workspace, nullptr});
+  StartGlobal(sim);
   rest_topology_ = sim.model.topology_version;
   input_.tools[0] = tool;
   input_.num_tools = 0;
@@ -83,11 +84,26 @@ bool Loop::PushCommand(const LoopCommand& command) {
   // Room for both first: this thread is the only producer, so the room cannot shrink meanwhile,
   // and no prepared set is left behind without its command.
   if (commands_.write_available() == 0 || resets_in_flight_ >= kResetsInFlight) return false;
-  // The copy of the rest set: the O(model) work a reset used to do inside one tick.
-  auto set = std::make_unique<SimSet>(*rest_);
+  // The copy of the rest set: the O(model) work a reset used to do inside one tick; its global
+  // pass starts here too (the spent set's stops in CollectResets, on this thread as well).
+  auto set = std::make_unique<SimSet>(SimSet{rest_->model, rest_->state, rest_->workspace, nullptr});
+  StartGlobal(*set);
   reset_ready_.push(set.release());
   ++resets_in_flight_;
   return commands_.push(command);
+}
+
+void Loop::StartGlobal(SimSet& set) const {
+  if (!(options_.global_rate_hz > 0)) return;
+  set.global = std::make_unique<GlobalDynamics>(set.model, set.state, step_options_,
+                                                GlobalOptions{.rate_hz = options_.global_rate_hz,
+                                                              .threaded = options_.global_threaded,
+                                                              .threads = options_.global_threads});
+}
+
+GlobalStats Loop::global_stats() const {
+  const SimSet* set = sim_.get();
+  return set != nullptr && set->global ? set->global->stats() : GlobalStats{};
 }
 
 int Loop::CollectResets() {
@@ -205,6 +221,14 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   const int64_t clamped_before = state.warnings.device_force_clamped;
   const StepReport report = Step(model, state, workspace, input_);
   if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
+  // The atoms outside the haptic window from the global pass (its window hand-off too).
+  if (sim_->global) {
+    sim_->global->AfterTick(state, workspace);
+    const GlobalStats g = sim_->global->stats();
+    counters_.global_steps.store(g.steps, std::memory_order_relaxed);
+    counters_.global_late.store(g.late, std::memory_order_relaxed);
+    counters_.global_reachable_hz.store(g.reachable_hz, std::memory_order_relaxed);
+  }
 
   // Device write: zero without a fresh pose; the guard is the last line of defence.
   const ToolReport& out = report.tools[0];

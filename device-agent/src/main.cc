@@ -37,6 +37,7 @@ struct Args {
   std::string server, token, token_file, trainee, model, model_file, device, scene_file, preset, summary_json,
       dump_final, cache_dir;
   std::string rotation, offset, friction, passivity;
+  double global_rate = -1;  // --global-rate; -1 = the scene's
   double duration_s = 0, rate_hz = 0, scale = 0, max_force = 0, flush_timeout_s = 5, idle_timeout_s = 2;
   int64_t backlog = 120000;
   int cpu = -1;
@@ -146,6 +147,11 @@ bool WriteSummary(const std::string& path, const LatencySummary& period, const L
       {"keyframes", up.keyframes},
       {"mesh_skipped", c.mesh_skipped.load()},
       {"force_faults", c.force_faults.load()},
+      {"global",
+       {{"rate_hz", loop.options().global_rate_hz},
+        {"steps", c.global_steps.load()},
+        {"late", c.global_late.load()},
+        {"reachable_hz", c.global_reachable_hz.load()}}},
       {"passivity",
        {{"enabled", loop.options().passivity.enabled},
         {"ticks_acted", c.passivity_ticks.load()},
@@ -241,6 +247,10 @@ void AddOptions(CLI::App& app, Args& a) {
                  "on|off[,window=S,max_damping=B,quantum=Q]: the passivity observer and controller at the device "
                  "port (overrides the scene's; default on for udp: devices, off otherwise and with --preset thesis; "
                  "docs/passivity.md)");
+  app.add_option("--global-rate", a.global_rate,
+                 "The whole model at this rate (Hz) on a thread of its own beside the local pass (thesis 7.2.2; "
+                 "overrides the scene's global_rate_hz; 0 = local only)")
+      ->check(CLI::Range(0.0, 500.0));
   app.add_flag("--no-realtime", a.no_realtime, "Do not ask for SCHED_FIFO, mlockall and cpu_dma_latency 0");
   app.add_option("--cpu", a.cpu, "Pin the loop thread to this CPU; the I/O thread keeps off it (default: not pinned)")
       ->check(CLI::Range(0, CPU_SETSIZE - 1));
@@ -273,6 +283,8 @@ bool ResolveScene(const Args& a, v1::Scene* scene, StepOptions* step, ToolComman
   if (a.max_force > 0) scene->mutable_device()->set_max_force(a.max_force);
   if (!a.friction.empty() && !ApplyFrictionSpec(a.friction, scene, error)) return false;
   if (!ApplyPassivitySpec(a.passivity, a.device, scene, error)) return false;
+  if (a.global_rate >= 0) scene->set_global_rate_hz(a.global_rate);
+  if (!ValidateScene(*scene, error)) return false;
   if (!SceneToLoop(*scene, step, tool, registration, error)) return false;
   if (a.scale > 0) registration->scale = a.scale;
   if (!a.rotation.empty() && !ParseRotation(a.rotation, registration->rot, error)) {
@@ -399,6 +411,10 @@ int Main(int argc, char** argv) {
   LoopOptions lo;
   if (!MakeLoopOptions(a, scene, &lo, &error)) return Fail(error);
   lo.passivity = PassivityFromScene(scene, registration, step.dt_s);
+  lo.global_rate_hz = scene.global_rate_hz();
+  if (lo.global_rate_hz > 0) {
+    std::fprintf(stderr, "idms-agent: global pass at %g Hz beside the local one (its own thread)\n", lo.global_rate_hz);
+  }
   if (lo.passivity.enabled) {
     std::fprintf(stderr, "idms-agent: passivity controller on (window %g s, damping up to %g, encoder %g)\n",
                  scene.device().passivity().window_s(), scene.device().passivity().max_damping(),

@@ -238,6 +238,12 @@ Checker CheckScene(const v1::Scene& scene) {
   if (scene.has_air_resistance()) {
     c.Range(Path{{"air_resistance", -1}}, scene.air_resistance(), 0, kInf, false);
   }
+  if (scene.has_global_rate_hz()) {
+    c.Range(Path{{"global_rate_hz", -1}}, scene.global_rate_hz(), 0, 500, false);
+    if (scene.global_rate_hz() > 0 && scene.full_simulation()) {
+      c.Fail(Path{{"global_rate_hz", -1}}, "a global pass beside full_simulation, which already moves every atom");
+    }
+  }
   // Streaming and recording.
   if (scene.has_stream_rate_hz()) {
     c.Range(Path{{"stream_rate_hz", -1}}, scene.stream_rate_hz(), 0, 1000, true);

@@ -61,6 +61,7 @@ GlobalStats GlobalDynamics::stats() const {
   st.steps = steps_.load(std::memory_order_relaxed);
   st.exchanges = exchanges_;
   st.late = late_;
+  st.stopped = stopped_;
   st.last_step_ms = 1e-6 * static_cast<double>(last_step_ns_.load(std::memory_order_relaxed));
   const int64_t total = step_ns_total_.load(std::memory_order_relaxed);
   st.reachable_hz = total > 0 ? 1e9 * static_cast<double>(st.steps) / static_cast<double>(total) : 0.0;
@@ -68,6 +69,12 @@ GlobalStats GlobalDynamics::stats() const {
 }
 
 void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
+  // A cut (or any edit) changed the local model: the global pass's copy no longer describes it.
+  if (!started_) started_ = true, topology_ = ws.topology_version;
+  if (stopped_ || ws.topology_version != topology_) {
+    stopped_ = true;
+    return;
+  }
   // The local pass owns what it moved: no blend moves it until the global pass has seen it.
   for (int32_t i = 0; i < s.num_active; ++i) {
     const int32_t a = s.active_atoms[i];

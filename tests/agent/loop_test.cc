@@ -7,9 +7,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <thread>
 
 #include "alloc_counter.h"
 #include "idms/agent/device.h"
@@ -68,7 +70,8 @@ class RecordingDevice final : public Device {
 // A loop over the hex fragment with the scene defaults for `spec`'s script.
 struct Fixture {
   explicit Fixture(const std::string& spec, double max_force = 8) : Fixture(spec, HexModel(), max_force) {}
-  Fixture(const std::string& spec, Model model_in, double max_force = 8) : model(std::move(model_in)) {
+  Fixture(const std::string& spec, Model model_in, double max_force = 8, LoopOptions options = {})
+      : model(std::move(model_in)) {
     std::string script = "palpate", error;
     agent::DeviceScriptName(spec, &script);
     const v1::Scene scene = agent::DefaultScene(script);
@@ -79,7 +82,6 @@ struct Fixture {
     context.registration = registration;
     device = std::make_unique<RecordingDevice>(agent::MakeDevice(spec, context, &error));
     EXPECT_TRUE(device->inner_) << error;
-    LoopOptions options;
     options.realtime = false;
     loop = std::make_unique<Loop>(model, step, tool, registration, *device, options);
   }
@@ -410,6 +412,82 @@ TEST(Loop, RunStopsAfterMaxTicksReleasesDeviceAndPublishesFinalFrame) {
   while (loop.PopMeshSlot(&index)) final_frame = loop.slot(index).final_frame;
   EXPECT_TRUE(final_frame);
   EXPECT_EQ(loop.period_histogram().count(), 49u);
+}
+
+// A slab on home springs a fiftieth of its elements' k: a pluck lifts far more than the window.
+Model SoftMembrane() {
+  SlabOptions so;
+  so.rows = 20, so.cols = 20;
+  so.home_k = 0.3;
+  return GenerateSlab(so);
+}
+
+// The largest displacement from rest of the free atoms farther than `beyond` from `centre`.
+double FarMotion(const Model& model, const State& state, const double centre[3], double beyond) {
+  double largest = 0;
+  for (int32_t a = 0; a < model.num_atoms; ++a) {
+    double d2 = 0, m2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = model.atom_pos_eq[3 * a + c] - centre[c];
+      const double m = static_cast<double>(state.atom_pos[3 * a + c]) - model.atom_pos_eq[3 * a + c];
+      d2 += d * d, m2 += m * m;
+    }
+    if (!model.atom_fixed[a] && d2 > beyond * beyond) largest = std::max(largest, std::sqrt(m2));
+  }
+  return largest;
+}
+
+TEST(Loop, TheGlobalPassMovesTheTissueBeyondTheHapticWindow) {
+  // The pluck lifts the membrane: local simulation alone moves only the window (and the atoms
+  // that linger after leaving it); with the global pass at 100 Hz the rest follows, so the
+  // viewers (whose frames are gathered from this state) see it move.
+  LoopOptions global;
+  global.global_rate_hz = 100;
+  global.global_threaded = false;  // each global step inside the tick: reproducible here
+  Fixture local("scripted:pluck", SoftMembrane()), two_rate("scripted:pluck", SoftMembrane(), 8, global);
+  std::vector<TickSample> samples;
+  local.Run(3000), two_rate.Run(3000, &samples);
+  // The far field: what lies more than 2 window radii from where the tool is now.
+  double centre[3];
+  for (int c = 0; c < 3; ++c) centre[c] = samples.back().tool_pos[c];
+  const double far = 2 * two_rate.step.local_radius;
+  const double moved_local = FarMotion(local.model, local.loop->state(), centre, far);
+  const double moved_global = FarMotion(two_rate.model, two_rate.loop->state(), centre, far);
+  EXPECT_LT(moved_local, 1e-9) << "local simulation moved atoms far outside its window";
+  // More than the viewer stream's quantization step (1e-4): the viewers see it move.
+  EXPECT_GT(moved_global, 2e-4) << "the global pass did not move the far field";
+  const GlobalStats g = two_rate.loop->global_stats();
+  EXPECT_EQ(g.steps, 300);
+  EXPECT_EQ(two_rate.loop->counters().global_steps.load(), 300);
+  EXPECT_LT(samples.back().force[2], -0.05) << "the pluck pulled nothing (the hand is pulled down)";
+  EXPECT_EQ(g.late, 0);
+}
+
+TEST(Loop, TheGlobalPassTicksWithoutAllocatingAndAResetStopsItsThreadOffTheLoop) {
+  LoopOptions global;
+  global.global_rate_hz = 100;
+  Fixture f("scripted:pluck", SoftMembrane(), 8, global);
+  f.Run(10);
+  const int64_t before = AllocationCount();
+  // Paced as a device would be, so the global thread (its own allocations are its business) keeps up.
+  for (int i = 0; i < 300; ++i) {
+    f.Run(1);
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  EXPECT_EQ(AllocationCount() - before, 0) << "the loop's thread allocated";
+  const int64_t steps = f.loop->global_stats().steps;
+  EXPECT_GE(steps, 10);
+  // The reset swaps in a set with a global pass of its own; the spent one's thread stops where
+  // the I/O thread frees it.
+  ASSERT_TRUE(f.loop->PushCommand(LoopCommand{LoopCommand::kReset, 0}));
+  f.Run(1);
+  EXPECT_EQ(f.loop->CollectResets(), 1);
+  EXPECT_LE(f.loop->global_stats().steps, 1) << "the rest set's pass starts from nothing";
+  for (int i = 0; i < 100; ++i) {
+    f.Run(1);
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  EXPECT_GE(f.loop->global_stats().steps, 3);
 }
 
 }  // namespace

@@ -109,6 +109,10 @@ TEST(Scene, BadValuesNameTheFieldAndWhere) {
   EXPECT_EQ(LoadError(std::string(kMinimal) + "stream_rate_hz: 5000\n"),
             "test.scene:7:1: stream_rate_hz: must be in (0, 1000], got 5000");
   EXPECT_EQ(LoadError(std::string(kMinimal) + "gravity { z: nan }\n"), "test.scene:7:1: gravity: must be finite");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "global_rate_hz: 900\n"),
+            "test.scene:7:1: global_rate_hz: must be in [0, 500], got 900");
+  EXPECT_EQ(LoadError(std::string(kMinimal) + "full_simulation: true\nglobal_rate_hz: 50\n"),
+            "test.scene:8:1: global_rate_hz: a global pass beside full_simulation, which already moves every atom");
   EXPECT_EQ(LoadError(std::string(kMinimal) + "units {\n  mm_per_unit: 0\n}\n"),
             "test.scene:8:3: units.mm_per_unit: must be in (0, 1e+09], got 0");
   EXPECT_EQ(LoadError(std::string(kMinimal) + "units {\n  newtons_per_force_unit: -1\n}\n"),

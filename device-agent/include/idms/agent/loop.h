@@ -15,6 +15,7 @@
 #include "idms/agent/realtime.h"
 #include "idms/agent/registration.h"
 #include "idms/agent/thread_owner.h"
+#include "idms/sim/global.h"
 #include "idms/sim/model.h"
 #include "idms/sim/passivity.h"
 #include "idms/sim/state.h"
@@ -73,10 +74,13 @@ struct LoopCommand {
 };
 
 // A model with its state and workspace: what the loop steps, and what a reset swaps in whole.
+// With LoopOptions::global_rate_hz, the set's global pass too (its own thread, started where the
+// set is made and stopped where it is freed: both off the loop).
 struct SimSet {
   Model model;
   State state;
   Workspace workspace;
+  std::unique_ptr<GlobalDynamics> global;
 };
 
 struct LoopOptions {
@@ -92,6 +96,11 @@ struct LoopOptions {
   // The passivity observer and controller between the step's device force and the guard, in the
   // model frame and units (PassivityFromScene); off (the default): not run at all.
   PassivityOptions passivity;
+  // Global dynamics at a slower rate beside the local pass (thesis 7.2.2; sim/global.h): the
+  // whole model at this rate on a thread of its own; 0 = off (the thesis's local-only mode).
+  double global_rate_hz = 0;
+  int32_t global_threads = 1;   // StepOptions::threads of the global pass
+  bool global_threaded = true;  // false: each global step inside the tick (tests: reproducible)
 };
 
 // Counters the loop publishes (relaxed atomics: any thread may read them).
@@ -109,6 +118,11 @@ struct LoopCounters {
   std::atomic<uint64_t> resets{0};              // prepared rest states swapped in
   std::atomic<uint64_t> passivity_ticks{0};     // ticks the passivity controller added damping
   std::atomic<double> passivity_dissipated{0};  // the work its damping took out, force * model units
+  // The global pass (LoopOptions::global_rate_hz): its steps, the exchanges that found it still
+  // stepping, and the rate it can reach on this model (GlobalStats).
+  std::atomic<int64_t> global_steps{0};
+  std::atomic<int64_t> global_late{0};
+  std::atomic<double> global_reachable_hz{0};
 };
 
 class Loop {
@@ -163,8 +177,12 @@ class Loop {
   // replaced back for CollectResets. At most kResetsInFlight copies exist outside the loop at a
   // time. False, with nothing queued, when the command ring or the reset handoff is full.
   bool PushCommand(const LoopCommand& command);
-  // I/O thread: frees the sets replaced by resets (O(model) each, off the loop); how many.
+  // I/O thread: frees the sets replaced by resets (O(model) each, off the loop; their global
+  // passes stop there, waiting for a global step in progress); how many.
   int CollectResets();
+  // The current set's global pass (zeros without one). Loop thread, or any thread once the loop
+  // has stopped (the set is the loop's to swap).
+  GlobalStats global_stats() const;
   static constexpr int kResetsInFlight = 2;
 
   const LoopOptions& options() const { return options_; }
@@ -184,6 +202,8 @@ class Loop {
   RealtimeReport realtime_report() const { return rt_report_; }
 
  private:
+  // The set's global pass, when the options ask for one (allocates, starts its thread).
+  void StartGlobal(SimSet& set) const;
   void SetUpThread();  // real-time setup and pinning of the calling thread, said on stderr
   void ApplyCommands();
   bool PublishMesh(bool final_frame);  // false when no buffer was free

@@ -47,11 +47,13 @@ struct GlobalStats {
   int64_t late = 0;         // exchanges at which the threaded step had not finished (nothing taken)
   double last_step_ms = 0;  // wall time of the last global step
   double reachable_hz = 0;  // 1 / (its mean step time): the rate this model can run at
+  bool stopped = false;     // a cut changed the local model: the global pass stopped (its copy is the old one)
 };
 
 class GlobalDynamics {
  public:
-  // A copy of `state` becomes the global state; `local` are the local pass's options (its tick
+  // Copies of `model` and `state` become the global pass's own (the local model may change under
+  // the loop: a cut stops the global pass, see GlobalStats::stopped); `local` are the local pass's options (its tick
   // T, integrator and damping; the global pass runs them in full mode, energy check off: the
   // local pass is what the device feels and keeps its own). Allocates; starts the thread.
   GlobalDynamics(const Model& model, const State& state, const StepOptions& local, const GlobalOptions& options);
@@ -75,7 +77,9 @@ class GlobalDynamics {
   void RunJob();  // one global step from the published window (either mode)
   void ThreadMain();
 
-  const Model& m_;
+  const Model m_;          // the global pass's copy
+  uint64_t topology_ = 0;  // the local workspace's topology at the first AfterTick
+  bool started_ = false, stopped_ = false;
   const GlobalOptions options_;
   int32_t k_ = 1;
   int64_t ticks_ = 0;
