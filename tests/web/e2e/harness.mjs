@@ -97,14 +97,15 @@ export class Server {
 /**
  * The real agent publishing a scripted palpation of a shipped model (`model`, the hex fragment
  * unless named): its files, or with `library` the server's library's copy by name (downloaded, as a
- * deployed agent does); `args`: more of the agent's options (--trainee NAME, --max-force F, --scene FILE).
+ * deployed agent does), or `modelFile`, a prefix of its own; `args`: more of the agent's options
+ * (--trainee NAME, --max-force F, --scene FILE).
  * @param {Server} server @param {number} durationS @param {string} [device]
- * @param {{library?: boolean, model?: string, args?: string[]}} [options]
+ * @param {{library?: boolean, model?: string, modelFile?: string, args?: string[]}} [options]
  */
 export function startAgent(server, durationS, device = 'scripted:palpate', options = {}) {
   const name = options.model ?? 'hex_4x5_home';
   const model = options.library ? ['--model', name, '--cache-dir', tempDir('agent-cache')]
-    : ['--model-file', join(sourceDir(), 'models', name)];
+    : ['--model-file', options.modelFile ?? join(sourceDir(), 'models', name)];
   const child = spawn(agentBin(), ['--server', `ws://127.0.0.1:${server.port}`, '--token', server.token('agent'),
     ...model, '--device', device, '--no-realtime', '--duration', String(durationS), ...(options.args ?? [])],
   { stdio: ['ignore', 'ignore', 'pipe'] });

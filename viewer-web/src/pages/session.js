@@ -207,7 +207,8 @@ export function sessionPage(id, role, mode) {
   // What the surface shows, and where a model point falls on the canvas, for the tests.
   /** @type {any} */ (window).__idmsSurface = () => ({ contacts: view.view.numContacts, lo: view.view.surface.lo, hi: view.view.surface.hi,
     colourBy: view.view.surface.colourBy, scale: view.view.surface.scale, restTimeS: view.view.surface.restTimeS,
-    camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius });
+    camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius,
+    moved: movedVertices(view.view.surface) });
   /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
   // The force-against-depth plot's axes as last drawn, for the tests.
@@ -250,4 +251,18 @@ export function sessionPage(id, role, mode) {
     socket?.close();
     view.dispose();
   };
+}
+
+/**
+ * Vertices displaced from rest by more than a hundredth of the colour map's range (the tests' measure
+ * of how much of the surface moved). @param {import('../view/surface_geometry.js').SurfaceGeometry} g
+ */
+function movedVertices(g) {
+  const t2 = (0.01 * g.hi) ** 2;
+  let n = 0;
+  for (let i = 0; i < 3 * g.numVertices; i += 3) {
+    const dx = g.actual[i] - g.rest[i], dy = g.actual[i + 1] - g.rest[i + 1], dz = g.actual[i + 2] - g.rest[i + 2];
+    if (dx * dx + dy * dy + dz * dz > t2) n++;
+  }
+  return n;
 }
