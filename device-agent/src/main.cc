@@ -100,6 +100,14 @@ void PrintSummary(const LatencySummary& period, const LatencySummary& wake, cons
                static_cast<long long>(o.spin_ns / 1000), period.p50_us, period.p99_us, period.p999_us, period.max_us,
                wake.p50_us, wake.p99_us, wake.p999_us, wake.max_us, compute.p50_us, compute.p99_us, compute.p999_us,
                compute.max_us);
+  if (o.global_rate_hz > 0) {
+    const LoopCounters& c = loop.counters();
+    const double reachable = c.global_reachable_hz.load();
+    std::fprintf(
+        stderr, "  global: %lld steps at %g Hz asked, %lld exchanges found it still stepping; it reaches %.0f Hz%s\n",
+        static_cast<long long>(c.global_steps.load()), o.global_rate_hz, static_cast<long long>(c.global_late.load()),
+        reachable, reachable > 0 && reachable < o.global_rate_hz ? " (the model is too large for the rate asked)" : "");
+  }
   if (!offline) {
     std::fprintf(stderr,
                  "  uplink: %llu samples sent (%llu resent, %llu dropped, %llu unsent), %llu mesh frames "
@@ -412,6 +420,8 @@ int Main(int argc, char** argv) {
   if (!MakeLoopOptions(a, scene, &lo, &error)) return Fail(error);
   lo.passivity = PassivityFromScene(scene, registration, step.dt_s);
   lo.global_rate_hz = scene.global_rate_hz();
+  // The cores the loop does not use (sections of a renumbered model; one otherwise).
+  lo.global_threads = std::max(1, static_cast<int>(std::thread::hardware_concurrency()) - 1);
   if (lo.global_rate_hz > 0) {
     std::fprintf(stderr, "idms-agent: global pass at %g Hz beside the local one (its own thread)\n", lo.global_rate_hz);
   }

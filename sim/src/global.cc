@@ -81,9 +81,9 @@ void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
     if (!local_moved_[a]) local_moved_[a] = 1, moved_[moved_n_++] = a;
     blend_[a] = 0;
   }
-  phase_ = std::min(phase_ + 1, k_);
+  phase_ = std::min(phase_ + 1, span_);
   if (have_target_) {
-    const Real alpha = static_cast<Real>(std::min(1.0, static_cast<double>(phase_) / k_));
+    const Real alpha = static_cast<Real>(static_cast<double>(phase_) / span_);
     for (int32_t i = 0; i < blend_n_; ++i) {
       const int32_t a = blend_list_[i];
       if (!blend_[a]) continue;
@@ -91,7 +91,7 @@ void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
       for (int c = 0; c < 3; ++c) p[c] = from_[3 * a + c] + alpha * (to_[3 * a + c] - from_[3 * a + c]);
       UpdateSpatialHash(ws.hash, a, p);
     }
-    if (phase_ >= k_) have_target_ = false;  // arrived: hold until the next result
+    if (phase_ >= span_) have_target_ = false;  // arrived: hold until the next result
   }
   if (++ticks_ % k_ == 0) Exchange(s);
 }
@@ -119,6 +119,10 @@ void GlobalDynamics::Exchange(const State& s) {
       blend_list_[blend_n_++] = a;
       for (int c = 0; c < 3; ++c) from_[3 * a + c] = s.atom_pos[3 * a + c], to_[3 * a + c] = r.pos[3 * i + c];
     }
+    // Over as many ticks as results came apart last time (K while the pass keeps up; more on a
+    // model too large for the rate, so that its atoms keep moving instead of stepping and holding).
+    span_ = last_take_ < 0 ? k_ : static_cast<int32_t>(std::clamp<int64_t>(ticks_ - last_take_, k_, int64_t{64} * k_));
+    last_take_ = ticks_;
     phase_ = 0;
     have_target_ = true;
     ++exchanges_;

@@ -6,7 +6,8 @@
 // its own threads if asked), and hands its result back; the local pass then moves every atom
 // outside its window from where it is to that result, linearly over the next K ticks, so nothing
 // jumps. A result lags the local state by one slow step (the step it took to compute), in both
-// modes below, so an offline run shows what a device sees.
+// modes below, so an offline run shows what a device sees. When results come further apart (a
+// model too large for the rate), each blend spans the interval the last two came apart.
 //
 // Two modes. Synchronous: the global step runs inside AfterTick at the exchange (offline runs,
 // `idms-sim run --global-rate`, reproducible to the bit). Threaded: it runs on a thread of its
@@ -114,6 +115,8 @@ class GlobalDynamics {
   std::vector<Real> from_, to_;  // (atoms x 3)
   std::vector<uint8_t> blend_;   // (atoms)
   int32_t phase_ = 0;            // ticks into the blend period
+  int32_t span_ = 1;             // its length: the ticks between the last two results taken, at least K
+  int64_t last_take_ = -1;       // ticks_ when the last result was taken; -1 = none yet
   bool have_target_ = false;
   // Threaded mode's hand-offs: 0 idle, 1 job published, 2 result ready.
   std::atomic<int32_t> slot_{0};
