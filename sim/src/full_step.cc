@@ -179,6 +179,19 @@ constexpr bool kRowBackup = false;
 [[maybe_unused]] inline void StreamRow(Real* dst, V4 v) { StreamStore3(dst, v); }  // kRowBackup is off
 #endif
 
+// A degenerate element's push (DegenerateElement in forces.cc): k l_eq along its rest direction,
+// atom 0 pushed along -f, atom 1 along +f. w: its walk index, e: its id. False: no push (k l_eq <= 0).
+inline bool DegeneratePush(const Model& m, const FusedPass& fp, int32_t w, int32_t e, V4* f) {
+  const Real push = fp.elem_k[w] * fp.elem_leq[w];
+  if (push <= 0) return false;
+  const int32_t a0 = m.elem_atoms[2 * e], a1 = m.elem_atoms[2 * e + 1];
+  Real dir[3];
+  for (int c = 0; c < 3; ++c)
+    dir[c] = static_cast<Real>((m.atom_pos_eq[3 * a1 + c] - m.atom_pos_eq[3 * a0 + c]) / m.elem_leq[e]);
+  *f = push * Make4(dir[0], dir[1], dir[2]);
+  return true;
+}
+
 // One substep over every free atom in slot order. Group i holds the elements whose lowest free
 // endpoint is atom g = active[i]; they are visited after every earlier group, so once group i is
 // done g has all of its forces (no later element touches g) and is integrated in place. Element
@@ -487,14 +500,9 @@ class Substep {
       s_.elem_len[e] = kFilterRestart;
       s_.elem_rate[e] = 0;
     }
-    const Real push = fp_.elem_k[w] * fp_.elem_leq[w];
-    if (push <= 0) return true;
-    const int32_t a0 = m_.elem_atoms[2 * e], a1 = m_.elem_atoms[2 * e + 1];
-    Real dir[3];
-    for (int c = 0; c < 3; ++c)
-      dir[c] = static_cast<Real>((m_.atom_pos_eq[3 * a1 + c] - m_.atom_pos_eq[3 * a0 + c]) / m_.elem_leq[e]);
-    // Atom 0 is pushed along -dir, atom 1 along +dir.
-    const V4 f = push * Make4(dir[0], dir[1], dir[2]);
+    V4 f;
+    if (!DegeneratePush(m_, fp_, w, e, &f)) return true;
+    const int32_t a0 = m_.elem_atoms[2 * e];
     const int32_t o = raw ^ (raw >> 31);
     const bool mine = static_cast<uint32_t>(raw) < bound_;  // free, and in this section
     if (g == a0) {
@@ -824,14 +832,9 @@ void CrossForces(const Model& m, State& s, Workspace& ws, int32_t u, Real T, Rat
         continue;
       }
       // Substep::Degenerate's push on the far endpoint.
-      const Real push = fp.elem_k[w] * fp.elem_leq[w];
-      if (push <= 0) continue;
-      const int32_t a0 = m.elem_atoms[2 * w], a1 = m.elem_atoms[2 * w + 1];
-      Real dir[3];
-      for (int c = 0; c < 3; ++c)
-        dir[c] = static_cast<Real>((m.atom_pos_eq[3 * a1 + c] - m.atom_pos_eq[3 * a0 + c]) / m.elem_leq[w]);
-      const V4 f = push * Make4(dir[0], dir[1], dir[2]);
-      Store4(force + 4 * o, fp.elem_g[w] == a0 ? Load4(force + 4 * o) + f : Load4(force + 4 * o) - f);
+      V4 f;
+      if (!DegeneratePush(m, fp, w, w, &f)) continue;
+      Store4(force + 4 * o, fp.elem_g[w] == m.elem_atoms[2 * w] ? Load4(force + 4 * o) + f : Load4(force + 4 * o) - f);
     }
   }
 }
