@@ -101,7 +101,7 @@ void GlobalDynamics::Exchange(const State& s) {
   if (options_.threaded) {
     const int32_t slot = slot_.load(std::memory_order_acquire);
     take = slot == kResult;
-    publish = slot != kJob;
+    publish = slot == kIdle || slot == kResult;
     late_ += slot == kJob;
   } else {
     take = jobs_ > 0;
