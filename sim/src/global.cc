@@ -93,7 +93,7 @@ void GlobalDynamics::AfterTick(State& s, Workspace& ws) {
     }
     if (phase_ >= span_) have_target_ = false;  // arrived: hold until the next result
   }
-  if (++ticks_ % k_ == 0) Exchange(s);
+  if ((++ticks_ + options_.phase) % k_ == 0) Exchange(s);
 }
 
 void GlobalDynamics::Exchange(const State& s) {

@@ -24,7 +24,8 @@ ScriptedTrace RunScripted(const Model& model, const ScriptedRunOptions& o) {
   Workspace ws = MakeWorkspace(model, step);
   std::unique_ptr<GlobalDynamics> global;
   if (o.mode == RunMode::kTwoRate) {
-    global = std::make_unique<GlobalDynamics>(model, s, step, GlobalOptions{.rate_hz = o.global_rate_hz});
+    global = std::make_unique<GlobalDynamics>(model, s, step,
+                                              GlobalOptions{.rate_hz = o.global_rate_hz, .phase = o.global_phase});
   }
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
   const int64_t script_ticks = std::llround(ScriptDuration(o.script) / step.dt_s);
@@ -54,6 +55,25 @@ ScriptedTrace RunScripted(const Model& model, const ScriptedRunOptions& o) {
   }
   if (global && global->stats().reachable_hz > 0) trace.global_step_ms = 1e3 / global->stats().reachable_hz;
   return trace;
+}
+
+UpdateJump CompareShifted(const ScriptedTrace& run, const ScriptedTrace& shifted) {
+  IDMS_CHECK(run.force.size() == shifted.force.size());
+  std::vector<uint8_t> at_update(run.force.size(), 0);
+  for (const int64_t t : run.update_ticks) {
+    if (t > 0 && t < static_cast<int64_t>(run.force.size())) at_update[t] = 1;
+  }
+  UpdateJump u;
+  for (size_t i = 1; i < run.force.size(); ++i) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = (run.force[i][c] - run.force[i - 1][c]) - (shifted.force[i][c] - shifted.force[i - 1][c]);
+      d2 += d * d;
+    }
+    double& m = at_update[i] ? u.at_update_max : u.elsewhere_max;
+    m = std::max(m, std::sqrt(d2));
+  }
+  return u;
 }
 
 TraceError CompareTraces(const ScriptedTrace& ref, const ScriptedTrace& run) {

@@ -43,6 +43,21 @@ TEST(GlobalDynamics, TwoRateFollowsTheWholeModelOnAPluckWhereLocalOnlyDoesNot) {
   EXPECT_LT(global.jump_at_update_max, 0.05);
 }
 
+TEST(GlobalDynamics, AnUpdateAddsNoJumpToAStrokesForce) {
+  // A stroke changes the force by tenths of a newton from one tick to the next as surface atoms
+  // enter the sphere, at update ticks as elsewhere. The update's own part: against the same run
+  // with its exchanges half a slow step later (no update at these ticks, the same contacts).
+  const Model model = SoftMembrane();
+  const ScriptedRunOptions o{.script = Script::kStrokeSlow, .mode = RunMode::kTwoRate, .global_rate_hz = 100};
+  ScriptedRunOptions shifted = o;
+  shifted.global_phase = 5;
+  const ScriptedTrace run = RunScripted(model, o);
+  const UpdateJump u = CompareShifted(run, RunScripted(model, shifted));
+  ASSERT_GT(run.update_ticks.size(), 500u);
+  EXPECT_LT(u.at_update_max, 0.05);
+  EXPECT_LT(u.at_update_max, u.elsewhere_max + 1e-3) << "the updates stand out";
+}
+
 TEST(GlobalDynamics, SynchronousRunsAreReproducibleAndTheBlendNeverJumps) {
   const Model model = SoftMembrane();
   const ScriptedRunOptions o{

@@ -36,6 +36,8 @@ struct GlobalOptions {
   int32_t threads = 1;    // StepOptions::threads of the global pass (full mode, renumbered models)
   // Tests only: the global thread sleeps this long after each step (a pass made artificially slow).
   int32_t extra_delay_us = 0;
+  // Benches: the exchanges come this many ticks earlier in each period (0 = at multiples of K).
+  int32_t phase = 0;
 };
 
 // Model units: a result moves an atom only when it differs by more than this from the position

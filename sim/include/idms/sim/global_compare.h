@@ -20,6 +20,7 @@ struct ScriptedRunOptions {
   Script script = Script::kPluck;
   RunMode mode = RunMode::kLocal;
   double global_rate_hz = 100;  // kTwoRate
+  int32_t global_phase = 0;     // kTwoRate: GlobalOptions::phase
   int32_t sample_every = 10;    // surface positions every this many ticks
   int64_t max_ticks = -1;       // -1 = the whole script
 };
@@ -44,6 +45,15 @@ struct TraceError {
   double jump_at_update_max = 0, jump_elsewhere_max = 0;
   std::vector<double> jumps_at_update;  // each one, for a histogram
 };
+
+// The update's own part of the force change: the same two-rate run with its exchanges shifted half
+// a slow step (`shifted`, no update at `run`'s update ticks) meets the same contacts at nearly the
+// same ticks, so |(f(t) - f(t-1)) - (f_s(t) - f_s(t-1))| at run's update ticks is what the update
+// added there; `elsewhere` is the same at every other tick (how much the two runs differ anyway).
+struct UpdateJump {
+  double at_update_max = 0, elsewhere_max = 0;
+};
+UpdateJump CompareShifted(const ScriptedTrace& run, const ScriptedTrace& shifted);
 
 TraceError CompareTraces(const ScriptedTrace& reference, const ScriptedTrace& run);
 
