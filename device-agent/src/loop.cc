@@ -221,14 +221,6 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   const int64_t clamped_before = state.warnings.device_force_clamped;
   const StepReport report = Step(model, state, workspace, input_);
   if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
-  // The atoms outside the haptic window from the global pass (its window hand-off too).
-  if (sim_->global) {
-    sim_->global->AfterTick(state, workspace);
-    const GlobalStats g = sim_->global->stats();
-    counters_.global_steps.store(g.steps, std::memory_order_relaxed);
-    counters_.global_late.store(g.late, std::memory_order_relaxed);
-    counters_.global_reachable_hz.store(g.reachable_hz, std::memory_order_relaxed);
-  }
 
   // Device write: zero without a fresh pose; the guard is the last line of defence.
   const ToolReport& out = report.tools[0];
@@ -252,6 +244,16 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     passivity_.Commanded(f_model);
     if (passive.acted) counters_.passivity_ticks.fetch_add(1, std::memory_order_relaxed);
     counters_.passivity_dissipated.store(passivity_.dissipated(), std::memory_order_relaxed);
+  }
+
+  // The atoms outside the haptic window from the global pass (its window hand-off too): after the
+  // device write, which it does not change, and before the snapshot, which shows it.
+  if (sim_->global) {
+    sim_->global->AfterTick(state, workspace);
+    const GlobalStats g = sim_->global->stats();
+    counters_.global_steps.store(g.steps, std::memory_order_relaxed);
+    counters_.global_late.store(g.late, std::memory_order_relaxed);
+    counters_.global_reachable_hz.store(g.reachable_hz, std::memory_order_relaxed);
   }
 
   // Surface snapshot at the stream rate.

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #if defined(__linux__)
 #include <sys/mman.h>
 #endif
@@ -1092,7 +1093,8 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     }
     ws.fused->t_over_m_of = T;
   }
-  SectionsRun sections;  // ws.fused->sections > 1
+  // Only a sectioned pass sets up its 64 sections' progress (not every one-thread tick).
+  std::optional<SectionsRun> sections;
   for (int32_t k = 0; k < substeps; ++k) {
     // The energy check's sums: at the tick's start in the first substep, at its end in the last.
     const bool before = energy && k == 0, after = energy && k == substeps - 1;
@@ -1113,9 +1115,10 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
       const SubstepFn substep =
           PickSubstep(integrator == Integrator::kSymplecticEuler, rate, ws.fused->identity, before || after, sectioned);
       if (sectioned) {
-        sections.m = &m, sections.s = &s, sections.ws = &ws, sections.T = T, sections.rate = rate;
-        sections.backup = k == 0, sections.before = before, sections.after = after, sections.substep = substep;
-        p = RunSections(sections);
+        if (!sections) sections.emplace();
+        sections->m = &m, sections->s = &s, sections->ws = &ws, sections->T = T, sections->rate = rate;
+        sections->backup = k == 0, sections->before = before, sections->after = after, sections->substep = substep;
+        p = RunSections(*sections);
       } else {
         p = substep(m, s, ws, T, /*backup=*/k == 0, before, after, 0);
       }
@@ -1133,7 +1136,7 @@ bool RunFused(const Model& m, State& s, Workspace& ws, Integrator integrator, in
     if (!p.ok && ws.fused->sections > 1 && k == 0) {
       for (int32_t t = 0; t < ws.fused->sections; ++t) {
         const FusedPass::Section& sec = ws.fused->section[t];
-        const Progress& q = sections.progress[t];
+        const Progress& q = sections->progress[t];
         RestoreWritten(s, ws, q.atoms, q.elems, filter, sec.slot_begin, sec.w_begin);
       }
       return false;
