@@ -506,11 +506,6 @@ void LiveSession::End(const std::string& state, const std::string& why) {
   timer_.cancel();
   Flush();  // what the viewers were still owed
   gather_timer_.cancel();
-  {
-    std::lock_guard lock(row_mu_);
-    row_.state = state;
-    row_.recording = hub_.recordings().NameFor(id_, state);
-  }
   audience_.CloseAll(kNormal, why);
   num_viewers_ = 0;
   Publish(nullptr, 0, why);
@@ -518,7 +513,14 @@ void LiveSession::End(const std::string& state, const std::string& why) {
   viewer_sub_.reset();
   // Once the file is closed and published: the row stored, the hub told, the agent acknowledged.
   const bool ended = state == "ended";
-  recorder_->Finish([self = shared_from_this(), ended, epoch = lease_.epoch](bool ok) {
+  // The row says "ended" or "interrupted" only once its recording is there under that name: a
+  // listing that reads the new state finds the file (until then it reads "live", and the live file).
+  recorder_->Finish([self = shared_from_this(), ended, state, epoch = lease_.epoch](bool ok) {
+    {
+      std::lock_guard lock(self->row_mu_);
+      self->row_.state = state;
+      self->row_.recording = self->hub_.recordings().NameFor(self->id_, state);
+    }
     self->Persist([self, epoch] {
       self->hub_.Forget(self->id_, self.get());
       // Stored: another server may take the session now (its agent resuming there).
