@@ -22,6 +22,12 @@ std::string TimeError(const std::string& field, double t_s) {
 
 bool VecOk(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
 
+// Unit within what a float's rounding (a device's own quaternion) leaves: 1 +- 1e-3.
+bool QuatOk(const v1::Quat& q) {
+  const double n = q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z();
+  return std::isfinite(n) && std::abs(n - 1) <= 2e-3;
+}
+
 bool SizeOk(const std::string& s, size_t max, const char* field, std::string* error) {
   if (s.size() <= max) return true;
   return Fail(error, std::string(field) + " has " + std::to_string(s.size()) + " bytes; at most " +
@@ -82,6 +88,9 @@ bool CheckAgentFrame(const v1::Envelope& e, std::string* error) {
         return Fail(error, where + ".tick " + std::to_string(s.tick()) + " is at or above 2^63");
       if (!TimeOk(s.time_s())) return Fail(error, TimeError(where + ".time_s", s.time_s()));
       if (!VecOk(s.tool_pos()) || !VecOk(s.force())) return Fail(error, where + ": tool_pos and force must be finite");
+      if (s.has_tool_orientation() && !QuatOk(s.tool_orientation()))
+        return Fail(error, where + ".tool_orientation must be a finite unit quaternion");
+      if (!std::isfinite(s.needle_inserted())) return Fail(error, where + ".needle_inserted must be finite");
     }
     return true;
   }
