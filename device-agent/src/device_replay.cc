@@ -18,6 +18,8 @@ struct ReplaySample {
   double time_s = 0;  // recorded simulation time, from the first sample
   double pos_model[3] = {0, 0, 0};
   bool closed = false;  // the recording's grasp flag stands for the button
+  bool oriented = false;
+  float orientation[4] = {1, 0, 0, 0};  // model frame (float: the bound's memory, 1e-7 of a turn)
 };
 
 class ReplayDevice final : public Device {
@@ -30,6 +32,10 @@ class ReplayDevice final : public Device {
     while (next_ + 1 < samples_.size() && samples_[next_ + 1].time_s <= t_s + 1e-9) ++next_;
     const ReplaySample& s = samples_[next_];
     registration_.ModelToDevice(s.pos_model, out->pos);
+    if (s.oriented) {
+      const double q[4] = {s.orientation[0], s.orientation[1], s.orientation[2], s.orientation[3]};
+      out->oriented = registration_.OrientationToDevice(q, out->orientation);
+    }
     out->closed = s.closed;
     out->valid = true;
     finished_ = next_ + 1 >= samples_.size() && t_s >= s.time_s;
@@ -72,6 +78,12 @@ std::unique_ptr<Device> MakeReplayDevice(std::string_view path, const Registrati
       r.time_s = s.time_s() - t0;
       r.pos_model[0] = s.tool_pos().x(), r.pos_model[1] = s.tool_pos().y(), r.pos_model[2] = s.tool_pos().z();
       r.closed = s.grasp();
+      if (s.has_tool_orientation()) {
+        const v1::Quat& q = s.tool_orientation();
+        r.oriented = true;
+        r.orientation[0] = static_cast<float>(q.w()), r.orientation[1] = static_cast<float>(q.x());
+        r.orientation[2] = static_cast<float>(q.y()), r.orientation[3] = static_cast<float>(q.z());
+      }
       samples.push_back(r);
       if (samples.size() > kMaxReplaySamples) {
         *error = Cat({path, ": more than ", std::to_string(kMaxReplaySamples), " device samples"});

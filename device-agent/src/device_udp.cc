@@ -31,7 +31,7 @@ class UdpDevice final : public Device {
 
   void Read(int64_t tick, double, DeviceReading* out) override {
     // Drain the socket, keeping the newest valid position and its sender.
-    uint8_t buf[kUdpDatagramBytes + 1];
+    uint8_t buf[kUdpMaxDatagramBytes + 1];
     for (int i = 0; i < kMaxDatagramsPerTick; ++i) {
       sockaddr_in from{};
       socklen_t from_len = sizeof(from);
@@ -60,6 +60,8 @@ class UdpDevice final : public Device {
     out->valid = has_position_ && !timed_out_;
     out->closed = (last_.flags & kUdpButton) != 0;
     for (int i = 0; i < 3; ++i) out->pos[i] = last_.pos[i];
+    out->oriented = last_.oriented;
+    for (int i = 0; i < 4; ++i) out->orientation[i] = last_.orientation[i];
     tick_ = tick;
   }
 

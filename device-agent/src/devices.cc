@@ -31,10 +31,13 @@ struct ScriptTarget {
   Registration registration;
   double duration_s = 0;
 
-  void At(double t_s, double pos_device[3], bool* closed) const {
+  // The position and button; the orientation too where the script gives one (the pierce).
+  void At(double t_s, double pos_device[3], bool* closed, DeviceReading* orientation = nullptr) const {
     const ScriptSample s = SampleScript(script, geometry, PingPong(t_s, duration_s));
     registration.ModelToDevice(s.pos, pos_device);
     *closed = s.closed;
+    if (orientation != nullptr && s.oriented)
+      orientation->oriented = registration.OrientationToDevice(s.orientation, orientation->orientation);
   }
 };
 
@@ -43,7 +46,7 @@ class ScriptedDevice final : public Device {
  public:
   ScriptedDevice(ScriptTarget target, std::string name) : target_(target), name_(std::move(name)) {}
   void Read(int64_t, double t_s, DeviceReading* out) override {
-    target_.At(t_s, out->pos, &out->closed);
+    target_.At(t_s, out->pos, &out->closed, out);
     out->valid = true;
   }
   void Write(int64_t, const double*) override {}
@@ -69,7 +72,7 @@ class HumanDevice final : public Device {
   void Read(int64_t, double t_s, DeviceReading* out) override {
     // The hand moves under the spring to the target, its damping and last tick's device force.
     double target[3];
-    target_.At(t_s, target, &out->closed);
+    target_.At(t_s, target, &out->closed, out);  // the hand turns as the script does
     for (int i = 0; i < 3; ++i) {
       const double a = (k_ * (target[i] - x_[i]) - c_ * v_[i] + force_[i]) / mass_;
       v_[i] += dt_s_ * a;
@@ -158,7 +161,7 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
   }
   if (!ParseScriptName(script_name, &target.script)) {
     *error = Cat({"unknown script '", script_name}) +
-             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or (scripted) drag";
+             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or (scripted) drag";
     return nullptr;
   }
   if (context.model == nullptr) {

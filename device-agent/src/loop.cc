@@ -210,6 +210,16 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   if (reading.valid) {
     registration_.DeviceToModel(reading.pos, tool.pos);
     has_pose_ = true;
+    // An orientation that is no rotation (zero, non-finite) is a fault too: the tool keeps the last.
+    if (reading.oriented) {
+      if (registration_.OrientationToModel(reading.orientation, orientation_)) {
+        oriented_ = true;
+        NeedleAxisOf(orientation_, tool.axis);
+      } else {
+        pose_fault = 1;
+        counters_.pose_faults.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
   }
   // A tweezers command holds until the device's own button changes.
   if (tweezers_override_ >= 0 && reading.closed != override_button_) tweezers_override_ = -1;
@@ -288,6 +298,10 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     s.normal_force = std::isfinite(out.normal_force) ? out.normal_force : 0.0;
     s.friction = out.friction;
   }
+  for (int i = 0; i < 4; ++i) s.orientation[i] = orientation_[i];
+  s.oriented = oriented_;
+  s.needle_punctured = out.punctured;
+  s.needle_inserted = out.inserted;
   s.port_energy = passive.energy;
   s.port_energy_window = passive.window;
   s.passivity_damping = passive.damping;

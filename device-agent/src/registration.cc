@@ -5,6 +5,8 @@
 #include <cmath>
 #include <numbers>
 
+#include <Eigen/Geometry>
+
 #include "text_internal.h"
 
 namespace idms::agent {
@@ -50,6 +52,42 @@ void Registration::DeviceToModel(const double p_device[3], double p_model[3]) co
   double r[3];
   MulRot(rot, p_device, r);
   for (int i = 0; i < 3; ++i) p_model[i] = scale * r[i] + offset[i];
+}
+
+namespace {
+
+// The registration's rotation as a quaternion, and a unit, finite quaternion from q (false when none).
+Eigen::Quaterniond RotationQuat(const double rot[9]) {
+  return Eigen::Quaterniond(Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(rot));
+}
+bool UnitQuat(const double q[4], Eigen::Quaterniond* out) {
+  const Eigen::Quaterniond r(q[0], q[1], q[2], q[3]);
+  const double n = r.norm();
+  if (!std::isfinite(n) || n < 1e-12) return false;
+  *out = r;
+  out->normalize();
+  return true;
+}
+void Store(const Eigen::Quaterniond& q, double out[4]) {
+  // The same rotation either sign; w >= 0 so that a recording reads the same for the same pose.
+  const double sign = q.w() < 0 ? -1.0 : 1.0;
+  out[0] = sign * q.w(), out[1] = sign * q.x(), out[2] = sign * q.y(), out[3] = sign * q.z();
+}
+
+}  // namespace
+
+bool Registration::OrientationToModel(const double q_device[4], double q_model[4]) const {
+  Eigen::Quaterniond q;
+  if (!UnitQuat(q_device, &q)) return false;
+  Store((RotationQuat(rot) * q).normalized(), q_model);
+  return true;
+}
+
+bool Registration::OrientationToDevice(const double q_model[4], double q_device[4]) const {
+  Eigen::Quaterniond q;
+  if (!UnitQuat(q_model, &q)) return false;
+  Store((RotationQuat(rot).conjugate() * q).normalized(), q_device);
+  return true;
 }
 
 void Registration::ModelToDevice(const double p_model[3], double p_device[3]) const {

@@ -7,16 +7,35 @@
 #include <limits>
 
 #include "idms/protocol/scene.h"
+#include "idms/sim/interaction_script.h"
 
 namespace idms::agent {
 
 v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
   v1::Scene scene;
   v1::Tool* tool = scene.add_tools();
-  tool->set_kind(script == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
-  tool->set_name(script == "pluck" ? "tweezers" : "finger");
-  tool->set_radius(1.5);
-  tool->set_stiffness(400);
+  if (script == "pierce") {
+    // The needle the script is made for (PierceNeedle), the rest of its fields the defaults.
+    const ToolCommand c = PierceNeedle();
+    tool->set_kind(v1::Tool::KIND_NEEDLE);
+    tool->set_name("needle");
+    tool->set_radius(c.radius);
+    tool->set_stiffness(c.stiffness);
+    tool->set_force_law(v1::FORCE_LAW_LINEAR);
+    v1::Needle* n = tool->mutable_needle();
+    n->set_length(c.needle.length);
+    n->set_puncture_force(c.needle.puncture_force);
+    n->set_axial_friction(c.needle.mu);
+    n->set_grip(c.needle.grip);
+    n->set_capture_radius(c.needle.capture_radius);
+    n->set_lateral_stiffness(c.needle.lateral_stiffness);
+    n->set_axial_stiffness(c.needle.axial_stiffness);
+  } else {
+    tool->set_kind(script == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
+    tool->set_name(script == "pluck" ? "tweezers" : "finger");
+    tool->set_radius(1.5);
+    tool->set_stiffness(400);
+  }
   scene.set_preset(preset);
   scene.set_dt_s(0.001);
   scene.mutable_device()->set_max_force(8);

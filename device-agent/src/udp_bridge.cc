@@ -30,14 +30,17 @@ bool CheckHeader(const uint8_t* data, size_t size, uint32_t magic) {
 
 }  // namespace
 
-void EncodeUdpPosition(const UdpPosition& msg, uint8_t out[kUdpDatagramBytes]) {
+size_t EncodeUdpPosition(const UdpPosition& msg, uint8_t out[kUdpMaxDatagramBytes]) {
   Put<uint32_t>(out, 0, kUdpPositionMagic);
-  Put<uint16_t>(out, 4, kUdpBridgeVersion);
+  Put<uint16_t>(out, 4, msg.oriented ? kUdpOrientedVersion : kUdpBridgeVersion);
   Put<uint16_t>(out, 6, msg.flags);
   Put<uint32_t>(out, 8, msg.sequence);
   Put<uint32_t>(out, 12, 0);
   Put<uint64_t>(out, 16, msg.driver_time_ns);
   for (size_t i = 0; i < 3; ++i) PutDouble(out, 24 + 8 * i, msg.pos[i]);
+  if (!msg.oriented) return kUdpDatagramBytes;
+  for (size_t i = 0; i < 4; ++i) PutDouble(out, 48 + 8 * i, msg.orientation[i]);
+  return kUdpOrientedBytes;
 }
 
 void EncodeUdpForce(const UdpForce& msg, uint8_t out[kUdpDatagramBytes]) {
@@ -51,8 +54,20 @@ void EncodeUdpForce(const UdpForce& msg, uint8_t out[kUdpDatagramBytes]) {
 }
 
 bool DecodeUdpPosition(const uint8_t* data, size_t size, UdpPosition* out) {
-  if (!CheckHeader(data, size, kUdpPositionMagic)) return false;
+  // Version 2 is version 1 with the orientation after it.
+  const bool oriented = size == kUdpOrientedBytes && Get<uint32_t>(data, 0) == kUdpPositionMagic &&
+                        Get<uint16_t>(data, 4) == kUdpOrientedVersion;
+  if (!oriented && !CheckHeader(data, size, kUdpPositionMagic)) return false;
   UdpPosition msg;
+  if (oriented) {
+    double norm = 0;
+    for (size_t i = 0; i < 4; ++i) {
+      msg.orientation[i] = GetDouble(data, 48 + 8 * i);
+      norm += msg.orientation[i] * msg.orientation[i];
+    }
+    if (!std::isfinite(norm) || norm < 1e-12) return false;
+    msg.oriented = true;
+  }
   msg.flags = Get<uint16_t>(data, 6);
   msg.sequence = Get<uint32_t>(data, 8);
   msg.driver_time_ns = Get<uint64_t>(data, 16);

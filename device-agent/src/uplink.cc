@@ -577,6 +577,12 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_port_energy(s.port_energy);
     out->set_port_energy_window(s.port_energy_window);
     out->set_passivity_damping(s.passivity_damping);
+    if (s.oriented) {
+      v1::Quat* q = out->mutable_tool_orientation();
+      q->set_w(s.orientation[0]), q->set_x(s.orientation[1]), q->set_y(s.orientation[2]), q->set_z(s.orientation[3]);
+    }
+    out->set_needle_punctured(s.needle_punctured);
+    out->set_needle_inserted(s.needle_inserted);
   }
 
   void FillStats(v1::LoopStats* out) {

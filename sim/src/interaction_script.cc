@@ -158,7 +158,51 @@ double ContactUnder(const Model& model, std::array<double, 2> xy, double radius,
   return std::isfinite(top) ? top : otherwise;
 }
 
+// The pierce: the tip's distance past first contact along the needle's axis (negative: short of
+// it) at each key; about 0.5 units/s in and out (0.8 at the ease's fastest).
+struct PierceKey {
+  double t;  // s
+  double s;  // model units along the axis
+};
+constexpr PierceKey kPierce[] = {{0.0, -kPierceHover}, {0.5, -kPierceHover}, {6.5, kPiercePast},
+                                 {7.5, kPiercePast},   {13.5, -kPierceHover}, {14.0, -kPierceHover}};
+
+ScriptSample SamplePierce(const ScriptGeometry& g, double t) {
+  t = std::clamp(t, 0.0, std::end(kPierce)[-1].t);
+  size_t i = 0;
+  while (i + 2 < std::size(kPierce) && t >= kPierce[i + 1].t) ++i;
+  const PierceKey& a = kPierce[i];
+  const PierceKey& b = kPierce[i + 1];
+  const double s = a.s + Ease((t - a.t) / (b.t - a.t)) * (b.s - a.s);
+  // A turn of -tilt about y takes the local -z to (sin tilt, 0, -cos tilt).
+  const double tilt = kPierceTiltDeg * std::numbers::pi / 180;
+  const double axis[3] = {std::sin(tilt), 0, -std::cos(tilt)};
+  // The tip's centre touches the atom under the centre (g.center, g.top_z) at s = 0.
+  ScriptSample out;
+  const double p[3] = {g.center[0], g.center[1], g.top_z};
+  for (int c = 0; c < 3; ++c) out.pos[c] = p[c] + (s - g.mio_radius) * axis[c];
+  out.oriented = true;
+  out.orientation[0] = std::cos(tilt / 2), out.orientation[2] = -std::sin(tilt / 2);
+  return out;
+}
+
 }  // namespace
+
+ToolCommand PierceNeedle() {
+  ToolCommand c;
+  c.kind = ToolKind::kNeedle;
+  c.radius = 0.25;
+  c.stiffness = 400;
+  c.law = ContactLaw::kLinear;
+  c.needle.length = 5;
+  c.needle.puncture_force = 1;
+  c.needle.mu = 0.5;
+  c.needle.grip = 1;
+  c.needle.capture_radius = 0.7;
+  c.needle.lateral_stiffness = 20;
+  c.needle.axial_stiffness = 100;
+  return c;
+}
 
 std::array<double, 2> ScanPoint(const ScriptGeometry& g, int i) {
   const double fx = static_cast<double>(i % kScanGrid) / (kScanGrid - 1);
@@ -177,6 +221,7 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
     case Script::kPalpate:
     case Script::kPluck:
     case Script::kScan:
+    case Script::kPierce:
       break;
   }
   return {};
@@ -231,6 +276,8 @@ ScriptSample SampleScript(Script script, const ScriptGeometry& g, double t) {
       return Interpolate(kPluck, g, t);
     case Script::kScan:
       return SampleScan(g, t);
+    case Script::kPierce:
+      return SamplePierce(g, t);
   }
   return {};
 }
@@ -249,6 +296,8 @@ double ScriptDuration(Script script) {
       return std::end(kPluck)[-1].t;
     case Script::kScan:
       return kScanDuration;
+    case Script::kPierce:
+      return std::end(kPierce)[-1].t;
   }
   return 0;
 }
@@ -267,13 +316,15 @@ const char* ScriptName(Script script) {
       return "pluck";
     case Script::kScan:
       return "scan";
+    case Script::kPierce:
+      return "pierce";
   }
   return "?";
 }
 
 bool ParseScriptName(std::string_view name, Script* script) {
   for (Script s : {Script::kPalpate, Script::kStrokeSlow, Script::kStrokeFast, Script::kPluck, Script::kStrokeGentle,
-                   Script::kScan}) {
+                   Script::kScan, Script::kPierce}) {
     if (name == ScriptName(s)) {
       *script = s;
       return true;

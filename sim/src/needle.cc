@@ -39,6 +39,14 @@
 
 namespace idms {
 
+void NeedleAxisOf(const double q[4], double axis[3]) {
+  // -R e_z: the rotation matrix's third column, negated.
+  const double w = q[0], x = q[1], y = q[2], z = q[3];
+  axis[0] = -2 * (x * z + w * y);
+  axis[1] = -2 * (y * z - w * x);
+  axis[2] = -(1 - 2 * (x * x + y * y));
+}
+
 namespace {
 
 // The first needle parameter out of range, with what it must be, or null: no allocation, so the

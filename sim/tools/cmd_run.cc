@@ -160,12 +160,15 @@ void Run(RunArgs& a) {
   const bool drag = a.script == "drag" || a.script.rfind("drag:", 0) == 0;
   if (!drag && !ParseScriptName(a.script, &script)) {
     Fail("run", "--script '" + a.script +
-                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or "
+                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or "
                     "drag[:fraction=F,...]");
   }
+  const bool pierce = !drag && script == Script::kPierce;
   ToolCommand tool;
   tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
+  if (pierce) tool = PierceNeedle();
   std::string error;
+  if (pierce && !a.tool.empty()) Fail("run", "--tool: the pierce's needle is PierceNeedle's (docs/needle.md)");
   if (!a.tool.empty() && !ParseToolSpec(a.tool, &tool, &error)) Fail("run", error);
   DragOptions drag_options;
   if (drag && !ParseDragSpec(a.script, &drag_options, &error)) Fail("run", "--script: " + error);
@@ -218,6 +221,10 @@ void Run(RunArgs& a) {
                csv);
   }
   int64_t stick_ticks = 0, slip_ticks = 0, transitions = 0;
+  // The needle: punctures (entries), the first one's time, the deepest insertion, in at the end.
+  int64_t punctures = 0;
+  double punctured_s = NAN, max_inserted = 0;
+  bool inside = false;
   double friction_work = 0, friction_work_max_sum = 0, max_ft = 0;
   FrictionState last_friction = FrictionState::kNone;
   double last_force[3] = {0, 0, 0};
@@ -239,6 +246,7 @@ void Run(RunArgs& a) {
         drag ? hand.Next((n + 1) * a.dt, last_force) : SampleScript(script, geometry, (n + 1) * a.dt);
     tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
     tool.closed = sample.closed;
+    if (sample.oriented) NeedleAxisOf(sample.orientation, tool.axis);
     input.tools[0] = tool;
     const auto start = std::chrono::steady_clock::now();
     const double cpu_start = a.full ? ThreadCpuSeconds() : 0.0;  // a system call: full mode only
@@ -260,6 +268,9 @@ void Run(RunArgs& a) {
         std::sqrt(tr.friction_force[0] * tr.friction_force[0] + tr.friction_force[1] * tr.friction_force[1] +
                   tr.friction_force[2] * tr.friction_force[2]);
     max_ft = std::max(max_ft, ft);
+    if (tr.punctured && !inside) ++punctures, punctured_s = std::isnan(punctured_s) ? state.time_s : punctured_s;
+    inside = tr.punctured;
+    max_inserted = std::max(max_inserted, tr.inserted);
     stick_ticks += tr.friction == FrictionState::kStick;
     slip_ticks += tr.friction == FrictionState::kSlip;
     transitions +=
@@ -354,6 +365,12 @@ void Run(RunArgs& a) {
                            {"stick_ticks", stick_ticks}, {"slip_ticks", slip_ticks},
                            {"transitions", transitions}, {"max_ft", max_ft},
                            {"work", friction_work},      {"work_max_running_sum", friction_work_max_sum}};
+  }
+  if (tool.kind == ToolKind::kNeedle) {
+    summary["needle"] = {{"punctures", punctures},
+                         {"punctured_s", std::isnan(punctured_s) ? nlohmann::json(nullptr) : nlohmann::json(punctured_s)},
+                         {"max_inserted", max_inserted},
+                         {"inside_at_end", inside}};
   }
   if (a.json) {
     PrintJson(summary);

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <numbers>
 #include <thread>
 
 #include "alloc_counter.h"
@@ -46,6 +47,7 @@ class RecordingDevice final : public Device {
   void Read(int64_t tick, double t_s, DeviceReading* out) override {
     inner_->Read(tick, t_s, out);
     if (poison_) out->pos[2] = std::nan("");
+    if (no_rotation_) out->oriented = true, out->orientation[0] = out->orientation[1] = out->orientation[2] = 0;
   }
   void Write(int64_t tick, const double force[3]) override {
     for (int i = 0; i < 3; ++i) all_finite_ = all_finite_ && std::isfinite(force[i]);
@@ -60,7 +62,7 @@ class RecordingDevice final : public Device {
   const char* name() const override { return inner_->name(); }
 
   std::unique_ptr<Device> inner_;
-  bool poison_ = false, all_finite_ = true, released_ = false;
+  bool poison_ = false, no_rotation_ = false, all_finite_ = true, released_ = false;
   double max_force_ = 0;
   double last_force_ = 0;  // |force| of the last write
   double max_rise_ = 0;    // the largest rise of |force| from one write to the next
@@ -80,6 +82,7 @@ struct Fixture {
     agent::DeviceContext context;
     context.model = &model;
     context.registration = registration;
+    context.mio_radius = tool.radius;  // as the agent's main does
     device = std::make_unique<RecordingDevice>(agent::MakeDevice(spec, context, &error));
     EXPECT_TRUE(device->inner_) << error;
     options.realtime = false;
@@ -362,6 +365,33 @@ TEST(Loop, DeviceNeverSeesNonFiniteOrOversizeForce) {
     for (int i = 0; i < 3; ++i) ASSERT_TRUE(std::isfinite(s.tool_pos[i]) && std::isfinite(s.force[i]));
     ASSERT_GE(s.warnings, 1u);
   }
+}
+
+// A needle's orientation from the device reaches the sample in the model frame with the needle's
+// state; an orientation that is no rotation (all zero) is a pose fault, and the tool keeps the last.
+TEST(Loop, TheNeedlesOrientationAndStateAreSampledAndAZeroOrientationIsAFault) {
+  Fixture f("scripted:pierce");
+  std::vector<TickSample> samples;
+  f.Run(4500, &samples);
+  const double half = 15 * std::numbers::pi / 180;
+  int64_t punctured = 0;
+  for (const TickSample& s : samples) {
+    ASSERT_TRUE(s.oriented);
+    ASSERT_NEAR(s.orientation[0], std::cos(half), 1e-12);
+    ASSERT_NEAR(s.orientation[2], -std::sin(half), 1e-12);
+    punctured += s.needle_punctured;
+  }
+  EXPECT_GT(punctured, 500) << "in by 4.5 s (the puncture is at about 2.9 s)";
+  EXPECT_GT(samples.back().needle_inserted, 0.2);
+  f.device->no_rotation_ = true;
+  samples.clear();
+  f.Run(100, &samples);
+  EXPECT_EQ(f.loop->counters().pose_faults.load(), 100u);
+  for (const TickSample& s : samples) {
+    ASSERT_NEAR(s.orientation[0], std::cos(half), 1e-12);
+    ASSERT_GE(s.warnings, 1u);
+  }
+  EXPECT_TRUE(f.device->all_finite_);
 }
 
 // Issue 28: an instructor sees when the hand was held at the force limit: each clamped tick is

@@ -5,6 +5,8 @@
 
 #include <cmath>
 
+#include "idms/sim/tool.h"
+
 namespace idms::test {
 namespace {
 
@@ -51,6 +53,35 @@ TEST(Registration, DeviceToModelInvertsAndForcesTurnWithTheFrame) {
   EXPECT_NEAR(std::hypot(f_device[0], f_device[1], f_device[2]), 1.0, 1e-12);
   r.ForceToModel(f_device, f_back);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(f_back[i], f_model[i], 1e-12);
+}
+
+// An orientation turns with the frame as a direction does: a needle's axis (the local -z) mapped
+// to the model is the device's axis turned by R; mapped back, the orientation is the device's.
+TEST(Registration, AnOrientationTurnsWithTheFrameAndMapsBack) {
+  Registration r;
+  std::string error;
+  ASSERT_TRUE(agent::ParseRotation("quat:0.9,0.1,-0.3,0.2", r.rot, &error)) << error;
+  r.scale = 25.4;  // scale and offset do not turn anything
+  r.offset[0] = 5;
+  const double c = std::cos(0.35), s = std::sin(0.35);
+  const double q_device[4] = {2 * c, 2 * s * 0.6, 0, 2 * s * 0.8};  // not unit: normalised
+  double q_model[4], back[4];
+  ASSERT_TRUE(r.OrientationToModel(q_device, q_model));
+  EXPECT_NEAR(q_model[0] * q_model[0] + q_model[1] * q_model[1] + q_model[2] * q_model[2] + q_model[3] * q_model[3], 1,
+              1e-12);
+  EXPECT_GE(q_model[0], 0);
+  const double unit[4] = {c, s * 0.6, 0, s * 0.8};
+  double axis_device[3], axis_model[3], turned[3];
+  NeedleAxisOf(unit, axis_device);
+  NeedleAxisOf(q_model, axis_model);
+  r.ForceToModel(axis_device, turned);  // R v (force_scale 1)
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(axis_model[i], turned[i], 1e-12) << i;
+  ASSERT_TRUE(r.OrientationToDevice(q_model, back));
+  for (int i = 0; i < 4; ++i) EXPECT_NEAR(back[i], unit[i], 1e-12) << i;
+  // No rotation: zero or non-finite.
+  const double zero[4] = {0, 0, 0, 0}, nan[4] = {std::nan(""), 0, 0, 1};
+  EXPECT_FALSE(r.OrientationToModel(zero, q_model));
+  EXPECT_FALSE(r.OrientationToModel(nan, q_model));
 }
 
 TEST(Registration, BadRotationsAreExplained) {

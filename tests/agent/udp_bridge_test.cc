@@ -35,29 +35,59 @@ TEST(UdpBridge, DatagramsRoundTripLittleEndian) {
   p.sequence = 0xfffffffe;
   p.driver_time_ns = 123456789;
   p.pos[0] = 1.5, p.pos[1] = -2.25, p.pos[2] = 3e-3;
-  uint8_t buf[agent::kUdpDatagramBytes];
-  agent::EncodeUdpPosition(p, buf);
+  uint8_t buf[agent::kUdpMaxDatagramBytes];
+  ASSERT_EQ(agent::EncodeUdpPosition(p, buf), agent::kUdpDatagramBytes);
   EXPECT_EQ(buf[0], 'I');
   EXPECT_EQ(buf[3], 'P');
   EXPECT_EQ(buf[8], 0xfe);  // sequence, least significant byte first
   UdpPosition q;
-  ASSERT_TRUE(agent::DecodeUdpPosition(buf, sizeof(buf), &q));
+  ASSERT_TRUE(agent::DecodeUdpPosition(buf, agent::kUdpDatagramBytes, &q));
   EXPECT_EQ(q.sequence, p.sequence);
   EXPECT_EQ(q.flags, p.flags);
   EXPECT_EQ(q.driver_time_ns, p.driver_time_ns);
   for (int i = 0; i < 3; ++i) EXPECT_EQ(q.pos[i], p.pos[i]);
   // Wrong size, a force datagram, a NaN: rejected.
-  EXPECT_FALSE(agent::DecodeUdpPosition(buf, sizeof(buf) - 1, &q));
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, agent::kUdpDatagramBytes - 1, &q));
   UdpForce f;
   f.force[2] = 0.5;
   agent::EncodeUdpForce(f, buf);
-  EXPECT_FALSE(agent::DecodeUdpPosition(buf, sizeof(buf), &q));
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, agent::kUdpDatagramBytes, &q));
   UdpForce g;
-  ASSERT_TRUE(agent::DecodeUdpForce(buf, sizeof(buf), &g));
+  ASSERT_TRUE(agent::DecodeUdpForce(buf, agent::kUdpDatagramBytes, &g));
   EXPECT_EQ(g.force[2], 0.5);
   p.pos[1] = std::nan("");
   agent::EncodeUdpPosition(p, buf);
-  EXPECT_FALSE(agent::DecodeUdpPosition(buf, sizeof(buf), &q));
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, agent::kUdpDatagramBytes, &q));
+}
+
+TEST(UdpBridge, AnOrientedPositionIsVersionTwoAndEightyBytes) {
+  UdpPosition p;
+  p.sequence = 9;
+  p.pos[2] = 1;
+  p.oriented = true;
+  p.orientation[0] = 0.5, p.orientation[1] = 0.5, p.orientation[2] = -0.5, p.orientation[3] = 0.5;
+  uint8_t buf[agent::kUdpMaxDatagramBytes];
+  ASSERT_EQ(agent::EncodeUdpPosition(p, buf), 80u);
+  EXPECT_EQ(buf[4], 2);  // version
+  UdpPosition q;
+  ASSERT_TRUE(agent::DecodeUdpPosition(buf, 80, &q));
+  EXPECT_TRUE(q.oriented);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(q.orientation[i], p.orientation[i]);
+  EXPECT_EQ(q.pos[2], 1);
+  // Version 2 at version 1's size, version 1 at 80 bytes, a zero or NaN orientation: refused.
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, 48, &q));
+  p.oriented = false;
+  ASSERT_EQ(agent::EncodeUdpPosition(p, buf), 48u);
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, 80, &q));
+  ASSERT_TRUE(agent::DecodeUdpPosition(buf, 48, &q));
+  EXPECT_FALSE(q.oriented);
+  p.oriented = true;
+  for (double& c : p.orientation) c = 0;
+  agent::EncodeUdpPosition(p, buf);
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, 80, &q));
+  p.orientation[0] = std::nan("");
+  agent::EncodeUdpPosition(p, buf);
+  EXPECT_FALSE(agent::DecodeUdpPosition(buf, 80, &q));
 }
 
 TEST(UdpBridge, SequenceOrderSurvivesWrap) {
@@ -78,14 +108,18 @@ class FakeDriver {
   }
   ~FakeDriver() { close(fd_); }
 
-  void SendPosition(const double pos[3], bool button = false) {
+  // With an orientation (w, x, y, z), a version-2 datagram.
+  void SendPosition(const double pos[3], bool button = false, const double* orientation = nullptr) {
     UdpPosition p;
     p.sequence = ++sequence_;
     p.flags = button ? agent::kUdpButton : 0;
     for (int i = 0; i < 3; ++i) p.pos[i] = pos[i];
-    uint8_t buf[agent::kUdpDatagramBytes];
-    agent::EncodeUdpPosition(p, buf);
-    SendRaw(buf, sizeof(buf));
+    if (orientation) {
+      p.oriented = true;
+      for (int i = 0; i < 4; ++i) p.orientation[i] = orientation[i];
+    }
+    uint8_t buf[agent::kUdpMaxDatagramBytes];
+    SendRaw(buf, agent::EncodeUdpPosition(p, buf));
   }
   void SendRaw(const uint8_t* data, size_t size) {
     sendto(fd_, data, size, 0, reinterpret_cast<const sockaddr*>(&agent_), sizeof(agent_));

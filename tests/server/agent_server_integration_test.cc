@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -214,6 +216,56 @@ TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
   // When the press first passed 0.5 (the palpation reaches it well after its start).
   EXPECT_GT(first_time_s, 0.5);
   EXPECT_LT(first_time_s, 3.5);
+}
+
+// The needle's pierce (scripted:pierce, a needle tilted 30 degrees from the vertical) through a
+// registration turned 90 degrees about z: the recording holds every sample's orientation in the
+// model frame (the script's, whatever the device's frame), and the puncture and its depth.
+TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth) {
+  const std::string dir = TempDir("agent-pierce");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(IDMS_AGENT_BIN,
+                     {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home",
+                      "--cache-dir", dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90",
+                      "--duration", "9", "--no-realtime"},
+                     dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
+  std::string id;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(server.port(), observer);
+    if (s.empty() || s[0]["state"] != "ended") return false;
+    id = s[0]["id"];
+    return true;
+  })) << server.Log();
+  ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
+  const double half = 15 * std::numbers::pi / 180;  // the script's turn of -30 degrees about y
+  int64_t samples = 0, oriented = 0, punctured = 0;
+  double first_punctured_s = -1, deepest = 0, worst = 0;
+  for (const v1::DeviceSample& s : RecordedSamples(dir + "/rec.mcap")) {
+    ++samples;
+    if (s.has_tool_orientation()) {
+      ++oriented;
+      const v1::Quat& q = s.tool_orientation();
+      worst = std::max({worst, std::abs(q.w() - std::cos(half)), std::abs(q.x()), std::abs(q.y() + std::sin(half)),
+                        std::abs(q.z())});
+    }
+    if (s.needle_punctured()) {
+      if (punctured++ == 0) first_punctured_s = s.time_s();
+      deepest = std::max(deepest, s.needle_inserted());
+    }
+  }
+  std::printf("[ figures  ] pierce: %lld samples, punctured at %.3f s for %lld ticks, deepest %.3f\n",
+              static_cast<long long>(samples), first_punctured_s, static_cast<long long>(punctured), deepest);
+  EXPECT_GT(samples, 8000);
+  EXPECT_EQ(oriented, samples);
+  EXPECT_LT(worst, 1e-9);
+  // In at about 2.9 s (idms-sim run --script pierce), as far as the script goes (2 past contact).
+  EXPECT_GT(first_punctured_s, 2.0);
+  EXPECT_LT(first_punctured_s, 4.5);
+  EXPECT_GT(deepest, 1.0);
+  EXPECT_LT(deepest, 2.5);
 }
 
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {

@@ -88,13 +88,19 @@ void ForEachRecorded(const std::string& path, RecordingReaderOptions options, F&
 
 }  // namespace
 
-std::vector<uint64_t> RecordedTicks(const std::string& path) {
+std::vector<v1::DeviceSample> RecordedSamples(const std::string& path) {
   RecordingReaderOptions options;
   options.mesh = options.events = options.annotations = false;
-  std::vector<uint64_t> ticks;
+  std::vector<v1::DeviceSample> samples;
   ForEachRecorded(path, options, [&](const v1::Envelope& e) {
-    for (const v1::DeviceSample& s : e.device_samples().samples()) ticks.push_back(s.tick());
+    for (const v1::DeviceSample& s : e.device_samples().samples()) samples.push_back(s);
   });
+  return samples;
+}
+
+std::vector<uint64_t> RecordedTicks(const std::string& path) {
+  std::vector<uint64_t> ticks;
+  for (const v1::DeviceSample& s : RecordedSamples(path)) ticks.push_back(s.tick());
   return ticks;
 }
 

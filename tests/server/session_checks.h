@@ -35,7 +35,8 @@ double MetricValue(uint16_t port, const std::string& token, const std::string& s
 // GET /api/sessions/{id}/recording.mcap into `path`; false (with a test failure) unless 200.
 bool DownloadRecording(uint16_t port, const std::string& id, const std::string& token, const std::string& path);
 
-// Every device tick in a recording, in order.
+// Every device sample of a recording, in the order recorded; their ticks.
+std::vector<v1::DeviceSample> RecordedSamples(const std::string& path);
 std::vector<uint64_t> RecordedTicks(const std::string& path);
 
 // Every SessionEvent on the recording's /events channel, in order.

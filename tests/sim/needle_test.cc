@@ -7,12 +7,14 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "alloc_counter.h"
 #include "idms/sim/generate.h"
+#include "idms/sim/interaction_script.h"
 #include "idms/sim/step.h"
 #include "idms/sim/workspace.h"
 #include "step_test_util.h"
@@ -283,6 +285,32 @@ TEST_F(NeedleTest, StepAllocatesNothingInside) {
 }
 
 // Bad parameters: the boundary's check names the field; the step holds the last valid pose.
+// The pose a device gives: the local -z of its orientation. The pierce's quaternion (-30 degrees
+// about y) points the needle down and towards +x, and the script's tip moves along that axis.
+TEST(NeedleAxis, IsTheOrientationsLocalMinusZAndThePierceMovesAlongIt) {
+  const double identity[4] = {1, 0, 0, 0};
+  double axis[3];
+  NeedleAxisOf(identity, axis);
+  EXPECT_EQ(axis[0], 0);
+  EXPECT_EQ(axis[1], 0);
+  EXPECT_EQ(axis[2], -1);
+  const double half_turn_x[4] = {0, 1, 0, 0};  // 180 degrees about x: the needle points up
+  NeedleAxisOf(half_turn_x, axis);
+  EXPECT_NEAR(axis[2], 1, 1e-15);
+  const ScriptGeometry g = MakeScriptGeometry(test::LoadShippedModel("hex_4x5_home"), PierceNeedle().radius);
+  const ScriptSample a = SampleScript(Script::kPierce, g, 2.0), b = SampleScript(Script::kPierce, g, 3.0);
+  ASSERT_TRUE(a.oriented);
+  NeedleAxisOf(a.orientation, axis);
+  const double tilt = kPierceTiltDeg * std::numbers::pi / 180;
+  EXPECT_NEAR(axis[0], std::sin(tilt), 1e-12);
+  EXPECT_NEAR(axis[1], 0, 1e-12);
+  EXPECT_NEAR(axis[2], -std::cos(tilt), 1e-12);
+  const double d[3] = {b.pos[0] - a.pos[0], b.pos[1] - a.pos[1], b.pos[2] - a.pos[2]};
+  const double n = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  ASSERT_GT(n, 0.1);
+  EXPECT_NEAR((d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]) / n, 1, 1e-12);
+}
+
 TEST_F(NeedleTest, BadParametersAreRefusedNamingTheField) {
   std::string error;
   ToolCommand c = Needle(1, 0.5);

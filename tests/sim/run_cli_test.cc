@@ -138,6 +138,37 @@ TEST(RunCli, PluckForceDropsToZeroWhenTheTweezersOpen) {
   EXPECT_EQ(max_abs_after, 0.0);
 }
 
+// The pierce: a needle tilted 30 degrees goes in along its axis, punctures once, and comes out;
+// while it is in, the device force resists it along its axis in the plane of the tilt.
+TEST(RunCli, ThePierceGoesInAlongItsTiltedAxisOnceAndComesOut) {
+  const std::string csv = testing::TempDir() + "/pierce.csv";
+  const Output out = RunSim("run --model " + kHex + " --script pierce --csv " + csv + " --json");
+  ASSERT_EQ(out.status, 0) << out.text;
+  const nlohmann::json j = nlohmann::json::parse(out.text);
+  EXPECT_EQ(j["needle"]["punctures"], 1) << j.dump();
+  EXPECT_GT(j["needle"]["punctured_s"].get<double>(), 1.0);
+  EXPECT_LT(j["needle"]["punctured_s"].get<double>(), 6.5);
+  EXPECT_GT(j["needle"]["max_inserted"].get<double>(), 1.0);
+  EXPECT_FALSE(j["needle"]["inside_at_end"].get<bool>());
+  EXPECT_EQ(j["warnings"], 0);
+  // At the deepest hold (6.5-7.5 s) the force points back up the axis (-sin 30, 0, cos 30).
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  int held = 0;
+  while (std::getline(in, line)) {
+    double t, x, y, z, fx, fy, fz;
+    ASSERT_EQ(std::sscanf(line.c_str(), "%lf,%lf,%lf,%lf,%lf,%lf,%lf", &t, &x, &y, &z, &fx, &fy, &fz), 7);
+    if (t < 6.6 || t > 7.4) continue;
+    // In the plane of the tilt (y: the captured atoms' lateral pull, uneven on this mesh).
+    const double f = std::sqrt(fx * fx + fz * fz);
+    ASSERT_GT(f, 0.5) << t;
+    EXPECT_GT((-0.5 * fx + std::sqrt(0.75) * fz) / f, 0.99) << t << ": " << fx << ", " << fy << ", " << fz;
+    ++held;
+  }
+  EXPECT_GT(held, 700);
+}
+
 TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
   for (const char* integrator : {"euler", "symplectic", "rk4", "implicit"}) {
     const Output out = RunSim("run --model " + kHex + " --script stroke-slow --integrator " + integrator + " --json");
@@ -151,8 +182,9 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(out.text.find("--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan or "
-                          "drag[:fraction=F,...]"),
+  EXPECT_NE(out.text.find(
+                "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or "
+                "drag[:fraction=F,...]"),
             std::string::npos)
       << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");

@@ -19,7 +19,11 @@ namespace idms::agent {
 // What the device says at the start of a tick.
 struct DeviceReading {
   double pos[3] = {0, 0, 0};  // device frame, device units
-  bool closed = false;        // button held / tweezers closed
+  // The stylus's orientation, device frame, a unit quaternion (w, x, y, z), when `oriented`: a
+  // needle's axis is its local -z. A device without one leaves the tool along the model's -z.
+  double orientation[4] = {1, 0, 0, 0};
+  bool oriented = false;
+  bool closed = false;  // button held / tweezers closed
   bool valid = false;         // false: no usable position this tick (not yet connected, timed out)
 };
 

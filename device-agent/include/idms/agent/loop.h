@@ -51,6 +51,12 @@ struct TickSample {
   double port_energy = 0;
   double port_energy_window = 0;
   double passivity_damping = 0;
+  // The tool's orientation, model frame, unit quaternion (w, x, y, z), when the device gave one
+  // (`oriented`); a needle's punctured state and inserted length (model units).
+  double orientation[4] = {1, 0, 0, 0};
+  bool oriented = false;
+  bool needle_punctured = false;
+  double needle_inserted = 0;
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.
@@ -228,6 +234,8 @@ class Loop {
   double mesh_interval_s_ = 1.0 / 60;
   uint64_t published_topology_ = UINT64_MAX;
   bool has_pose_ = false;
+  double orientation_[4] = {1, 0, 0, 0};  // the tool's, model frame, once the device gave one
+  bool oriented_ = false;
   int8_t tweezers_override_ = -1;  // -1 = the device decides, 0 = held open, 1 = held closed
   bool reset_this_tick_ = false;   // Reset() ran in this tick's commands: the sample says so
   bool override_button_ = false;   // the device's button when the override was commanded

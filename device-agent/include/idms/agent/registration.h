@@ -23,7 +23,12 @@ struct Registration {
   void ForceToDevice(const double f_model[3], double f_device[3]) const;
   // f_model = R f_device / force_scale (for a device force acting back on a simulated hand).
   void ForceToModel(const double f_device[3], double f_model[3]) const;
+  // Orientations as unit quaternions (w, x, y, z): q_model = R q_device, and back. The input is
+  // normalised; false (out untouched) when it is not finite or is zero. Does not allocate.
+  bool OrientationToModel(const double q_device[4], double q_model[4]) const;
+  bool OrientationToDevice(const double q_model[4], double q_device[4]) const;
 };
+
 
 // Rotation matrices (row-major) from the usual descriptions. Each returns false with a message
 // when the input cannot describe a rotation (non-finite, zero quaternion or axis).

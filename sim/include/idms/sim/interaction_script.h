@@ -1,7 +1,8 @@
 // The scripted interactions of thesis chapter 6 — palpation (6.1.1), slow and fast stroking
 // (6.1.2) at the thesis's speeds and plucking (6.1.3) — as reproducible MIO trajectories over any
 // model's surface; a gentle stroke slow enough to watch; and a scan, shallow palpations over a
-// grid for the fitter's stiffness map (thesis 7.2.5, issue 34).
+// grid for the fitter's stiffness map (thesis 7.2.5, issue 34); a needle's pierce, tilted, through
+// the surface and back (issue 32).
 // Used by `idms-sim run`, the benches and the agent's scripted device.
 #pragma once
 
@@ -10,11 +11,13 @@
 #include <string_view>
 #include <vector>
 
+#include "idms/sim/tool.h"
+
 namespace idms {
 
 struct Model;
 
-enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan };
+enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan, kPierce };
 
 // The scan's grid: kScanGrid x kScanGrid points over the middle 60% of the surface in x and y.
 inline constexpr int kScanGrid = 7;
@@ -33,11 +36,24 @@ struct ScriptGeometry {
   double scan_top_z[kScanGrid * kScanGrid] = {};
 };
 
-// One sample of the trajectory: the MIO centre in model units and the tweezers' state.
+// One sample of the trajectory: the MIO centre (a needle's tip) in model units, the tweezers'
+// state, and the tool's orientation where the script gives one (the pierce: a unit quaternion
+// w, x, y, z whose local -z is the needle's axis, tail to tip).
 struct ScriptSample {
   double pos[3] = {0, 0, 0};
   bool closed = false;
+  bool oriented = false;
+  double orientation[4] = {1, 0, 0, 0};
 };
+
+// The pierce: the needle tilted this far from the vertical, in the x-z plane (its tip leads in +x),
+// goes along its axis from kPierceHover before first contact to kPiercePast past it and back.
+inline constexpr double kPierceTiltDeg = 30;
+inline constexpr double kPierceHover = 1.0;
+inline constexpr double kPiercePast = 2.0;
+// The needle the pierce is made for: a 0.25 tip and springs for a tissue of element k about 15
+// (the hex fragment's; docs/needle.md). The agent's scene for the script says the same.
+ToolCommand PierceNeedle();
 
 // The script's geometry over `model`'s external atoms for an MIO of radius `mio_radius`.
 ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius);
@@ -55,7 +71,7 @@ double ScriptDuration(Script script);
 // The scan's grid point i (0 .. kScanGrid^2 - 1, x fastest): its x, y.
 std::array<double, 2> ScanPoint(const ScriptGeometry& geometry, int i);
 
-// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan".
+// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan", "pierce".
 const char* ScriptName(Script script);
 bool ParseScriptName(std::string_view name, Script* script);
 

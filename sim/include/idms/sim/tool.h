@@ -61,6 +61,10 @@ struct ToolCommand {
   NeedleParams needle;
 };
 
+// A needle's axis (tail to tip) for the tool's orientation, a unit quaternion (w, x, y, z): its
+// local -z (idms.proto, DeviceSample.tool_orientation). Pure; does not allocate.
+void NeedleAxisOf(const double orientation[4], double axis[3]);
+
 // The needle's parameters as a boundary checks them (finite, in range). False with *error naming
 // the field ("needle.puncture_force must be a finite number > 0, got 0").
 bool ValidateNeedle(const ToolCommand& tool, std::string* error);
