@@ -448,8 +448,8 @@ int main(int argc, char** argv) {
     const double mps = r["probe_messages_per_s"].get<double>();
     if (r["connected"].get<int>() != n)
       std::printf("(only %d of %d viewers connected)\n", r["connected"].get<int>(), n);
-    std::printf("%8d %9.1f %10.3f %11.1f %10.1f %9.1f %9.2f %9.2f %10.2f %9.0f %8.0f %8.1f %8.1f %9.2f %9.2f %8.1f\n", n,
-                cpu, mb_per_viewer, kbps, mps, r["mesh_fps_median"].get<double>(), r["latency_p50_ms"].get<double>(),
+    std::printf("%8d %9.1f %10.3f %11.1f %10.1f %9.1f %9.2f %9.2f %10.2f %9.0f %8.0f %8.1f %8.1f %9.2f %9.2f %8.1f\n",
+                n, cpu, mb_per_viewer, kbps, mps, r["mesh_fps_median"].get<double>(), r["latency_p50_ms"].get<double>(),
                 r["latency_p99_ms"].get<double>(), r["latency_p999_ms"].get<double>(), skipped, resyncs,
                 r["load_cpu_percent"].get<double>(), agent_cpu, r["relayed_p50_ms"].get<double>(),
                 r["relayed_p99_ms"].get<double>(), r["settle_s"].get<double>());

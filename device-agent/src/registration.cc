@@ -1,11 +1,10 @@
 // Registration transforms, rotation parsing and the device-force guard.
 #include "idms/agent/registration.h"
 
+#include <Eigen/Geometry>
 #include <charconv>
 #include <cmath>
 #include <numbers>
-
-#include <Eigen/Geometry>
 
 #include "text_internal.h"
 

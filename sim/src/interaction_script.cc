@@ -164,7 +164,7 @@ struct PierceKey {
   double t;  // s
   double s;  // model units along the axis
 };
-constexpr PierceKey kPierce[] = {{0.0, -kPierceHover}, {0.5, -kPierceHover}, {6.5, kPiercePast},
+constexpr PierceKey kPierce[] = {{0.0, -kPierceHover}, {0.5, -kPierceHover},  {6.5, kPiercePast},
                                  {7.5, kPiercePast},   {13.5, -kPierceHover}, {14.0, -kPierceHover}};
 
 ScriptSample SamplePierce(const ScriptGeometry& g, double t) {

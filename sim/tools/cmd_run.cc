@@ -367,10 +367,11 @@ void Run(RunArgs& a) {
                            {"work", friction_work},      {"work_max_running_sum", friction_work_max_sum}};
   }
   if (tool.kind == ToolKind::kNeedle) {
-    summary["needle"] = {{"punctures", punctures},
-                         {"punctured_s", std::isnan(punctured_s) ? nlohmann::json(nullptr) : nlohmann::json(punctured_s)},
-                         {"max_inserted", max_inserted},
-                         {"inside_at_end", inside}};
+    summary["needle"] = {
+        {"punctures", punctures},
+        {"punctured_s", std::isnan(punctured_s) ? nlohmann::json(nullptr) : nlohmann::json(punctured_s)},
+        {"max_inserted", max_inserted},
+        {"inside_at_end", inside}};
   }
   if (a.json) {
     PrintJson(summary);

@@ -9,10 +9,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <regex>
 
 #include "server_process.h"
@@ -226,11 +226,11 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
   ServerProcess server(dir + "/data");
   ASSERT_TRUE(server.ready()) << server.Log();
   const std::string observer = server.Token("observer");
-  ChildProcess agent(IDMS_AGENT_BIN,
-                     {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home",
-                      "--cache-dir", dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90",
-                      "--duration", "9", "--no-realtime"},
-                     dir + "/agent.log");
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
+       dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90", "--duration", "9", "--no-realtime"},
+      dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
   std::string id;
   ASSERT_TRUE(Eventually([&] {

@@ -24,7 +24,7 @@ struct DeviceReading {
   double orientation[4] = {1, 0, 0, 0};
   bool oriented = false;
   bool closed = false;  // button held / tweezers closed
-  bool valid = false;         // false: no usable position this tick (not yet connected, timed out)
+  bool valid = false;   // false: no usable position this tick (not yet connected, timed out)
 };
 
 // Counters a device keeps (read after the loop stopped, or racily for display).

@@ -29,7 +29,6 @@ struct Registration {
   bool OrientationToDevice(const double q_model[4], double q_device[4]) const;
 };
 
-
 // Rotation matrices (row-major) from the usual descriptions. Each returns false with a message
 // when the input cannot describe a rotation (non-finite, zero quaternion or axis).
 // Roll about x, pitch about y, yaw about z, degrees: R = Rz(yaw) Ry(pitch) Rx(roll) (idms.proto).
