@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <cstring>
 
 #include "idms/render/display.h"
@@ -498,6 +499,66 @@ TEST_F(RecordingRenderTest, TheToolIsAnOutlineWhereTheDeviceWasAndTheForceArrowS
   ASSERT_TRUE(renderer_.Render(sliding, o, &slipping, &error)) << error;
   EXPECT_GT(RingPixels(slipping, TheDisplay().tool_slip, cx, cy, radius_px), ring / 2);
   EXPECT_LT(RingPixels(with_friction, TheDisplay().tool_slip, cx, cy, radius_px), ring / 10);
+}
+
+// A needle (issue 32): its shaft runs back from the tip against its axis, steel, red while it is
+// in; a sphere's scene has none; turned the other way, the shaft is on the other side.
+TEST_F(RecordingRenderTest, ANeedlesShaftIsDrawnAlongItsAxisInItsStatesColour) {
+  const test::RecordedSession& s = test::Session();
+  std::string error;
+  ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
+  SceneView needle = player_.state().View();
+  needle.tool_radius = 0.25;
+  needle.needle_length = 5;
+  const double tilt = 30 * std::numbers::pi / 180;
+  needle.needle_axis = {std::sin(tilt), 0, -std::cos(tilt)};
+  needle.force = {0, 0, 0};
+  RenderOptions o;
+  o.width = 800, o.height = 600;
+  o.show_tool = true;
+  o.camera = CameraFor(needle, o);
+  // Pixels in a 7 x 7 box around (x, y) that are the lit shaft's: steel (blue-grey, darker than
+  // the background) or red, lit (the tissue is orange: red above blue too, but green with it).
+  auto steel = [](const uint8_t* p) { return p[2] > p[0] + 12 && p[0] < 215; };
+  auto red = [](const uint8_t* p) { return p[0] > p[1] + 70 && p[0] > p[2] + 70 && std::abs(p[1] - p[2]) < 25; };
+  auto near = [](const Image& image, auto is, double x, double y) {
+    int n = 0;
+    for (int dy = -3; dy <= 3; ++dy) {
+      for (int dx = -3; dx <= 3; ++dx) {
+        const int px = int(x) + dx, py = int(y) + dy;
+        if (px >= 0 && py >= 0 && px < image.width && py < image.height) n += is(image.Pixel(px, py));
+      }
+    }
+    return n;
+  };
+  // Three quarters of the way up the shaft (above the tissue), towards the tail.
+  auto along = [&](const SceneView& v, double d, double* x, double* y) {
+    return renderer_.Project({v.tool_pos[0] - v.needle_axis[0] * d, v.tool_pos[1] - v.needle_axis[1] * d,
+                              v.tool_pos[2] - v.needle_axis[2] * d},
+                             x, y);
+  };
+  Image image;
+  ASSERT_TRUE(renderer_.Render(needle, o, &image, &error)) << error;
+  double x = 0, y = 0;
+  ASSERT_TRUE(along(needle, 3.75, &x, &y));
+  EXPECT_GT(near(image, steel, x, y), 3) << "at (" << x << ", " << y << ")";
+  needle.needle_punctured = true;
+  ASSERT_TRUE(renderer_.Render(needle, o, &image, &error)) << error;
+  EXPECT_GT(near(image, red, x, y), 3);
+  EXPECT_EQ(near(image, steel, x, y), 0);
+  // Turned the other way about z: nothing where the shaft was.
+  SceneView turned = needle;
+  turned.needle_axis = {-std::sin(tilt), 0, -std::cos(tilt)};
+  ASSERT_TRUE(renderer_.Render(turned, o, &image, &error)) << error;
+  EXPECT_EQ(near(image, red, x, y), 0);
+  double tx = 0, ty = 0;
+  ASSERT_TRUE(along(turned, 3.75, &tx, &ty));
+  EXPECT_GT(near(image, red, tx, ty), 3);
+  // Not a needle: no shaft.
+  SceneView sphere = needle;
+  sphere.needle_length = 0;
+  ASSERT_TRUE(renderer_.Render(sphere, o, &image, &error)) << error;
+  EXPECT_EQ(near(image, red, x, y), 0);
 }
 
 TEST_F(RecordingRenderTest, TheSameTimeRenderedTwiceIsTheSameImage) {

@@ -91,6 +91,21 @@ Shape MakeArrow(int slices) {
   return s;
 }
 
+// A cylinder of radius 1 from z = 0 to 1, open at its ends (a needle's shaft).
+Shape MakeCylinder(int slices) {
+  Shape s;
+  for (int j = 0; j <= slices; ++j) {
+    const double phi = 2 * kPi * j / slices, c = std::cos(phi), sn = std::sin(phi);
+    s.Add({c, sn, 0}, {c, sn, 0});
+    s.Add({c, sn, 1}, {c, sn, 0});
+  }
+  for (int j = 0; j < slices; ++j) {
+    const uint32_t a = static_cast<uint32_t>(2 * j), b = a + 2;
+    s.tris.insert(s.tris.end(), {a, b, a + 1, a + 1, b, b + 1});
+  }
+  return s;
+}
+
 // The force arrow's length beyond the tool's surface, model units.
 double ArrowLength(double tool_radius, double force) {
   return tool_radius * std::min(kArrowRadiiPerForce * force, kMaxArrowRadii);
@@ -168,6 +183,7 @@ struct Renderer::Impl {
   std::vector<float> values;   // (num_vertices): the colour map entry / 255
   std::vector<int32_t> contacts;
   Shape arrow = MakeArrow(20);
+  Shape cylinder = MakeCylinder(16);
   Mat4 view{}, proj{};
   int width = 0, height = 0;
   GLuint program = 0, colour_map = 0;
@@ -403,6 +419,36 @@ struct Renderer::Impl {
     glEnable(GL_DEPTH_TEST);
   }
 
+  // A needle's shaft from its tip back along its axis, lit, hidden where the tissue is in front of
+  // it; then again over everything, faint, so that the part in the tissue shows through.
+  void DrawNeedle(const SceneView& scene, const Camera& cam, double tip_radius, int image_height) {
+    const Vec3 axis = Normalized({scene.needle_axis[0], scene.needle_axis[1], scene.needle_axis[2]});
+    const Vec3 tip{scene.tool_pos[0], scene.tool_pos[1], scene.tool_pos[2]};
+    const Vec3 z = Scale(axis, -1);  // tip to tail
+    const Vec3 x = Normalized(Cross(std::abs(z[2]) < 0.9 ? Vec3{0, 0, 1} : Vec3{1, 0, 0}, z));
+    const Vec3 y = Cross(z, x);
+    const double pixel = 2 * Norm(Sub(tip, cam.eye)) * std::tan(kFovYDeg * kPi / 360) / image_height;
+    const double r = std::max(tip_radius / 3, kNeedleMinPx * pixel);
+    const double len = scene.needle_length;
+    const double m[16] = {x[0] * r,   x[1] * r,   x[2] * r,   0, y[0] * r, y[1] * r, y[2] * r, 0,
+                          z[0] * len, z[1] * len, z[2] * len, 0, tip[0],   tip[1],   tip[2],   1};
+    const std::array<float, 3>& colour = scene.needle_punctured ? kNeedleInColour : kNeedleColour;
+    glPushMatrix();
+    glMultMatrixd(m);
+    glEnable(GL_LIGHTING);
+    SetMaterial(GL_FRONT_AND_BACK, colour, 0.5f);
+    DrawShape(cylinder);
+    glDisable(GL_LIGHTING);
+    glDisable(GL_DEPTH_TEST);
+    glEnable(GL_BLEND);
+    glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ZERO, GL_ONE);  // the image stays opaque
+    glColor4f(colour[0], colour[1], colour[2], 0.35f);
+    DrawShape(cylinder);
+    glDisable(GL_BLEND);
+    glEnable(GL_DEPTH_TEST);
+    glPopMatrix();
+  }
+
   // The force arrow from the tool's surface, lit by one light from the viewer's upper left.
   // The device force, and its tangential (friction) part when there is one, each an arrow from
   // the tool's surface along it, the same length per unit of force.
@@ -539,6 +585,11 @@ bool Renderer::Render(const SceneView& scene, const RenderOptions& o, Image* out
   if (scene.has_tool && (o.show_tool || o.show_force)) {
     const Camera around = AutoCamera(drawn.positions, 1);
     const double r = scene.tool_radius > 0 ? scene.tool_radius : 0.05 * Norm(Sub(around.eye, around.target));
+    if (o.show_tool && scene.needle_length > 0) {
+      glEnableClientState(GL_NORMAL_ARRAY);
+      impl_->DrawNeedle(scene, cam, r, o.height);
+      glDisableClientState(GL_NORMAL_ARRAY);
+    }
     if (o.show_tool) impl_->DrawTool(scene, cam, r, o.height);
     glEnableClientState(GL_NORMAL_ARRAY);
     if (o.show_force) impl_->DrawForce(scene, r);
@@ -562,10 +613,14 @@ Camera CameraFor(const SceneView& scene, const RenderOptions& o) {
   const Vec3 f{scene.force[0], scene.force[1], scene.force[2]};
   const double magnitude = Norm(f);
   const double reach = o.show_force && magnitude > 1e-9 ? (r + std::min(r, ArrowLength(r, magnitude))) / magnitude : 0;
-  const std::array<double, 4> spheres[2] = {
+  // A needle's tail too: the shaft is in view.
+  const double tail = o.show_tool ? scene.needle_length : 0;
+  const std::array<double, 4> spheres[3] = {
       {scene.tool_pos[0], scene.tool_pos[1], scene.tool_pos[2], r},
-      {scene.tool_pos[0] + f[0] * reach, scene.tool_pos[1] + f[1] * reach, scene.tool_pos[2] + f[2] * reach, 0.2 * r}};
-  return AutoCamera(scene.positions, aspect, spheres);
+      {scene.tool_pos[0] + f[0] * reach, scene.tool_pos[1] + f[1] * reach, scene.tool_pos[2] + f[2] * reach, 0.2 * r},
+      {scene.tool_pos[0] - scene.needle_axis[0] * tail, scene.tool_pos[1] - scene.needle_axis[1] * tail,
+       scene.tool_pos[2] - scene.needle_axis[2] * tail, r}};
+  return AutoCamera(scene.positions, aspect, std::span(spheres, tail > 0 ? 3 : 2));
 }
 
 bool Renderer::Project(const std::array<double, 3>& p, double* x, double* y) const {

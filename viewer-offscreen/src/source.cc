@@ -9,6 +9,7 @@
 #include "idms/render/display.h"
 #include "idms/sim/model.h"
 #include "idms/sim/model_io.h"
+#include "idms/sim/tool.h"
 
 namespace idms::render {
 
@@ -27,6 +28,15 @@ SceneView ViewerState::View() const {
     v.slip = sample.friction() == v1::FRICTION_SLIP;
     v.contact = sample.contact();
     v.grasp = sample.grasp();
+    if (needle_length > 0) {
+      v.needle_length = needle_length;
+      v.needle_punctured = sample.needle_punctured();
+      if (sample.has_tool_orientation()) {
+        const v1::Quat& q = sample.tool_orientation();
+        const double w[4] = {q.w(), q.x(), q.y(), q.z()};
+        NeedleAxisOf(w, v.needle_axis.data());
+      }
+    }
   }
   if (rest.size() == v.positions.size()) v.rest = rest, v.rest_time_s = rest_time_s;
   if (stiffness.size() * 3 == v.positions.size()) v.stiffness = stiffness;
@@ -35,6 +45,8 @@ SceneView ViewerState::View() const {
 
 void ViewerState::SetScene(const v1::Scene& scene) {
   tool_radius = scene.tools_size() > 0 && scene.tools(0).has_radius() ? scene.tools(0).radius() : 0;
+  const bool needle = scene.tools_size() > 0 && scene.tools(0).kind() == v1::Tool::KIND_NEEDLE;
+  needle_length = !needle ? 0 : scene.tools(0).needle().has_length() ? scene.tools(0).needle().length() : NeedleParams{}.length;
   mm_per_unit = scene.units().mm_per_unit();
   newtons_per_force_unit = scene.units().newtons_per_force_unit();
 }
@@ -147,6 +159,9 @@ bool RecordingPlayer::MoveTo(double t_s, std::string* error) {
     // A fresh mirror: frames from before the seek must not stand in for the surface at t_s.
     auto fresh = std::make_unique<ViewerState>();
     fresh->tool_radius = state_->tool_radius;
+    fresh->needle_length = state_->needle_length;
+    fresh->mm_per_unit = state_->mm_per_unit;
+    fresh->newtons_per_force_unit = state_->newtons_per_force_unit;
     fresh->rest = state_->rest;
     fresh->rest_time_s = state_->rest_time_s;
     state_ = std::move(fresh);

@@ -58,6 +58,12 @@ struct SceneView {
   std::array<double, 3> friction_force{0, 0, 0};  // its tangential (friction) part, the same frame and units
   bool contact = false, grasp = false;            // the device's last sample's flags
   bool slip = false;                              // its contact slipped (friction): the ring's slip colour
+  // A needle (Tool.KIND_NEEDLE), when needle_length > 0: tool_pos is its tip, tool_radius the
+  // tip's, and the shaft runs back from the tip against needle_axis (tail to tip, unit) for
+  // needle_length; needle_punctured while it is in the tissue.
+  double needle_length = 0;
+  std::array<double, 3> needle_axis{0, 0, -1};
+  bool needle_punctured = false;
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
@@ -70,6 +76,12 @@ inline constexpr std::array<float, 3> kBackground{0.93f, 0.94f, 0.96f};
 inline constexpr std::array<float, 3> kForceColour{0.95f, 0.80f, 0.10f};
 inline constexpr std::array<float, 3> kFrictionColour{0.80f, 0.15f, 0.75f};  // the force's tangential part
 inline constexpr std::array<float, 3> kWireColour{0.15f, 0.20f, 0.30f};
+// A needle's shaft: steel out of the tissue, red while it is in (its part under the surface shows
+// through it, faint).
+inline constexpr std::array<float, 3> kNeedleColour{0.45f, 0.50f, 0.58f};
+inline constexpr std::array<float, 3> kNeedleInColour{0.80f, 0.18f, 0.16f};
+// The shaft's radius: a third of the tip's, at least this many pixels.
+inline constexpr double kNeedleMinPx = 1.5;
 // The force arrow is this many tool radii long per unit of force, at most kMaxArrowRadii radii.
 inline constexpr double kArrowRadiiPerForce = 1.0;
 inline constexpr double kMaxArrowRadii = 4.0;
