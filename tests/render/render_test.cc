@@ -6,8 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <numbers>
 #include <cstring>
+#include <numbers>
 
 #include "idms/render/display.h"
 #include "idms/render/png.h"

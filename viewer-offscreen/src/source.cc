@@ -46,7 +46,9 @@ SceneView ViewerState::View() const {
 void ViewerState::SetScene(const v1::Scene& scene) {
   tool_radius = scene.tools_size() > 0 && scene.tools(0).has_radius() ? scene.tools(0).radius() : 0;
   const bool needle = scene.tools_size() > 0 && scene.tools(0).kind() == v1::Tool::KIND_NEEDLE;
-  needle_length = !needle ? 0 : scene.tools(0).needle().has_length() ? scene.tools(0).needle().length() : NeedleParams{}.length;
+  needle_length = !needle                                ? 0
+                  : scene.tools(0).needle().has_length() ? scene.tools(0).needle().length()
+                                                         : NeedleParams{}.length;
   mm_per_unit = scene.units().mm_per_unit();
   newtons_per_force_unit = scene.units().newtons_per_force_unit();
 }

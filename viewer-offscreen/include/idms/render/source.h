@@ -22,10 +22,10 @@ namespace idms::render {
 struct ViewerState {
   MeshMirror mirror;
   bool has_sample = false;
-  v1::DeviceSample sample;  // the last one received
-  double tool_radius = 0;   // from the scene (0 = unknown)
+  v1::DeviceSample sample;   // the last one received
+  double tool_radius = 0;    // from the scene (0 = unknown)
   double needle_length = 0;  // from the scene when its tool is a needle (0 = not one)
-  double mm_per_unit = 0;   // from the scene's units (0 = not declared)
+  double mm_per_unit = 0;    // from the scene's units (0 = not declared)
   double newtons_per_force_unit = 0;
   // The surface at rest (display.json's rule, as the browser's): the first keyframe applied, or
   // the first of another number of vertices; a model's own rest; a recording's first keyframe.
