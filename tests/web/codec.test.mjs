@@ -155,7 +155,8 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
   const batch = (/** @type {number} */ n, /** @type {boolean} */ stats) => Envelope.encode({ deviceSamples: {
     samples: Array.from({ length: n }, (_, k) => ({ tick: 2 ** 40 + k, timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 },
       force: k % 2 ? { x: 0.25, z: -k } : null, contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, substeps: 1,
-      forceLimited: k % 4 === 1, ...(k === 4 ? { frictionForce: { x: 0.3, y: -0.1 }, normalForce: 1.25, friction: 2 } : {}) })),
+      forceLimited: k % 4 === 1, ...(k === 4 ? { frictionForce: { x: 0.3, y: -0.1 }, normalForce: 1.25, friction: 2 } : {}),
+      ...(k === 5 ? { toolOrientation: { w: 0.966, y: 0.259 }, needlePunctured: true, needleInserted: 1.5 } : {}) })),
     stats: stats ? { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true, periodMaxUs: 9 } : null,
     samplesDropped: 12, sentUnixNs: 1.7e18 } }).finish();
   const first = decoder.decode(batch(17, true));
@@ -170,7 +171,10 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
     assert.deepEqual(s, { timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 }, force: k % 2 ? { x: 0.25, y: 0, z: -k } : { x: 0, y: 0, z: 0 },
       contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, forceLimited: k % 4 === 1,
       frictionForce: k === 4 ? { x: 0.3, y: -0.1, z: 0 } : { x: 0, y: 0, z: 0 }, normalForce: k === 4 ? 1.25 : 0,
-      friction: k === 4 ? 2 : 0, portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0 }, `sample ${k}`);
+      friction: k === 4 ? 2 : 0, portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0,
+      // A needle's pose and state (k = 5); unset, the orientation is the identity.
+      toolOrientation: k === 5 ? { w: 0.966, x: 0, y: 0.259, z: 0 } : { w: 1, x: 0, y: 0, z: 0 },
+      needlePunctured: k === 5, needleInserted: k === 5 ? 1.5 : 0 }, `sample ${k}`);
   }
   const sample3 = d.samples[3];
   // A smaller batch without statistics: the same objects, rewritten.

@@ -7,14 +7,17 @@ import $protobuf from 'protobufjs/minimal.js';
 import { idms } from './proto.js';
 
 /** A 3-vector as the viewer reads it. @typedef {{x: number, y: number, z: number}} Vec3 */
+/** A quaternion as the viewer reads it. @typedef {{w: number, x: number, y: number, z: number}} Quat */
 
 /**
  * One tick, as idms.v1.DeviceSample's fields the viewer reads (unset fields read 0 / false).
  * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number,
  *   forceLimited: boolean, frictionForce: Vec3, normalForce: number, friction: number, portEnergy: number,
- *   portEnergyWindow: number, passivityDamping: number}} Sample
+ *   portEnergyWindow: number, passivityDamping: number, toolOrientation: Quat, needlePunctured: boolean,
+ *   needleInserted: number}} Sample
  *   friction: idms.v1.FrictionState (0 none, 1 stick, 2 slip); portEnergy, portEnergyWindow, passivityDamping: the
- *   passivity controller's (0 when off)
+ *   passivity controller's (0 when off); toolOrientation: the identity when unset (as the protocol says), its
+ *   fields 0 when unset inside a set one
  */
 
 /**
@@ -53,7 +56,8 @@ const kWireLength = 2;
 /** @returns {Sample} */
 const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0,
   forceLimited: false, frictionForce: { x: 0, y: 0, z: 0 }, normalForce: 0, friction: 0,
-  portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0 });
+  portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0, toolOrientation: { w: 1, x: 0, y: 0, z: 0 },
+  needlePunctured: false, needleInserted: 0 });
 
 export class FrameDecoder {
   constructor() {
@@ -180,6 +184,11 @@ export class FrameDecoder {
     s.portEnergy = 0;
     s.portEnergyWindow = 0;
     s.passivityDamping = 0;
+    s.needlePunctured = false;
+    s.needleInserted = 0;
+    const q = s.toolOrientation;
+    q.w = 1;
+    q.x = q.y = q.z = 0;
     zero(s.toolPos);
     zero(s.force);
     zero(s.frictionForce);
@@ -199,6 +208,9 @@ export class FrameDecoder {
         case 16: s.portEnergy = r.double(); break;
         case 17: s.portEnergyWindow = r.double(); break;
         case 18: s.passivityDamping = r.double(); break;
+        case 19: this.readQuat(q, r.uint32() + r.pos); break;
+        case 20: s.needlePunctured = r.bool(); break;
+        case 21: s.needleInserted = r.double(); break;
         default: r.skipType(tag & 7);
       }
     }
@@ -216,6 +228,24 @@ export class FrameDecoder {
         if (f === 1) v.x = d;
         else if (f === 2) v.y = d;
         else v.z = d;
+      } else r.skipType(tag & 7);
+    }
+    checkEnd(r, end);
+  }
+
+  /** Set: its fields 0 until read (proto3 leaves zeros out). @param {Quat} q @param {number} end */
+  readQuat(q, end) {
+    const r = this.reader;
+    q.w = q.x = q.y = q.z = 0;
+    while (r.pos < end) {
+      const tag = r.uint32();
+      const f = tag >>> 3;
+      if ((tag & 7) === kWireFixed64 && f >= 1 && f <= 4) {
+        const d = r.double();
+        if (f === 1) q.w = d;
+        else if (f === 2) q.x = d;
+        else if (f === 3) q.y = d;
+        else q.z = d;
       } else r.skipType(tag & 7);
     }
     checkEnd(r, end);

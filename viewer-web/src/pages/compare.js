@@ -14,7 +14,7 @@ import { Units, kModelUnits } from '../view/units.js';
 import { ProfilePlot } from '../plots/profile.js';
 import { h, page, fixed, formatDate, formatTime } from './dom.js';
 import { Timeline } from './timeline.js';
-import { loadModelRest, toolWords } from './live_view.js';
+import { loadModelRest, needleLength, toolWords } from './live_view.js';
 import { gradeBadge, gradeWords } from './grade.js';
 import { traineeHref } from './session_table.js';
 
@@ -97,6 +97,7 @@ class Side {
       if (count === 0) return;
       const last = samples[count - 1];
       const f = last.force, p = last.toolPos;
+      view.setNeedlePose(last.toolOrientation, !!last.needlePunctured);
       view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, last.friction === 2);
       this.st.timeS = last.timeS || 0;
       this.onTime(this);
@@ -108,6 +109,7 @@ class Side {
     } else if (env.welcome) {
       const scene = env.welcome.scene;
       view.setToolRadius(scene?.tools?.[0]?.radius ?? 1.5);
+      view.setNeedle(needleLength(scene?.tools?.[0]));
       if (scene?.model) loadModelRest(view, scene.model, scene.quantStep || 1e-4);
     }
   }

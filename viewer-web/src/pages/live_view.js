@@ -10,6 +10,7 @@ import { length3 } from '../length3.js';
 import { display } from '../view/display.js';
 import { Units, kModelUnits } from '../view/units.js';
 import { parseObj } from '../codec/obj.js';
+import { idms } from '../codec/proto.js';
 
 /**
  * What the view has seen (a part of the page's state object, window.__idms).
@@ -41,6 +42,16 @@ export const kPositionPlot = { title: 'Tool position', unit: display.unit.length
 export function toolWords(sample) {
   const held = sample.friction === 1 ? ', sticking' : sample.friction === 2 ? ', slipping' : '';
   return sample.grasp ? `tool: grasping${held}` : sample.contact ? `tool: in contact${held}` : 'tool: free';
+}
+
+/**
+ * A needle's shaft length (its scene's Needle.length, protocol/idms.proto's default 10 when not
+ * given), model units; 0 for a tool that is not a needle (no shaft drawn).
+ * @param {idms.v1.ITool | null | undefined} tool the scene's first
+ */
+export function needleLength(tool) {
+  if (tool?.kind !== idms.v1.Tool.Kind.KIND_NEEDLE) return 0;
+  return tool.needle?.length ?? 10;
 }
 
 /** Friction's plot: the contact's normal force and the tangential (friction) force's magnitude. */
@@ -168,7 +179,9 @@ export class LiveView {
    *   toolPos?: {x?: number | null, y?: number | null, z?: number | null} | null, contact?: boolean | null,
    *   grasp?: boolean | null, warnings?: number | null, forceLimited?: boolean | null,
    *   frictionForce?: {x?: number | null, y?: number | null, z?: number | null} | null, normalForce?: number | null,
-   *   friction?: number | null, portEnergy?: number | null, passivityDamping?: number | null}[]} samples
+   *   friction?: number | null, portEnergy?: number | null, passivityDamping?: number | null,
+   *   toolOrientation?: {w?: number | null, x?: number | null, y?: number | null, z?: number | null} | null,
+   *   needlePunctured?: boolean | null}[]} samples
    * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
   onSamples(samples, count = samples.length) {
@@ -202,6 +215,7 @@ export class LiveView {
     const last = samples[count - 1];
     const f = last.force, p = last.toolPos;
     const friction = last.friction || 0;  // idms.v1.FrictionState: 1 stick, 2 slip
+    this.view.setNeedlePose(last.toolOrientation, !!last.needlePunctured);
     this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, friction === 2);
     // The tool's state in words (colour alone is not enough), written only when it changes.
     const words = toolWords(last);

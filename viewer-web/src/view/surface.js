@@ -4,7 +4,8 @@
 // displacement from rest (or stiffness) through protocol/display.json's map and lit by its grazing
 // key and fill lights (surface_material.js: idms-render's arithmetic), with a legend; the vertices
 // in contact marked; the tool as an outlined see-through sphere of its radius (thesis 6.1) so the
-// contact patch keeps its colours, the force as an arrow scaled to its magnitude. Renders only when
+// contact patch keeps its colours, the force as an arrow scaled to its magnitude; a needle's shaft
+// from its tip along its orientation, red while it is in the tissue. Renders only when
 // something changed, in the page's frame (FrameLoop); nothing is allocated per frame once the first
 // keyframe is drawn.
 import * as THREE from 'three';
@@ -32,6 +33,9 @@ const scratchRight = new THREE.Vector3();
 const scratchUp = new THREE.Vector3();
 const scratchCorner = new THREE.Vector3();
 const scratchBox = new THREE.Box3();
+const scratchTail = new THREE.Vector3();
+/** A needle's shaft: a third of its tip's radius, and at least this many pixels (idms-render's kNeedleMinPx). */
+const kShaftMinPx = 1.5;
 /** placeCamera's points: x across, y up, z towards the camera and radius, for 16 at most. */
 const scratchPoints = new Float64Array(16 * 4);
 
@@ -252,6 +256,12 @@ export class SurfaceView {
     this.dirty = false;
     if (this.surface.moved) this.surface.updateNormals();
     this.markContacts();
+    // A needle's shaft as thick as the view needs, rewritten when that changes by more than 2 %
+    // (orbiting changes it a little every frame).
+    if (this.tool.needleLength > 0) {
+      const r = this.shaftRadius();
+      if (Math.abs(r - this.tool.shaftRadius) > 0.02 * r) this.tool.setShaftRadius(r);
+    }
     this.renderer.render(this.scene, this.camera);
     this.surface.rendered();
     this.onRender?.();
@@ -405,11 +415,47 @@ export class SurfaceView {
     this.invalidate();
   }
 
-  /** Whether the tool is near the surface where the camera has not framed it (its travel). */
+  /**
+   * The tool is a needle of this length, model units (its tip the sphere, of the tool's radius);
+   * 0: it is not.
+   * @param {number} length
+   */
+  setNeedle(length) {
+    this.tool.setNeedle(length, this.toolRadius / 3);
+    this.invalidate();
+  }
+
+  /**
+   * A needle's orientation and state, from its last sample (nothing for another tool).
+   * @param {{w?: number | null, x?: number | null, y?: number | null, z?: number | null} | null | undefined} q
+   *   unit, model frame; absent: identity (the shaft straight up from the tip)
+   * @param {boolean} punctured
+   */
+  setNeedlePose(q, punctured) {
+    if (this.tool.needleLength <= 0) return;
+    this.tool.setNeedlePose(q, punctured);
+    this.invalidate();
+  }
+
+  /**
+   * A needle's shaft's radius, model units: a third of the tip's, and no thinner than kShaftMinPx
+   * pixels where the tip is, so that it shows when the view is far.
+   */
+  shaftRadius() {
+    const d = this.camera.position.distanceTo(this.tool.position);
+    const pixel = (2 * d * Math.tan(THREE.MathUtils.degToRad(this.camera.fov) / 2)) / Math.max(1, this.renderer.domElement.height);
+    const third = this.toolRadius / 3;
+    return Math.max(third, kShaftMinPx * pixel);
+  }
+
+  /** Whether the tool is near the surface where the camera has not framed it (its travel), or a needle's tail. */
   toolOutOfFrame() {
     if (!this.toolFitted) return true;
     const p = this.tool.position;
-    return !this.travel.containsPoint(p) && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius));
+    if (!this.travel.containsPoint(p) && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius))) return true;
+    if (this.tool.needleLength <= 0) return false;
+    const tail = this.tool.tail(scratchTail);
+    return !this.travel.containsPoint(tail) && toolNear(this.surfaceSphere, this.toolSphere.set(tail, this.toolRadius));
   }
 
   /**
@@ -424,6 +470,10 @@ export class SurfaceView {
     }
     this.forceScale = this.surfaceSphere.radius / 4;
     if (this.tool.visible) frameTool(this.travel, this.surfaceSphere, this.toolSphere.set(this.tool.position, this.toolRadius));
+    // A needle's tail too: its shaft in view.
+    if (this.tool.visible && this.tool.needleLength > 0) {
+      frameTool(this.travel, this.surfaceSphere, this.toolSphere.set(this.tool.tail(scratchTail), this.toolRadius));
+    }
     placeCamera(this.camera, this.surfaceBox, this.travel, this.toolRadius, this.controls.target);
     this.controls.update();
     this.fitted = true;

@@ -15,6 +15,13 @@
 // frame's (bench/web: the sphere at 12x6 segments drew the page 3% faster over 8 paired runs).
 // Only the arrow's vertices are rewritten when the force changes, and only they are uploaded;
 // nothing is allocated.
+//
+// A needle (Tool.KIND_NEEDLE, setNeedle) adds its shaft to the same mesh: a lit cylinder of a
+// third of the tip's radius from the tip (the sphere's centre) back along its orientation's local
+// +z for its length, steel, red while it is in the tissue (idms-render's kNeedleColour and
+// kNeedleInColour, viewer-offscreen/include/idms/render/render.h). Its triangles come first in the
+// index, so that the tip's ring and the force are drawn over it; a tool that is not a needle draws
+// from after them, as it did before the shaft was added.
 import * as THREE from 'three';
 import { display } from './display.js';
 
@@ -24,7 +31,12 @@ const kSides = 12;
 const kArrowVertices = 4 * kSides + 2;
 const kUp = new THREE.Vector3(0, 1, 0);
 const kSeeThrough = display.tool.fill_alpha;
-/** The cosine and sine of each side's angle around the arrow. */
+/** The shaft's rings (at the tip, at the tail, the tail cap's rim) and the cap's centre. */
+const kShaftVertices = 3 * kSides + 1;
+/** The shaft's colours, sRGB (idms-render's): out of the tissue, and while it is in. */
+const kSteel = new THREE.Color().setRGB(0.45, 0.50, 0.58, THREE.SRGBColorSpace);
+const kInside = new THREE.Color().setRGB(0.80, 0.18, 0.16, THREE.SRGBColorSpace);
+/** The cosine and sine of each side's angle around the arrow (and the shaft). */
 const kSideCos = Float64Array.from({ length: kSides }, (_, i) => Math.cos((2 * Math.PI * i) / kSides));
 const kSideSin = Float64Array.from({ length: kSides }, (_, i) => Math.sin((2 * Math.PI * i) / kSides));
 
@@ -89,7 +101,8 @@ export class ToolMesh extends THREE.Mesh {
   /** @param {number} color the tool's colour @param {number} arrowColor */
   constructor(color, arrowColor) {
     const numSphere = kCorners.length;
-    const n = numSphere + kArrowVertices;
+    const shaft = numSphere + kArrowVertices;
+    const n = shaft + kShaftVertices;
     const positions = new Float32Array(3 * n);
     const normals = new Float32Array(3 * n);
     const colors = new Float32Array(4 * n);
@@ -99,8 +112,19 @@ export class ToolMesh extends THREE.Mesh {
       // Unused (the shader makes the sphere's normals); facing the eye, as the square does.
       normals[3 * v + 2] = 1;
     }
-    const index = [0, 1, 2, 0, 2, 3];
-    const numSphereIndices = index.length;
+    // The shaft's triangles first (drawn only for a needle, under the rest); rings as in
+    // setShaft, counter-clockwise seen from outside.
+    const index = [];
+    const capCentre = shaft + 3 * kSides;
+    for (let i = 0; i < kSides; i++) {
+      const j = (i + 1) % kSides;
+      index.push(shaft + i, shaft + j, shaft + kSides + j, shaft + i, shaft + kSides + j, shaft + kSides + i);
+      index.push(shaft + 2 * kSides + i, shaft + 2 * kSides + j, capCentre);
+    }
+    const numShaftIndices = index.length;
+    index.push(0, 1, 2, 0, 2, 3);
+    const numSphereIndices = index.length - numShaftIndices;
+    const numArrowIndices = 12 * kSides;
     // The arrow's triangles after the sphere's, so that it is drawn over it. Counter-clockwise
     // seen from outside; rings as in arrowVertex.
     const a = numSphere;
@@ -142,6 +166,18 @@ export class ToolMesh extends THREE.Mesh {
     this.frustumCulled = false;
     this.numSphere = numSphere;
     this.numSphereIndices = numSphereIndices;
+    /** The shaft's first vertex and its index count (the index's first entries). */
+    this.shaftVertex = shaft;
+    this.numShaftIndices = numShaftIndices;
+    this.numArrowIndices = numArrowIndices;
+    /** The needle's length, model units; 0: not a needle (no shaft drawn). */
+    this.needleLength = 0;
+    /** The shaft's radius, model units. */
+    this.shaftRadius = 0;
+    /** The needle's orientation (model frame): the shaft runs from the tip along its local +z. */
+    this.orientation = new THREE.Quaternion();
+    this.punctured = false;
+    this.forceShown = false;
     /** The sphere's radius, model units (the shader's uniform). */
     this.radius = radius;
     this.positions = positions;
@@ -152,7 +188,7 @@ export class ToolMesh extends THREE.Mesh {
     this.tint = new THREE.Color();
     this.shownColor = -1;
     const c = new THREE.Color(arrowColor);
-    for (let v = numSphere; v < n; v++) colors.set([c.r, c.g, c.b, 1], 4 * v);
+    for (let v = numSphere; v < shaft; v++) colors.set([c.r, c.g, c.b, 1], 4 * v);
     this.setRadius(1);
     this.setColor(color);
     this.hideForce();
@@ -203,25 +239,118 @@ export class ToolMesh extends THREE.Mesh {
     this.arrowVertex(a + 4 * kSides + 1, 0, neck, 0, 0, -1, 0);
     this.upload('position', a, kArrowVertices);
     this.upload('normal', a, kArrowVertices);
-    this.geometry.setDrawRange(0, Infinity);
+    this.forceShown = true;
+    this.setDrawn();
   }
 
-  /** No force: the sphere alone. */
+  /** No force: the sphere alone (and a needle's shaft). */
   hideForce() {
-    this.geometry.setDrawRange(0, this.numSphereIndices);
+    this.forceShown = false;
+    this.setDrawn();
   }
 
   /**
-   * One of the arrow's vertices, given pointing along +y, turned to the force's direction.
-   * @param {number} v @param {number} x @param {number} y @param {number} z
-   * @param {number} nx @param {number} ny @param {number} nz
+   * The tool is a needle of this length (model units; 0 or less: it is not, and no shaft is
+   * drawn), its shaft of this radius (model units; a third of the tip's).
+   * @param {number} length @param {number} radius
    */
-  arrowVertex(v, x, y, z, nx, ny, nz) {
-    const t = this.scratch.set(x, y, z).applyQuaternion(this.direction);
+  setNeedle(length, radius) {
+    this.needleLength = length > 0 ? length : 0;
+    this.shaftRadius = radius;
+    this.setShaft();
+    this.setDrawn();
+  }
+
+  /**
+   * A needle's pose and state, from its last sample; the shaft rewritten only when they change.
+   * @param {{w?: number | null, x?: number | null, y?: number | null, z?: number | null} | null | undefined} q
+   *   unit, model frame; absent (or zero): identity, the shaft straight up from the tip
+   * @param {boolean} punctured in the tissue: the shaft red
+   */
+  setNeedlePose(q, punctured) {
+    const w = q?.w || 0, x = q?.x || 0, y = q?.y || 0, z = q?.z || 0;
+    const norm = Math.sqrt(w * w + x * x + y * y + z * z);
+    const o = this.orientation;
+    const turned = norm > 1e-9 ? o.w !== w / norm || o.x !== x / norm || o.y !== y / norm || o.z !== z / norm
+      : o.w !== 1 || o.x !== 0 || o.y !== 0 || o.z !== 0;
+    if (turned) {
+      if (norm > 1e-9) o.set(x / norm, y / norm, z / norm, w / norm);
+      else o.identity();
+    }
+    if (punctured !== this.punctured) {
+      this.punctured = punctured;
+      this.colorShaft();
+    }
+    if (turned) this.setShaft();
+  }
+
+  /** @param {number} radius the shaft's, model units; rewritten only when it changes */
+  setShaftRadius(radius) {
+    if (radius === this.shaftRadius) return;
+    this.shaftRadius = radius;
+    this.setShaft();
+  }
+
+  /** The needle's tail (the far end of its shaft), model frame. @param {THREE.Vector3} target */
+  tail(target) {
+    return target.set(0, 0, this.needleLength).applyQuaternion(this.orientation).add(this.position);
+  }
+
+  /**
+   * The shaft's vertices, given along +z from the tip, turned by the orientation: a ring at the
+   * tip, one at the tail, and the tail's cap (its rim and centre); then its colours.
+   */
+  setShaft() {
+    if (this.needleLength <= 0) return;
+    const s = this.shaftVertex, r = this.shaftRadius, len = this.needleLength;
+    const q = this.orientation;
+    for (let i = 0; i < kSides; i++) {
+      const c = kSideCos[i], sn = kSideSin[i];
+      this.arrowVertex(s + i, r * c, r * sn, 0, c, sn, 0, q);
+      this.arrowVertex(s + kSides + i, r * c, r * sn, len, c, sn, 0, q);
+      this.arrowVertex(s + 2 * kSides + i, r * c, r * sn, len, 0, 0, 1, q);
+    }
+    this.arrowVertex(s + 3 * kSides, 0, 0, len, 0, 0, 1, q);
+    this.upload('position', s, kShaftVertices);
+    this.upload('normal', s, kShaftVertices);
+    this.colorShaft();
+  }
+
+  /** The shaft's colour: steel, or red while the needle is in the tissue. */
+  colorShaft() {
+    const { r, g, b } = this.punctured ? kInside : kSteel;
+    const k = this.colors;
+    for (let v = this.shaftVertex; v < this.shaftVertex + kShaftVertices; v++) {
+      k[4 * v] = r;
+      k[4 * v + 1] = g;
+      k[4 * v + 2] = b;
+      k[4 * v + 3] = 1;
+    }
+    this.upload('color', this.shaftVertex, kShaftVertices);
+  }
+
+  /**
+   * What is drawn, one range of the index: the shaft (a needle's), the sphere, the arrow (while
+   * there is a force). A tool that is not a needle starts after the shaft.
+   */
+  setDrawn() {
+    const first = this.needleLength > 0 ? 0 : this.numShaftIndices;
+    const end = this.numShaftIndices + this.numSphereIndices + (this.forceShown ? this.numArrowIndices : 0);
+    this.geometry.setDrawRange(first, end - first);
+  }
+
+  /**
+   * One of the arrow's vertices, given pointing along +y, turned to the force's direction (or one
+   * of the shaft's, given along +z, turned by the needle's orientation).
+   * @param {number} v @param {number} x @param {number} y @param {number} z
+   * @param {number} nx @param {number} ny @param {number} nz @param {THREE.Quaternion} [turn]
+   */
+  arrowVertex(v, x, y, z, nx, ny, nz, turn = this.direction) {
+    const t = this.scratch.set(x, y, z).applyQuaternion(turn);
     this.positions[3 * v] = t.x;
     this.positions[3 * v + 1] = t.y;
     this.positions[3 * v + 2] = t.z;
-    const m = this.scratch.set(nx, ny, nz).applyQuaternion(this.direction);
+    const m = this.scratch.set(nx, ny, nz).applyQuaternion(turn);
     this.normals[3 * v] = m.x;
     this.normals[3 * v + 1] = m.y;
     this.normals[3 * v + 2] = m.z;
