@@ -222,6 +222,11 @@ struct Uplink::Impl final : ConnectionHandler {
             s.grasp ? "the tweezers took hold of an atom" : "the tweezers let go");
       grasping = s.grasp;
     }
+    if (s.needle_punctured != needle_in) {
+      Event(s, s.needle_punctured ? v1::SessionEvent::KIND_NEEDLE_IN : v1::SessionEvent::KIND_NEEDLE_OUT,
+            s.needle_punctured ? "the needle punctured the surface and went in" : "the needle came out");
+      needle_in = s.needle_punctured;
+    }
     // Bounded: the oldest goes; one the server never got is a drop, counted and reported.
     backlog.Accept(s);
   }
@@ -675,7 +680,8 @@ struct Uplink::Impl final : ConnectionHandler {
   uint64_t limited_unreported = 0;  // clamped ticks since the last KIND_FORCE_LIMIT event
   double limited_event_time_s = 0;
   bool has_limited_event = false;
-  bool grasping = false;  // the tweezers held an atom in the last sample
+  bool grasping = false;   // the tweezers held an atom in the last sample
+  bool needle_in = false;  // the needle was in the tissue in the last sample
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;

@@ -29,6 +29,9 @@ void SessionSummary::Add(const v1::DeviceSamples& ds) {
       force_limited_s += dt;
     }
     last_limited = s.force_limited();
+    punctures += s.needle_punctured() && !last_punctured ? 1 : 0;
+    last_punctured = s.needle_punctured();
+    needle_deepest = std::max(needle_deepest, s.needle_inserted());
   }
   overruns = ds.stats().overruns();
   tick_p99_us = ds.stats().compute_p99_us();
@@ -49,6 +52,9 @@ std::string SessionSummary::Json() const {
                    {"force_limited_s", force_limited_s},
                    {"passivity_dissipated", passivity_dissipated},
                    {"last_limited", last_limited},
+                   {"punctures", punctures},
+                   {"needle_deepest", needle_deepest},
+                   {"last_punctured", last_punctured},
                    {"contact_samples", contact_samples},
                    {"first_time_s", first_time_s},
                    {"last_time_s", last_time_s},
@@ -78,6 +84,9 @@ SessionSummary SessionSummary::FromJson(const std::string& text) {
   s.force_limited_s = number("force_limited_s", 0.0);
   s.passivity_dissipated = number("passivity_dissipated", 0.0);
   if (const auto it = j.find("last_limited"); it != j.end() && it->is_boolean()) s.last_limited = it->get<bool>();
+  s.punctures = number("punctures", int64_t{0});
+  s.needle_deepest = number("needle_deepest", 0.0);
+  if (const auto it = j.find("last_punctured"); it != j.end() && it->is_boolean()) s.last_punctured = it->get<bool>();
   s.first_time_s = number("first_time_s", -1.0);
   s.last_time_s = number("last_time_s", 0.0);
   s.notes = number("notes", uint64_t{0});

@@ -24,6 +24,9 @@ struct SessionSummary {
   double force_limited_s = 0;       // time spent at the limit
   double passivity_dissipated = 0;  // energy dissipated by the passivity controller (the agent's LoopStats)
   bool last_limited = false;        // the last sample was clamped (a run continues across batches)
+  int64_t punctures = 0;            // a needle's entries into the tissue (runs of punctured samples)
+  double needle_deepest = 0;        // its largest inserted length, model units
+  bool last_punctured = false;      // the last sample's needle was in
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
   double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample

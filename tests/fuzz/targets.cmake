@@ -36,3 +36,6 @@ set(IDMS_FUZZ_LIBS_s3_parse_fuzz idms_server_api)
 # --friction/--device scripted:drag,...).
 list(APPEND IDMS_FUZZ_TARGETS spec_fuzz)
 set(IDMS_FUZZ_LIBS_spec_fuzz idms_sim)
+# The agent's UDP bridge: a driver's datagrams (positions, version 1 and 2 with an orientation).
+list(APPEND IDMS_FUZZ_TARGETS udp_fuzz)
+set(IDMS_FUZZ_LIBS_udp_fuzz idms_udp_bridge)

@@ -14,6 +14,8 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <regex>
+#include <utility>
+#include <vector>
 
 #include "server_process.h"
 #include "session_checks.h"
@@ -220,7 +222,8 @@ TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
 
 // The needle's pierce (scripted:pierce, a needle tilted 30 degrees from the vertical) through a
 // registration turned 90 degrees about z: the recording holds every sample's orientation in the
-// model frame (the script's, whatever the device's frame), and the puncture and its depth.
+// model frame (the script's, whatever the device's frame), the puncture and its depth, the
+// needle's in and out as events, and the summary's count.
 TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth) {
   const std::string dir = TempDir("agent-pierce");
   ServerProcess server(dir + "/data");
@@ -229,7 +232,7 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
   ChildProcess agent(
       IDMS_AGENT_BIN,
       {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
-       dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90", "--duration", "9", "--no-realtime"},
+       dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90", "--duration", "12", "--no-realtime"},
       dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
   std::string id;
@@ -258,7 +261,7 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
   }
   std::printf("[ figures  ] pierce: %lld samples, punctured at %.3f s for %lld ticks, deepest %.3f\n",
               static_cast<long long>(samples), first_punctured_s, static_cast<long long>(punctured), deepest);
-  EXPECT_GT(samples, 8000);
+  EXPECT_GT(samples, 11000);
   EXPECT_EQ(oriented, samples);
   EXPECT_LT(worst, 1e-9);
   // In at about 2.9 s (idms-sim run --script pierce), as far as the script goes (2 past contact).
@@ -266,6 +269,22 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
   EXPECT_LT(first_punctured_s, 4.5);
   EXPECT_GT(deepest, 1.0);
   EXPECT_LT(deepest, 2.5);
+  // In and out are events at their ticks (out at about 11.1 s, as far past the deepest hold as
+  // in was before it), and the summary counts the puncture and its depth.
+  std::vector<std::pair<v1::SessionEvent::Kind, double>> needle_events;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/rec.mcap")) {
+    if (e.kind() == v1::SessionEvent::KIND_NEEDLE_IN || e.kind() == v1::SessionEvent::KIND_NEEDLE_OUT)
+      needle_events.emplace_back(e.kind(), e.time_s());
+  }
+  ASSERT_EQ(needle_events.size(), 2u);
+  EXPECT_EQ(needle_events[0].first, v1::SessionEvent::KIND_NEEDLE_IN);
+  EXPECT_NEAR(needle_events[0].second, first_punctured_s, 1e-9);
+  EXPECT_EQ(needle_events[1].first, v1::SessionEvent::KIND_NEEDLE_OUT);
+  EXPECT_GT(needle_events[1].second, 10.0);
+  EXPECT_LT(needle_events[1].second, 12.0);
+  const json row = Sessions(server.port(), observer)[0];
+  EXPECT_EQ(row["summary"]["punctures"], 1) << row.dump();
+  EXPECT_NEAR(row["summary"]["needle_deepest"].get<double>(), deepest, 1e-12);
 }
 
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {
