@@ -209,7 +209,7 @@ export function sessionPage(id, role, mode) {
   /** @type {any} */ (window).__idmsSurface = () => ({ contacts: view.view.numContacts, lo: view.view.surface.lo, hi: view.view.surface.hi,
     colourBy: view.view.surface.colourBy, scale: view.view.surface.scale, restTimeS: view.view.surface.restTimeS,
     camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius,
-    moved: movedVertices(view.view.surface) });
+    moved: movedVertices(view.view.surface), needle: needleShown(view.view.tool) });
   /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
   // The force-against-depth plot's axes as last drawn, for the tests.
@@ -252,6 +252,15 @@ export function sessionPage(id, role, mode) {
     socket?.close();
     view.dispose();
   };
+}
+
+/**
+ * A needle's shaft as drawn (null for another tool): its length, radius, tail (model frame) and
+ * whether it is red (in the tissue). @param {import('../view/tool.js').ToolMesh} tool
+ */
+function needleShown(tool) {
+  if (tool.needleLength <= 0) return null;
+  return { length: tool.needleLength, radius: tool.shaftRadius, tail: tool.tail(tool.position.clone()).toArray(), punctured: tool.punctured };
 }
 
 /**

@@ -448,14 +448,15 @@ export class SurfaceView {
     return Math.max(third, kShaftMinPx * pixel);
   }
 
-  /** Whether the tool is near the surface where the camera has not framed it (its travel), or a needle's tail. */
+  /**
+   * Whether the tool is near the surface where the camera has not framed it (its travel); for a
+   * needle near it, its tail too.
+   */
   toolOutOfFrame() {
     if (!this.toolFitted) return true;
     const p = this.tool.position;
-    if (!this.travel.containsPoint(p) && toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius))) return true;
-    if (this.tool.needleLength <= 0) return false;
-    const tail = this.tool.tail(scratchTail);
-    return !this.travel.containsPoint(tail) && toolNear(this.surfaceSphere, this.toolSphere.set(tail, this.toolRadius));
+    if (!toolNear(this.surfaceSphere, this.toolSphere.set(p, this.toolRadius))) return false;
+    return !this.travel.containsPoint(p) || (this.tool.needleLength > 0 && !this.travel.containsPoint(this.tool.tail(scratchTail)));
   }
 
   /**
@@ -470,9 +471,10 @@ export class SurfaceView {
     }
     this.forceScale = this.surfaceSphere.radius / 4;
     if (this.tool.visible) frameTool(this.travel, this.surfaceSphere, this.toolSphere.set(this.tool.position, this.toolRadius));
-    // A needle's tail too: its shaft in view.
-    if (this.tool.visible && this.tool.needleLength > 0) {
-      frameTool(this.travel, this.surfaceSphere, this.toolSphere.set(this.tool.tail(scratchTail), this.toolRadius));
+    // A needle whose tip is framed has its tail framed too, however far the shaft reaches: its
+    // whole shaft in view.
+    if (this.tool.visible && this.tool.needleLength > 0 && toolNear(this.surfaceSphere, this.toolSphere)) {
+      this.travel.expandByPoint(this.tool.tail(scratchTail));
     }
     placeCamera(this.camera, this.surfaceBox, this.travel, this.toolRadius, this.controls.target);
     this.controls.update();
