@@ -88,7 +88,7 @@ async function look(page, name, colour) {
   const on = along(img, tip, tail, colour);
   const beside = Math.max(along(img, tip, tail, colour, 15), along(img, tip, tail, colour, -15));
   const px = Math.hypot(tail.x - tip.x, tail.y - tip.y);
-  console.log(`${name}: t = ${s.tool}, tip (${tip.x.toFixed(0)}, ${tip.y.toFixed(0)}) tail (${tail.x.toFixed(0)}, ${tail.y.toFixed(0)}), `
+  console.log(`${name}: tip at ${s.tool.map((/** @type {number} */ v) => v.toFixed(2))}, on the canvas (${tip.x.toFixed(0)}, ${tip.y.toFixed(0)}) tail (${tail.x.toFixed(0)}, ${tail.y.toFixed(0)}), `
     + `${px.toFixed(0)} px long; on the line ${(100 * on).toFixed(0)} %, beside it ${(100 * beside).toFixed(0)} %`);
   return { s, on, beside, px, tip, tail };
 }
@@ -122,7 +122,7 @@ test('live: the needle\'s shaft along its orientation, red once it has punctured
   assert.ok(inside.px > 40, `the shaft ${inside.px.toFixed(0)} px long on the canvas`);
   assert.ok(inside.on > 0.8, `${(100 * inside.on).toFixed(0)} % of the shaft's line is red`);
   assert.ok(inside.beside < 0.2, `${(100 * inside.beside).toFixed(0)} % of the lines beside it are red`);
-  await docShot(page, 'needle-inside-page.png');
+  await shot(page, 'needle-inside-page.png');
   assert.equal(await agent.exited, 0, agent.log());
   // The replay before the puncture: steel, not red.
   for (let i = 0; i < 200; i++) {
