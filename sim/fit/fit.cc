@@ -366,11 +366,33 @@ bool ReadTraceCsv(const std::string& path, Trace* trace, std::string* error) {
     return false;
   }
   *trace = {};
+  // The tweezers' column, where the header names one.
+  int closed_column = -1, columns = 0;
+  {
+    std::stringstream names(line);
+    for (std::string name; std::getline(names, name, ','); ++columns) {
+      if (name == "closed") closed_column = columns;
+    }
+  }
   double t_first = 0, t_last = 0;
   for (int number = 2; std::getline(in, line); ++number) {
     double v[7];
     std::stringstream fields(line);
     std::string field;
+    if (closed_column >= 0) {
+      // The row's closed value: 0 or 1.
+      std::stringstream all(line);
+      std::string value;
+      for (int i = 0; i <= closed_column; ++i) {
+        if (!std::getline(all, value, ',')) value.clear();
+      }
+      if (value != "0" && value != "1") {
+        *error = path + ":" + std::to_string(number) + ": column " + std::to_string(closed_column + 1) +
+                 " (closed) is not 0 or 1";
+        return false;
+      }
+      trace->closed.push_back(value == "1" ? 1 : 0);
+    }
     for (int i = 0; i < 7; ++i) {
       char* end = nullptr;
       if (!std::getline(fields, field, ',') || (v[i] = std::strtod(field.c_str(), &end), *end != '\0') ||
@@ -415,6 +437,7 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
   out.reserve(trace.pos.size() / std::max(1, stride) + 1);
   for (size_t n = 0; n < trace.pos.size(); ++n) {
     std::copy(trace.pos[n].begin(), trace.pos[n].end(), tool.pos);
+    tool.closed = n < trace.closed.size() && trace.closed[n] != 0;
     input.tools[0] = tool;
     const StepReport report = Step(model, state, ws, input);
     if ((n + 1) % stride == 0)
@@ -607,6 +630,7 @@ MapResult FitMap(const Model& model, const Trace& trace, const FitOptions& optio
     slice.dt_s = trace.dt_s;
     slice.pos.assign(trace.pos.begin() + t0, trace.pos.begin() + t1);
     slice.force.assign(trace.force.begin() + t0, trace.force.begin() + t1);
+    if (!trace.closed.empty()) slice.closed.assign(trace.closed.begin() + t0, trace.closed.begin() + t1);
     const FitResult f = Fit(model, slice, one);
     r.replays += f.replays;
     if (!f.ok) {
@@ -651,12 +675,14 @@ Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t se
   t.dt_s = 1e-3;
   const ScriptGeometry g = MakeScriptGeometry(truth, 1.5);
   const int64_t ticks = std::llround(ScriptDuration(script) / t.dt_s);
+  const bool tweezers = script == Script::kPluck;
   for (int64_t n = 0; n < ticks; ++n) {
     const ScriptSample s = SampleScript(script, g, static_cast<double>(n + 1) * t.dt_s);
     t.pos.push_back({s.pos[0], s.pos[1], s.pos[2]});
+    if (tweezers) t.closed.push_back(s.closed ? 1 : 0);
   }
   ToolCommand tool;
-  tool.kind = ToolKind::kSphere;
+  tool.kind = tweezers ? ToolKind::kTweezers : ToolKind::kSphere;
   tool.stiffness = tool_stiffness;
   t.force = Replay(truth, t, StepOptions{}, tool, 1);
   double peak = 0;

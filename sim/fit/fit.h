@@ -29,9 +29,12 @@ struct Trace {
   double dt_s = 1e-3;
   std::vector<std::array<double, 3>> pos;
   std::vector<std::array<double, 3>> force;
+  // The tweezers closed at each tick (1), as many as pos; empty: never (a sphere's recording).
+  std::vector<uint8_t> closed;
 };
 
-// Reads the columns t,x,y,z,fx,fy,fz of an `idms-sim run --csv` file (the others are ignored).
+// Reads the columns t,x,y,z,fx,fy,fz of an `idms-sim run --csv` file, and `closed` where it has
+// one (a tweezers' run: 0 or 1); the others are ignored.
 // The tick is taken from t (uniform within 1e-6 s, or it is refused). False with *error naming the
 // file and line.
 bool ReadTraceCsv(const std::string& path, Trace* trace, std::string* error);
@@ -173,9 +176,9 @@ std::vector<std::array<double, 3>> Replay(const Model& model, const Trace& trace
                                           const ToolCommand& tool, int stride);
 
 // A recording's synthetic twin, for tests, benches and the docs' figures: a shipped script's path
-// (the thesis's sphere, r 1.5, k 400, on the default step) at 1 kHz, the force `truth` gives along
-// it, and Gaussian noise of `noise` times the peak force on every component (std::mt19937 `seed`).
-// tool_stiffness: the sphere's k in the recording.
+// (the thesis's sphere, r 1.5, k 400, on the default step; the pluck's tweezers, closed as its
+// script says) at 1 kHz, the force `truth` gives along it, and Gaussian noise of `noise` times the
+// peak force on every component (std::mt19937 `seed`). tool_stiffness: the tool's k in the recording.
 Trace ScriptedTrace(const Model& truth, Script script, double noise, uint32_t seed, double tool_stiffness = 400);
 
 }  // namespace idms::fit

@@ -113,8 +113,14 @@ void ReadSource(const FitArgs& a, const Model& model, fit::Trace* trace, fit::Fi
 #endif
   }
   if (!fit::ReadTraceCsv(a.csv, trace, &error)) Fail("fit", "--csv " + error);
-  o->tool.kind = ToolKind::kSphere;
+  // A run with a closed column was the tweezers' (idms-sim run --script pluck).
+  const bool tweezers = !trace->closed.empty();
+  o->tool.kind = tweezers ? ToolKind::kTweezers : ToolKind::kSphere;
   if (!a.tool.empty() && !ParseToolSpec(a.tool, &o->tool, &error)) Fail("fit", error);
+  if (tweezers != (o->tool.kind == ToolKind::kTweezers)) {
+    Fail("fit", tweezers ? "--csv has the tweezers' closed column: give --tool tweezers:... (or none)"
+                         : "--tool tweezers: the CSV has no closed column (idms-sim run writes it for the tweezers)");
+  }
   Preset preset{};
   if (!ParsePresetName(a.preset, &preset)) Fail("fit", "--preset '" + a.preset + "': expected default or thesis");
   const PresetSettings settings = SettingsOf(preset);

@@ -215,10 +215,13 @@ void Run(RunArgs& a) {
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
   if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
   // Friction's columns come after the ten of a frictionless run, so their readers keep working.
+  // The tweezers' closed state last (0 or 1: what the fitter replays them with).
+  const bool tweezers = tool.kind == ToolKind::kTweezers;
   if (csv) {
-    std::fputs(a.friction ? "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,ftx,fty,ftz,ft,fn,friction\n"
-                          : "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us\n",
+    std::fputs(a.friction ? "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,ftx,fty,ftz,ft,fn,friction"
+                          : "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us",
                csv);
+    std::fputs(tweezers ? ",closed\n" : "\n", csv);
   }
   int64_t stick_ticks = 0, slip_ticks = 0, transitions = 0;
   // The needle: punctures (entries), the first one's time, the deepest insertion, in at the end.
@@ -298,6 +301,7 @@ void Run(RunArgs& a) {
         std::fprintf(csv, ",%.6g,%.6g,%.6g,%.6g,%.6g,%s", tr.friction_force[0], tr.friction_force[1],
                      tr.friction_force[2], ft, tr.normal_force, kState[static_cast<int>(tr.friction)]);
       }
+      if (tweezers) std::fprintf(csv, ",%d", tool.closed ? 1 : 0);
       std::fputc('\n', csv);
     }
   }

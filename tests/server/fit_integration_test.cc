@@ -171,6 +171,28 @@ nlohmann::json FinishedFit(uint16_t port, const std::string& id, const std::stri
   return job;
 }
 
+// The pluck's tweezers: replayed closed where the recording held the atom, the session's forces
+// come back to the bit, and the model fits back to itself.
+TEST(FitRecording, APlucksRecordingIsReplayedWithItsGraspToTheBit) {
+  const std::string dir = TempDir("fit-pluck");
+  ServerProcess server(dir + "/data", kFitArgs);
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string id = RecordSession(server, dir, "hex_4x5_home", "scripted:pluck", "5");
+  ASSERT_FALSE(id.empty());
+  const std::string rec = dir + "/pluck.mcap";
+  ASSERT_TRUE(DownloadRecording(server.port(), id, server.Token("observer"), rec));
+  const std::string models = std::string(IDMS_SOURCE_DIR) + "/models/";
+  ASSERT_EQ(RunCommand({IDMS_SIM_BIN, "fit", "--model", models + "hex_4x5_home", "--recording", rec, "--params",
+                        "home_k", "--json"},
+                       dir + "/fit.json"),
+            0)
+      << ReadText(dir + "/fit.json");
+  const nlohmann::json fit = nlohmann::json::parse(ReadText(dir + "/fit.json"));
+  EXPECT_GE(fit["samples"].get<int>(), 4900);
+  EXPECT_EQ(fit["rms_before"].get<double>(), 0.0) << "the replay gives the agent's forces to the bit";
+  EXPECT_NEAR(fit["params"]["home_k"]["scale"].get<double>(), 1.0, 1e-6);
+}
+
 TEST(FitEndpoint, AnAdminFitsASessionAndTheLibraryGetsTheNextVersionWithTheReport) {
   const std::string dir = TempDir("fit-endpoint");
   ServerProcess server(dir + "/data", kFitArgs);

@@ -91,6 +91,29 @@ TEST(Fit, APalpationDeterminesOneStiffnessAndPredictsAStroke) {
   EXPECT_GT(both.scale_sigma[1], 0.05) << "one press cannot tell the home springs from the surface's";
 }
 
+// The pluck (thesis 6.1.3): the tweezers close on an atom pressed in, lift it and let go. Replayed
+// closed where the recording held the atom, its force determines the home stiffness as a press
+// does; replayed open throughout (a sphere), the lift pulls nothing and the fit is far off.
+TEST(Fit, ThePlucksTweezersAreReplayedClosedAndItsForceDeterminesTheStiffness) {
+  const Model typed = Hex();
+  Model truth = typed;
+  ScaleGroup(truth, Param::kHomeK, 1.3);
+  const Trace trace = ScriptedTrace(truth, Script::kPluck, 0.01, 7);
+  ASSERT_EQ(trace.closed.size(), trace.pos.size());
+  FitOptions o = Options({Param::kHomeK});
+  o.tool.kind = ToolKind::kTweezers;
+  const FitResult r = Fit(typed, trace, o);
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_NEAR(r.scale[0] / 1.3, 1.0, 0.02) << "home_k x " << r.scale[0];
+  EXPECT_LT(r.rms_after, 1.1 * std::sqrt(3.0) * 0.01 * r.peak_force);
+  std::printf("pluck fit: home_k x %.5f +- %.5f, RMS %.4g of peak %.4g\n", r.scale[0], r.scale_sigma[0], r.rms_after,
+              r.peak_force);
+  Trace open = trace;
+  open.closed.clear();
+  const FitResult blind = Fit(typed, open, o);
+  EXPECT_TRUE(!blind.ok || blind.rms_after > 5 * r.rms_after) << "without the grasp the lift is not explained";
+}
+
 TEST(Fit, RecoversDampingFromAStroke) {
   const Model typed = Hex();
   Model truth = typed;
@@ -295,6 +318,19 @@ TEST(Fit, TheCsvReaderTakesIdmsSimRunsColumnsAndRefusesOthers) {
   EXPECT_NE(error.find("fit-uneven.csv:4: t = 0.004"), std::string::npos) << error;
   EXPECT_FALSE(ReadTraceCsv(dir + "/none.csv", &t, &error));
   EXPECT_NE(error.find("cannot read"), std::string::npos) << error;
+  // A tweezers' run: its closed column, 0 or 1.
+  const std::string pluck = dir + "/fit-pluck.csv", bad_closed = dir + "/fit-bad-closed.csv";
+  std::ofstream(pluck) << "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,closed\n"
+                       << "0.001000,1,2,3,0.1,0.2,0.3,5,1,2.5,0\n0.002000,1,2,2.9,0.1,0.2,0.4,5,1,2.5,1\n";
+  std::ofstream(bad_closed) << "t,x,y,z,fx,fy,fz,closed\n0.001,1,2,3,0,0,0,0\n0.002,1,2,3,0,0,0,yes\n";
+  ASSERT_TRUE(ReadTraceCsv(pluck, &t, &error)) << error;
+  ASSERT_EQ(t.closed.size(), 2u);
+  EXPECT_EQ(t.closed[0], 0);
+  EXPECT_EQ(t.closed[1], 1);
+  EXPECT_FALSE(ReadTraceCsv(bad_closed, &t, &error));
+  EXPECT_NE(error.find("fit-bad-closed.csv:3: column 8 (closed) is not 0 or 1"), std::string::npos) << error;
+  ASSERT_TRUE(ReadTraceCsv(good, &t, &error)) << error;
+  EXPECT_TRUE(t.closed.empty());
 }
 
 }  // namespace

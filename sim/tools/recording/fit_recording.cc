@@ -74,11 +74,14 @@ bool ReadRecordingTrace(const std::string& path, const Model& model, fit::Trace*
     *error = path + ": " + why;
     return false;
   }
-  if (tool->kind != ToolKind::kSphere) {
+  // The tweezers replay closed where the recording held an atom (its grasp flag stands for the
+  // button, as replay:FILE.mcap has it); a cut or a needle's puncture is not replayed.
+  if (tool->kind != ToolKind::kSphere && tool->kind != ToolKind::kTweezers) {
     *error = path + ": the session's tool is the " + KindName(tool->kind) +
-             "; the fitter replays a sphere MIO (a grasp or a cut is not replayed)";
+             "; the fitter replays a sphere MIO or the tweezers (a cut or a puncture is not replayed)";
     return false;
   }
+  const bool tweezers = tool->kind == ToolKind::kTweezers;
   *trace = {};
   trace->dt_s = step->dt_s;
   MeshMirror mirror;
@@ -111,6 +114,7 @@ bool ReadRecordingTrace(const std::string& path, const Model& model, fit::Trace*
         if (s.passivity_damping() != 0) ++passive_ticks;
         trace->pos.push_back({s.tool_pos().x(), s.tool_pos().y(), s.tool_pos().z()});
         trace->force.push_back({s.force().x(), s.force().y(), s.force().z()});
+        if (tweezers) trace->closed.push_back(s.grasp() ? 1 : 0);
       }
     }
   }
