@@ -31,6 +31,18 @@ json ReadJson(const std::string& path) { return json::parse(ReadText(path)); }
 
 std::string WsUrl(const ServerProcess& server) { return "ws://127.0.0.1:" + server.port_string(); }
 
+// The newest session's id once it has ended (its recording finished); "" if it does not in time.
+std::string EndedSession(uint16_t port, const std::string& token) {
+  std::string id;
+  Eventually([&] {
+    const json s = Sessions(port, token);
+    if (s.empty() || s[0]["state"] != "ended") return false;
+    id = s[0]["id"];
+    return true;
+  });
+  return id;
+}
+
 TEST(AgentAndServer, ABacklogThatOverflowsWhileTheServerIsDownIsDroppedCountedAndRecorded) {
   const std::string dir = TempDir("agent-overflow");
   auto server = std::make_unique<ServerProcess>(dir + "/data");
@@ -192,13 +204,8 @@ TEST(AgentAndServer, TheForceLimitIsAnEventAtItsTimeAndCountedInTheSummary) {
                       "--max-force", "0.5", "--duration", "4", "--no-realtime"},
                      dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
-  std::string id;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(server.port(), observer);
-    if (s.empty() || s[0]["state"] != "ended") return false;
-    id = s[0]["id"];
-    return true;
-  })) << server.Log();
+  const std::string id = EndedSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
   const json row = Sessions(server.port(), observer)[0];
   EXPECT_GE(row["summary"]["force_limit_hits"].get<int>(), 1) << row.dump();
   EXPECT_GT(row["summary"]["force_limited_s"].get<double>(), 0.3) << row.dump();
@@ -235,13 +242,8 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
        dir + "/cache", "--device", "scripted:pierce", "--rotation", "rpy:0,0,90", "--duration", "12", "--no-realtime"},
       dir + "/agent.log");
   ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
-  std::string id;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(server.port(), observer);
-    if (s.empty() || s[0]["state"] != "ended") return false;
-    id = s[0]["id"];
-    return true;
-  })) << server.Log();
+  const std::string id = EndedSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
   ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
   const double half = 15 * std::numbers::pi / 180;  // the script's turn of -30 degrees about y
   int64_t samples = 0, oriented = 0, punctured = 0;
