@@ -8,6 +8,8 @@
 #include <string>
 #include <utility>
 
+#include "idms/sim/interaction_script.h"
+
 namespace idms {
 namespace {
 
@@ -44,6 +46,27 @@ TEST(Scene, ShippedScenesLoad) {
     EXPECT_EQ(scene.dt_s(), 0.001);
     EXPECT_EQ(scene.tools(0).kind(), std::string(name) == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
   }
+}
+
+// The pierce's scene is the needle scripted:pierce is made for (PierceNeedle, docs/needle.md).
+TEST(Scene, ThePierceSceneIsThePiercesNeedle) {
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadScene(std::string(IDMS_SOURCE_DIR) + "/models/pierce.scene", &scene, &error)) << error;
+  ASSERT_EQ(scene.tools_size(), 1);
+  const v1::Tool& t = scene.tools(0);
+  const ToolCommand c = PierceNeedle();
+  EXPECT_EQ(t.kind(), v1::Tool::KIND_NEEDLE);
+  EXPECT_EQ(t.radius(), c.radius);
+  EXPECT_EQ(t.stiffness(), c.stiffness);
+  EXPECT_EQ(t.force_law(), v1::FORCE_LAW_LINEAR);
+  EXPECT_EQ(t.needle().length(), c.needle.length);
+  EXPECT_EQ(t.needle().puncture_force(), c.needle.puncture_force);
+  EXPECT_EQ(t.needle().axial_friction(), c.needle.mu);
+  EXPECT_EQ(t.needle().grip(), c.needle.grip);
+  EXPECT_EQ(t.needle().capture_radius(), c.needle.capture_radius);
+  EXPECT_EQ(t.needle().lateral_stiffness(), c.needle.lateral_stiffness);
+  EXPECT_EQ(t.needle().axial_stiffness(), c.needle.axial_stiffness);
 }
 
 TEST(Scene, DefaultsFillUnsetFields) {
