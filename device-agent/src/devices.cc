@@ -168,12 +168,11 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
     *error = "a scripted device needs the model";
     return nullptr;
   }
-  target.geometry = MakeScriptGeometry(*context.model, context.mio_radius);
   target.registration = context.registration;
-  target.duration_s = ScriptDuration(target.script);
   const std::string name = std::string(human ? "human:" : "scripted:") + std::string(script_name);
-  // Hand parameters: a light hand (50 g) on a soft arm (5 Hz), damped.
+  // Hand parameters: a light hand (50 g) on a soft arm (5 Hz), damped; the scan's grid.
   double mass = 0.05, k = 60, zeta = 0.7;
+  int grid = kScanGrid;
   std::string_view rest = comma == std::string_view::npos ? std::string_view() : args.substr(comma + 1);
   while (!rest.empty()) {
     const size_t next = rest.find(',');
@@ -186,13 +185,22 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
       k = value;
     } else if (human && key == "zeta" && value >= 0) {
       zeta = value;
+    } else if (target.script == Script::kScan && key == "grid" && value >= kMinScanGrid && value <= kMaxScanGrid &&
+               value == std::floor(value)) {
+      grid = static_cast<int>(value);
     } else {
+      const bool scan = target.script == Script::kScan;
       *error = Cat({"option '", key, "' is unknown or out of range here",
-                    human ? " (human: mass > 0, k > 0, zeta >= 0)" : " (scripted devices take no options)"});
+                    human  ? (scan ? " (human: mass > 0, k > 0, zeta >= 0; scan: grid = 2 to 15)"
+                                   : " (human: mass > 0, k > 0, zeta >= 0)")
+                    : scan ? " (scan: grid = 2 to 15)"
+                           : " (scripted devices take no options)"});
       return nullptr;
     }
     rest = next == std::string_view::npos ? std::string_view() : rest.substr(next + 1);
   }
+  target.geometry = MakeScriptGeometry(*context.model, context.mio_radius, grid);
+  target.duration_s = ScriptDuration(target.script, target.geometry);
   if (human) {
     // The hand's own integrator (symplectic Euler at the loop's dt) is stable only while
     // (w dt)^2 + 4 zeta (w dt) < 4, w = sqrt(k / m): beyond it the hand diverges on its own.

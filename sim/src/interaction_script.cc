@@ -61,29 +61,30 @@ constexpr Key kPluck[] = {{0.0, 0.5, 0, kHover, false}, {0.5, 0.5, 0, kHover, fa
 // (ContactUnder) to kScanDepth below it, holds, goes back up and moves to the next point, row by row in a
 // serpentine. The depth is the palpation's order (0.063) but shallower: the tissue must stay
 // elastic (non-destructive, thesis 7.2.5), and a lump is felt as the force at a depth, not by
-// pressing harder. About 50 s for the 7 x 7 grid.
+// pressing harder.
 constexpr double kScanDepth = 0.05;
 constexpr double kScanHover = 0.3;
 constexpr double kScanLead = 0.5;  // hover above the first point at the start, and the last at the end
 constexpr double kScanDown = 0.3, kScanHold = 0.1, kScanUp = 0.3, kScanMove = 0.3;
 constexpr double kScanPeriod = kScanDown + kScanHold + kScanUp + kScanMove;
-constexpr int kScanPoints = kScanGrid * kScanGrid;
-constexpr double kScanDuration = 2 * kScanLead + kScanPoints * kScanPeriod - kScanMove;
+// About 50 s for the 7 x 7 grid, 2 min for 11 x 11.
+double ScanDuration(int grid) { return 2 * kScanLead + grid * grid * kScanPeriod - kScanMove; }
 
 double Ease(double u) { return 0.5 * (1 - std::cos(std::numbers::pi * std::clamp(u, 0.0, 1.0))); }
 
 // The grid index of the k-th point visited: rows in order, every other row backwards.
-int ScanVisit(int k) {
-  const int row = k / kScanGrid, col = k % kScanGrid;
-  return row * kScanGrid + (row % 2 == 0 ? col : kScanGrid - 1 - col);
+int ScanVisit(int k, int grid) {
+  const int row = k / grid, col = k % grid;
+  return row * grid + (row % 2 == 0 ? col : grid - 1 - col);
 }
 
 ScriptSample SampleScan(const ScriptGeometry& g, double t) {
-  t = std::clamp(t, 0.0, kScanDuration);
+  const int points = g.scan_grid * g.scan_grid;
+  t = std::clamp(t, 0.0, ScanDuration(g.scan_grid));
   const double u = t - kScanLead;
-  const int k = u < 0 ? 0 : std::min(static_cast<int>(u / kScanPeriod), kScanPoints - 1);
+  const int k = u < 0 ? 0 : std::min(static_cast<int>(u / kScanPeriod), points - 1);
   const double local = u - k * kScanPeriod;
-  const int at = ScanVisit(k);
+  const int at = ScanVisit(k, g.scan_grid);
   const std::array<double, 2> p = ScanPoint(g, at);
   ScriptSample out;
   out.pos[0] = p[0], out.pos[1] = p[1];
@@ -95,8 +96,8 @@ ScriptSample SampleScan(const ScriptGeometry& g, double t) {
     dz = -kScanDepth;
   } else if (local >= kScanDown + kScanHold && local < kScanDown + kScanHold + kScanUp) {
     dz = -kScanDepth + Ease((local - kScanDown - kScanHold) / kScanUp) * (kScanHover + kScanDepth);
-  } else if (local >= kScanPeriod - kScanMove && k + 1 < kScanPoints) {
-    const int next = ScanVisit(k + 1);
+  } else if (local >= kScanPeriod - kScanMove && k + 1 < points) {
+    const int next = ScanVisit(k + 1, g.scan_grid);
     const std::array<double, 2> q = ScanPoint(g, next);
     const double s = Ease((local - (kScanPeriod - kScanMove)) / kScanMove);
     out.pos[0] = p[0] + s * (q[0] - p[0]), out.pos[1] = p[1] + s * (q[1] - p[1]);
@@ -205,8 +206,9 @@ ToolCommand PierceNeedle() {
 }
 
 std::array<double, 2> ScanPoint(const ScriptGeometry& g, int i) {
-  const double fx = static_cast<double>(i % kScanGrid) / (kScanGrid - 1);
-  const double fy = static_cast<double>(i / kScanGrid) / (kScanGrid - 1);
+  const int n = g.scan_grid;
+  const double fx = static_cast<double>(i % n) / (n - 1);
+  const double fy = static_cast<double>(i / n) / (n - 1);
   return {g.x_min + fx * (g.x_max - g.x_min), g.y_min + fy * (g.y_max - g.y_min)};
 }
 
@@ -227,9 +229,10 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
   return {};
 }
 
-ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius) {
+ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius, int scan_grid) {
   ScriptGeometry g;
   g.mio_radius = mio_radius;
+  g.scan_grid = std::clamp(scan_grid, kMinScanGrid, kMaxScanGrid);
   double lo[3], hi[3];
   for (int c = 0; c < 3; ++c) lo[c] = std::numeric_limits<double>::infinity(), hi[c] = -lo[c];
   for (int32_t atom : model.external_atoms) {
@@ -257,7 +260,7 @@ ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius) {
   g.y_max = hi[1] - 0.2 * (hi[1] - lo[1]);
   // The surface under the tool: the highest external atom within one radius of the centre line.
   g.top_z = TopUnder(model, {g.center[0], g.center[1]}, mio_radius, hi[2]);
-  for (int i = 0; i < kScanGrid * kScanGrid; ++i)
+  for (int i = 0; i < g.scan_grid * g.scan_grid; ++i)
     g.scan_top_z[i] = ContactUnder(model, ScanPoint(g, i), mio_radius, hi[2]);
   return g;
 }
@@ -295,11 +298,15 @@ double ScriptDuration(Script script) {
     case Script::kPluck:
       return std::end(kPluck)[-1].t;
     case Script::kScan:
-      return kScanDuration;
+      return ScanDuration(kScanGrid);
     case Script::kPierce:
       return std::end(kPierce)[-1].t;
   }
   return 0;
+}
+
+double ScriptDuration(Script script, const ScriptGeometry& geometry) {
+  return script == Script::kScan ? ScanDuration(geometry.scan_grid) : ScriptDuration(script);
 }
 
 const char* ScriptName(Script script) {

@@ -32,6 +32,7 @@ struct RunArgs {
   int64_t max_ticks = -1;                            // -1 = the whole script
   bool full = false, json = false;
   int threads = 1;
+  int scan_grid = kScanGrid;   // --scan-grid: the scan's points per side
   double global_rate = 0;      // --global-rate: the whole model at this rate beside the local pass
   bool global_thread = false;  // --global-thread: on a thread of its own
   bool friction = false;       // the tool has friction (set by Run): the plot draws f_t and f_n
@@ -202,7 +203,7 @@ void Run(RunArgs& a) {
   Workspace workspace = MakeWorkspace(model, options);
   // Full mode streams the whole model every tick: past the caches, huge pages save page walks.
   if (options.full) AdviseHugePages(state, workspace);
-  const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
+  const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius, a.scan_grid);
   DragHand hand(geometry, drag_options);
   std::unique_ptr<GlobalDynamics> global;
   if (a.global_rate > 0) {
@@ -210,7 +211,7 @@ void Run(RunArgs& a) {
         model, state, options,
         GlobalOptions{.rate_hz = a.global_rate, .threaded = a.global_thread, .threads = a.threads});
   }
-  const int64_t script_ticks = std::llround((drag ? hand.Duration() : ScriptDuration(script)) / a.dt);
+  const int64_t script_ticks = std::llround((drag ? hand.Duration() : ScriptDuration(script, geometry)) / a.dt);
   const int64_t ticks = a.max_ticks >= 0 ? std::min(a.max_ticks, script_ticks) : script_ticks;
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
   if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
@@ -419,7 +420,8 @@ void Setup(CLI::App& app) {
   cmd->add_option("--model", a.model, "Model prefix (PREFIX.fem + PREFIX.plg)")->required();
   cmd->add_option("--script", a.script,
                   "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a "
-                  "slow stroke to watch) | scan (7 x 7 shallow presses, for fit --map) | "
+                  "slow stroke to watch) | scan (7 x 7 shallow presses, for fit --map; --scan-grid) | pierce (a "
+                  "needle, docs/needle.md) | "
                   "drag[:fraction=F,depth=D,mass=M,damping=B,push=S] (press, then push "
                   "sideways at F mu_s f_n through a simulated hand; needs mu_s)")
       ->capture_default_str();
@@ -446,6 +448,8 @@ void Setup(CLI::App& app) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   cmd->add_option("--lambda", a.lambda, "Eq. 4.6 filter weight (1 = backward difference)")->capture_default_str();
+  cmd->add_option("--scan-grid", a.scan_grid, "The scan's points per side (default 7: 7 x 7 over the middle 60%)")
+      ->check(CLI::Range(kMinScanGrid, kMaxScanGrid));
   cmd->add_option("--ticks", a.max_ticks, "Stop after this many ticks (default: the whole script)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--tool", a.tool,

@@ -106,6 +106,29 @@ TEST(Devices, TheScanDevicePressesAtTheGridPoints) {
   EXPECT_GT(ScriptDuration(Script::kScan), kScanGrid * kScanGrid * 0.9) << "every grid point visited";
 }
 
+// A denser grid (scripted:scan,grid=N): its second press is at its own second point, and the
+// scan lasts its N x N presses; a grid out of 2..15, or on another script, is refused.
+TEST(Devices, TheScanTakesItsGrid) {
+  const Model model = Hex();
+  agent::DeviceContext context;
+  context.model = &model;
+  const ScriptGeometry g9 = MakeScriptGeometry(model, 1.5, 9), g7 = MakeScriptGeometry(model, 1.5);
+  const std::array<double, 3> p = ModelPositionAt(context, "scripted:scan,grid=9", 1.9);  // the second press
+  EXPECT_NEAR(p[0], ScanPoint(g9, 1)[0], 1e-12);
+  EXPECT_NEAR(p[1], ScanPoint(g9, 1)[1], 1e-12);
+  EXPECT_GT(std::abs(ScanPoint(g9, 1)[0] - ScanPoint(g7, 1)[0]), 0.01);
+  EXPECT_GT(ScriptDuration(Script::kScan, g9), 81 * 0.9);
+  EXPECT_EQ(ScriptDuration(Script::kScan, g7), ScriptDuration(Script::kScan));
+  std::string error;
+  for (const char* bad : {"scripted:scan,grid=16", "scripted:scan,grid=1", "scripted:scan,grid=7.5",
+                          "scripted:palpate,grid=9"}) {
+    EXPECT_FALSE(agent::MakeDevice(bad, context, &error)) << bad;
+    EXPECT_NE(error.find("option 'grid' is unknown or out of range here"), std::string::npos) << error;
+  }
+  EXPECT_NE(error.find("(scripted devices take no options)"), std::string::npos) << error;
+  EXPECT_TRUE(agent::MakeDevice("human:scan,grid=5,k=80", context, &error)) << error;
+}
+
 // One contact law by default, the thesis's pseudo-code's (as idms-sim run); the prose's by name.
 TEST(Devices, TheSceneChoosesTheContactLawAndTheThesisLawIsTheDefault) {
   StepOptions step;

@@ -19,8 +19,10 @@ struct Model;
 
 enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan, kPierce };
 
-// The scan's grid: kScanGrid x kScanGrid points over the middle 60% of the surface in x and y.
+// The scan's grid: N x N points over the middle 60% of the surface in x and y, N from
+// kMinScanGrid to kMaxScanGrid (ScriptGeometry::scan_grid; kScanGrid by default).
 inline constexpr int kScanGrid = 7;
+inline constexpr int kMinScanGrid = 2, kMaxScanGrid = 15;
 
 // Where a script acts: the model's surface seen from above. For the hex fragment the top lies
 // at z = 0 and the tool comes down along z (thesis figure 6-1).
@@ -31,9 +33,10 @@ struct ScriptGeometry {
   double top_z = 0;             // highest external atom near the centre
   double mio_radius = 1.5;      // the MIO radius r: contact starts when z = top_z + r
   double y_min = 0, y_max = 0;  // the scan's extent along y (x: x_min..x_max)
-  // The scan: where the MIO first touches at each grid point, less its radius (as top_z), row-major
-  // with x fastest.
-  double scan_top_z[kScanGrid * kScanGrid] = {};
+  // The scan: its grid's points per side, and where the MIO first touches at each point, less its
+  // radius (as top_z), row-major with x fastest.
+  int scan_grid = kScanGrid;
+  double scan_top_z[kMaxScanGrid * kMaxScanGrid] = {};
 };
 
 // One sample of the trajectory: the MIO centre (a needle's tip) in model units, the tweezers'
@@ -55,8 +58,9 @@ inline constexpr double kPiercePast = 2.0;
 // (the hex fragment's; docs/needle.md). The agent's scene for the script says the same.
 ToolCommand PierceNeedle();
 
-// The script's geometry over `model`'s external atoms for an MIO of radius `mio_radius`.
-ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius);
+// The script's geometry over `model`'s external atoms for an MIO of radius `mio_radius`, the scan
+// on a scan_grid x scan_grid grid (clamped to [kMinScanGrid, kMaxScanGrid]).
+ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius, int scan_grid = kScanGrid);
 
 // The MIO pose at time t_s (clamped to [0, duration]). Smooth (C1) in position; pure function.
 ScriptSample SampleScript(Script script, const ScriptGeometry& geometry, double t_s);
@@ -65,10 +69,11 @@ ScriptSample SampleScript(Script script, const ScriptGeometry& geometry, double 
 // (one for stroke-slow and stroke-gentle, three for stroke-fast); empty for the other scripts.
 std::vector<std::array<double, 2>> StrokeCrossings(Script script);
 
-// Length of the script in seconds.
+// Length of the script in seconds (the scan's on the default grid; on another, the overload).
 double ScriptDuration(Script script);
+double ScriptDuration(Script script, const ScriptGeometry& geometry);
 
-// The scan's grid point i (0 .. kScanGrid^2 - 1, x fastest): its x, y.
+// The scan's grid point i (0 .. scan_grid^2 - 1, x fastest): its x, y.
 std::array<double, 2> ScanPoint(const ScriptGeometry& geometry, int i);
 
 // "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan", "pierce".
