@@ -120,8 +120,8 @@ TEST(Devices, TheScanTakesItsGrid) {
   EXPECT_GT(ScriptDuration(Script::kScan, g9), 81 * 0.9);
   EXPECT_EQ(ScriptDuration(Script::kScan, g7), ScriptDuration(Script::kScan));
   std::string error;
-  for (const char* bad : {"scripted:scan,grid=16", "scripted:scan,grid=1", "scripted:scan,grid=7.5",
-                          "scripted:palpate,grid=9"}) {
+  for (const char* bad :
+       {"scripted:scan,grid=16", "scripted:scan,grid=1", "scripted:scan,grid=7.5", "scripted:palpate,grid=9"}) {
     EXPECT_FALSE(agent::MakeDevice(bad, context, &error)) << bad;
     EXPECT_NE(error.find("option 'grid' is unknown or out of range here"), std::string::npos) << error;
   }
