@@ -385,11 +385,15 @@ std::optional<SessionNote> SessionHub::AddNote(const std::string& id, double tim
 }
 
 std::string SessionHub::RecordingPath(const SessionRow& row) const {
-  if (row.state != "live") {
-    std::string error;
-    if (!recordings_->Fetch(row.id, &error))
-      Log(LogLevel::kWarn, "recording not fetched", {{"session", row.id}, {"error", error}});
+  if (row.state == "live") {
+    // Published since the row was read (the row's state follows the file): the finished one.
+    std::error_code ec;
+    const std::string live = recordings_->LivePath(row.id), finished = recordings_->FinishedPath(row.id);
+    return !std::filesystem::exists(live, ec) && std::filesystem::exists(finished, ec) ? finished : live;
   }
+  std::string error;
+  if (!recordings_->Fetch(row.id, &error))
+    Log(LogLevel::kWarn, "recording not fetched", {{"session", row.id}, {"error", error}});
   return recordings_->PathFor(row.id, row.state);
 }
 
