@@ -141,11 +141,13 @@ export async function login(page, server, role, next = '/sessions') {
 }
 
 /**
- * A screenshot kept under build/web-artifacts and in docs/web (the README shows them).
+ * A screenshot kept under build/web-artifacts, and copied to docs/web (the README shows them) when
+ * IDMS_UPDATE_DOCS is set: a test run does not rewrite tracked files.
  * @param {import('playwright-core').Page | import('playwright-core').Locator} page @param {string} name
  */
 export async function docShot(page, name) {
   await shot(page, name);
+  if (!process.env.IDMS_UPDATE_DOCS) return;
   mkdirSync(join(sourceDir(), 'docs', 'web'), { recursive: true });
   copyFileSync(join(artifacts(), name), join(sourceDir(), 'docs', 'web', name));
 }
