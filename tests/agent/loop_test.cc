@@ -114,7 +114,7 @@ struct Fixture {
 };
 
 TEST(Loop, TickAllocatesNothing) {
-  for (const char* spec : {"scripted:palpate", "human:stroke-fast", "scripted:pluck"}) {
+  for (const char* spec : {"scripted:palpate", "human:stroke-fast", "scripted:pluck", "scripted:pierce"}) {
     Fixture f(spec);
     std::vector<TickSample> samples;
     samples.reserve(6000);
