@@ -15,16 +15,10 @@ inline double Dist2(const Real* p, const double* c) {
   return dx * dx + dy * dy + dz * dz;
 }
 
-// Squared distance from p to segment ab.
+// Squared distance from atom position p to segment ab.
 double SegmentDist2(const Real* p, const double* a, const double* b) {
-  double ab[3], ap[3];
-  for (int c = 0; c < 3; ++c) ab[c] = b[c] - a[c], ap[c] = p[c] - a[c];
-  const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-  double t = len2 > 0 ? (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2 : 0.0;
-  t = std::clamp(t, 0.0, 1.0);
-  double d2 = 0;
-  for (int c = 0; c < 3; ++c) d2 += (ap[c] - t * ab[c]) * (ap[c] - t * ab[c]);
-  return d2;
+  const double q[3] = {p[0], p[1], p[2]};
+  return internal::SegmentDist2(q, a, b);
 }
 
 // An atom is unsettled when it moves faster than settle_speed or its elastic force would still
@@ -129,6 +123,15 @@ void BuildActiveSet(const Model& m, State& s, Workspace& ws) {
         b.QuerySphere(g, ws.local_radius, /*contact=*/false, linger);
         b.AddActive(at.grasp_atom, linger);
       }
+    }
+    // The suture's punctures pull on the tissue around them wherever the tools are.
+    const SutureState& ss = s.suture;
+    for (int32_t j = 0; ss.num_nodes > 0 && j < ss.num_punctures; ++j) {
+      const SuturePuncture& pu = ss.punctures[j];
+      double p[3];
+      if (!AnchorPoint(s, pu.atoms, pu.w, p)) continue;
+      b.QuerySphere(p, ws.local_radius, /*contact=*/false, linger);
+      for (int i = 0; i < kAnchorAtoms && pu.atoms[i] >= 0; ++i) b.AddActive(pu.atoms[i], linger);
     }
     // Atoms that left the window (or were woken) keep moving while they are unsettled; then
     // they are immobilised.

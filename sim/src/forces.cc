@@ -86,6 +86,8 @@ void ToolForces(const State& s, Workspace& ws, Real* force, int stride) {
       if (ws.atom_mark[at.grasp_atom]) force[stride * at.grasp_atom + c] += static_cast<Real>(mag * sv[c]);
     }
   }
+  // The suture's punctures (suture.cc): no tool's force, so the hand feels them only through the thread.
+  AddSuture(s, ws, force, stride);
 }
 
 namespace {
@@ -223,6 +225,7 @@ void ToolEnergy(const State& s, const Workspace& ws, double* contact, double* no
       *noise += at.grasp_k * (std::fabs(stretch) + dl) * dl;
     }
   }
+  *contact += SutureEnergy(s, ws);
 }
 
 }  // namespace

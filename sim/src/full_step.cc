@@ -961,10 +961,10 @@ void BuildFusedPass(const Model& m, Workspace& ws) {
 bool FusedEligible(const Model& m, const Workspace& ws) {
   const StepOptions& o = ws.options;
   const bool euler = o.integrator == Integrator::kExplicitEuler || o.integrator == Integrator::kSymplecticEuler;
-  // A needle inside stiffens atoms beyond the tools' reach, which the pass's stable-step cache and
-  // ClearExtraK do not cover: the general kernel takes those ticks.
+  // A needle inside, or a suture's punctures, stiffen atoms beyond the tools' reach, which the
+  // pass's stable-step cache and ClearExtraK do not cover: the general kernel takes those ticks.
   return o.full && o.fused_pass && euler && ws.num_pending_cuts == 0 && ws.fused != nullptr &&
-         static_cast<int32_t>(ws.fused->group_end.size()) == m.num_atoms && !NeedleInside(ws);
+         static_cast<int32_t>(ws.fused->group_end.size()) == m.num_atoms && !NeedleInside(ws) && !ws.suture_on;
 }
 
 void SizeFusedPass(const Model& m, Workspace& ws) {

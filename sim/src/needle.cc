@@ -27,12 +27,21 @@
 //
 // Withdrawal: when the tip comes back behind the depth it punctured at, the needle is free (the tip
 // contact fades back in; entering again takes the threshold again).
+//
+// Through the far side: the tissue is where its elements are, so the tip has left it when no
+// element (not cut) passes within the capture radius of it, more than a tip's diameter in. The
+// exit point then rides on the captured atoms nearest the tip (weights by inverse distance).
+// Pulled on, the tail passes the entry and then the exit (depths along the axis); a suture the
+// needle draws (suture.cc) passes each there, and past the exit the needle is free.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <string>
+#include <utility>
 
 #include "idms/sim/model.h"
+#include "idms/sim/state.h"
 #include "idms/sim/tool.h"
 #include "idms/sim/workspace.h"
 #include "step_internal.h"
@@ -167,12 +176,58 @@ AxialEval EvaluateAxial(const State& s, const ActiveTool& at, double fn, double 
 
 bool Inside(const ActiveTool& at) { return at.kind == ToolKind::kNeedle && at.needle_state.punctured; }
 
+// Some element of the tissue (not cut) passes within r of p: the elements of the active atoms
+// within r plus twice the longest rest length (an element stretched to that still reaches).
+bool TissueAt(const Model& m, const State& s, const Workspace& ws, const double p[3], double r) {
+  const double reach = r + 2 * m.max_leq, r2 = r * r;
+  for (int32_t i = 0; i < ws.num_active; ++i) {
+    const int32_t a = ws.active[i];
+    const double pa[3] = {s.atom_pos[3 * a], s.atom_pos[3 * a + 1], s.atom_pos[3 * a + 2]};
+    const double d[3] = {pa[0] - p[0], pa[1] - p[1], pa[2] - p[2]};
+    if (!InsideSphere(d, reach)) continue;
+    const int32_t adr = m.atom_elem_adr[a];
+    for (int32_t j = 0; j < m.atom_elem_num[a]; ++j) {
+      const int32_t e = m.atom_elem[adr + j];
+      if (ws.elem_cut[e]) continue;
+      const int32_t b = m.elem_atoms[2 * e] == a ? m.elem_atoms[2 * e + 1] : m.elem_atoms[2 * e];
+      const double pb[3] = {s.atom_pos[3 * b], s.atom_pos[3 * b + 1], s.atom_pos[3 * b + 2]};
+      if (SegmentDist2(p, pa, pb) <= r2) return true;
+    }
+  }
+  return false;
+}
+
+// The exit point's atoms: the captured atoms nearest the tip, weights by inverse distance (a tip
+// radius added, so none dominates). False when the shaft held none.
+bool ExitAnchor(const State& s, const Workspace& ws, int32_t t, int32_t atoms[kAnchorAtoms], double w[kAnchorAtoms]) {
+  const ActiveTool& at = ws.tools[t];
+  double best[kAnchorAtoms];
+  std::fill(best, best + kAnchorAtoms, std::numeric_limits<double>::infinity());
+  std::fill(atoms, atoms + kAnchorAtoms, -1);
+  std::fill(w, w + kAnchorAtoms, 0.0);
+  for (int32_t i = 0; i < at.num_needle_atoms; ++i) {
+    const int32_t a = ws.needle_atoms[t][i];
+    const Real* p = &s.atom_pos[3 * a];
+    const double d[3] = {p[0] - at.pos[0], p[1] - at.pos[1], p[2] - at.pos[2]};
+    double dist = std::sqrt(Dot3(d, d));
+    int32_t id = a;
+    for (int k = 0; k < kAnchorAtoms; ++k) {  // insertion into the sorted few
+      if (dist < best[k]) std::swap(dist, best[k]), std::swap(id, atoms[k]);
+    }
+  }
+  double total = 0;
+  for (int k = 0; k < kAnchorAtoms && atoms[k] >= 0; ++k) total += w[k] = 1 / (best[k] + at.radius);
+  for (int k = 0; k < kAnchorAtoms && atoms[k] >= 0; ++k) w[k] /= total;
+  return atoms[0] >= 0;
+}
+
 }  // namespace
 
 bool ValidNeedleCommand(const ToolCommand& c) {
   double unused = 0;
   const double n2 = Dot3(c.axis, c.axis);
-  return Finite3(c.axis) && n2 > 1e-24 && std::isfinite(n2) && BadNeedleField(c.needle, &unused) == nullptr;
+  return Finite3(c.axis) && n2 > 1e-24 && std::isfinite(n2) && BadNeedleField(c.needle, &unused) == nullptr &&
+         ValidSutureCommand(c);
 }
 
 void ResolveNeedle(const State& s, const ToolState& ts, const ToolCommand& cmd, double dt, ActiveTool& at) {
@@ -302,7 +357,7 @@ double NeedleEnergy(const State& s, const Workspace& ws, int32_t t) {
   return energy + (ax.active ? ax.energy : 0.0);
 }
 
-void CommitNeedles(State& s, Workspace& ws, StepReport* report) {
+void CommitNeedles(const Model& m, State& s, Workspace& ws, StepReport* report) {
   const double dt = ws.options.dt_s;
   for (int32_t t = 0; t < ws.num_tools; ++t) {
     ActiveTool& at = ws.tools[t];
@@ -364,6 +419,30 @@ void CommitNeedles(State& s, Workspace& ws, StepReport* report) {
         tr.axial_force = -at.eval_axial;
         tr.needle_normal = at.eval_normal_needle;
         tr.axial = ns.axial;
+        // Through the far side, then drawn on through: the tail past the entry, then the exit.
+        if (!ns.exited && tr.inserted > 2 * at.radius && !TissueAt(m, s, ws, at.pos, at.needle.capture_radius) &&
+            ExitAnchor(s, ws, t, ns.exit_atoms, ns.exit_w)) {
+          ns.exited = true;
+          double e[3], x[3];
+          ns.exit_depth = EntryPoint(s, ns, e) && AnchorPoint(s, ns.exit_atoms, ns.exit_w, x)
+                              ? Dot3(x, at.axis) - Dot3(e, at.axis)
+                              : depth;
+        }
+        const double tail_depth = depth - at.needle.length;
+        if (ns.exited && !ns.entry_passed && tail_depth >= 0) {
+          ns.entry_passed = true;
+          SutureDrawnThrough(s, t, ns.entry_atoms, ns.entry_w, &report->suture);
+        }
+        if (ns.entry_passed && tail_depth >= ns.exit_depth) {
+          SutureDrawnThrough(s, t, ns.exit_atoms, ns.exit_w, &report->suture);
+          tr.drawn_through = true;
+          const double ramp = ns.tip_ramp;
+          ns = NeedleState{};  // free: the tip fades back in
+          ns.tip_ramp = ramp > 0 ? ramp : 1.0;
+          ns.tip_scale = 0;
+          ns.tip_axial = axial;
+        }
+        tr.exited = ns.exited;
       }
     }
     // The tip contact fades out while inside: next tick's stiffness factor is the one that would

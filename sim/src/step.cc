@@ -71,6 +71,7 @@ void ToolStiffness(State& s, Workspace& ws, StepReport* report) {
     friction = friction || at.mu_s > 0;
     needle = needle || at.kind == ToolKind::kNeedle;
   }
+  internal::BeginSuture(s, ws);
   if (slack == std::numeric_limits<double>::infinity()) return;  // no contact tool
   const int32_t n = ws.num_candidates;
   for (int32_t i = 0; i < n; ++i) {
@@ -496,12 +497,13 @@ StepReport Step(const Model& m, State& s, Workspace& ws, const ToolInput& input)
   report.forces_ns = times.forces_ns;
   report.integrate_ns = times.integrate_ns;
 
-  // 5. Friction's anchors (stick or slip), needles (puncture, axial stick or slip, withdrawal),
-  // then the device force.
+  // 5. Friction's anchors (stick or slip), needles (puncture, axial stick or slip, withdrawal,
+  // through), the suture thread (ties, its own dynamics, breaks), then the device force.
   {
     StageTimer timer(&report.checks_ns);
     CommitFriction(s, ws, &report);
-    CommitNeedles(s, ws, &report);
+    CommitNeedles(m, s, ws, &report);
+    CommitSuture(s, ws, &report);
     DeviceForces(s, ws, &report);
   }
 

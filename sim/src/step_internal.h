@@ -22,6 +22,19 @@ inline constexpr Real kMinLength = sizeof(Real) == 4 ? Real(1e-6) : Real(1e-12);
 
 inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
+// Squared distance from p to segment ab; *t (when given) the nearest point's parameter in [0, 1].
+inline double SegmentDist2(const double p[3], const double a[3], const double b[3], double* t = nullptr) {
+  double ab[3], ap[3];
+  for (int c = 0; c < 3; ++c) ab[c] = b[c] - a[c], ap[c] = p[c] - a[c];
+  const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+  double u = len2 > 0 ? (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2 : 0.0;
+  u = u < 0 ? 0.0 : (u > 1 ? 1.0 : u);
+  if (t != nullptr) *t = u;
+  double d2 = 0;
+  for (int c = 0; c < 3; ++c) d2 += (ap[c] - u * ab[c]) * (ap[c] - u * ab[c]);
+  return d2;
+}
+
 // SphereContact's own first test, inline: the loops over full mode's contact candidates (every
 // external atom) skip the call for the atoms a tool cannot touch.
 inline bool InsideSphere(const double d[3], double r) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < r * r; }
@@ -96,7 +109,27 @@ void AddNeedle(const State& state, Workspace& ws, int32_t tool, Real* force, int
 double NeedleEnergy(const State& state, const Workspace& ws, int32_t tool);
 // After the accepted attempt: puncture (tip axial force above the threshold), axial stick or slip,
 // withdrawal, the tip's fade; the report's needle fields; the needle back to State.
-void CommitNeedles(State& state, Workspace& ws, StepReport* report);
+void CommitNeedles(const Model& model, State& state, Workspace& ws, StepReport* report);
+
+// suture.cc — the suture thread (the model is described there).
+// The command's suture parameters are valid (a bad one is bad input).
+bool ValidSutureCommand(const ToolCommand& command);
+// At the end of ResolveTools: lays the thread behind the first needle that asks for one, finds
+// the needle drawing it, the tie command's rising edge, and whether its punctures pull this tick.
+void ResolveSuture(State& state, Workspace& ws, const ToolInput& input);
+// In ToolStiffness: the thread's point in each puncture at the tick's start, and the punctures'
+// springs into their atoms' atom_extra_k.
+void BeginSuture(const State& state, Workspace& ws);
+// In ToolForces: each puncture's spring-damper toward the thread on its atoms' accumulator.
+void AddSuture(const State& state, Workspace& ws, Real* force, int stride);
+// The punctures' spring potentials at the State's positions.
+double SutureEnergy(const State& state, const Workspace& ws);
+// From CommitNeedles: needle slot `tool`'s tail passed the point on these atoms; the thread it
+// draws now passes through it (a new puncture).
+void SutureDrawnThrough(State& state, int32_t tool, const int32_t* atoms, const double* w, SutureReport* report);
+// After CommitNeedles: a tie, the thread over the tick, the punctures slid, a break, the pull on
+// the needle's tail into its tick_force; the report's suture fields.
+void CommitSuture(State& state, Workspace& ws, StepReport* report);
 
 // active_set.cc — stage 2: active atoms (ws.active, copied to State), contact candidates, and
 // the active element list; immobilises atoms that left the window and settled.

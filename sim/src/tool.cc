@@ -336,6 +336,7 @@ void ResolveTools(const Model& m, State& s, Workspace& ws, const ToolInput& inpu
       report->tools[t].cut_elements = DetectCuts(m, s, ws, prev_base, prev_tip, at.pos, at.blade_tip);
     }
   }
+  ResolveSuture(s, ws, input);
 }
 
 void UpdateGrasps(const Model& m, State& s, Workspace& ws, StepReport* report) {

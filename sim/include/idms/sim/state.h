@@ -66,6 +66,64 @@ struct NeedleState {
   double axial_offset = 0;  // model units: the depth where the needle sticks
   double axial_u = 0;       // model units: committed axial displacement from the sticking depth
   FrictionState axial = FrictionState::kNone;
+  // Through the far side (issue 32): the tip left the tissue (no element within the capture
+  // radius of it) at exit_depth past the entry, the exit point riding on the captured atoms
+  // nearest the tip then. Pulled on through, the tail passes the entry (entry_passed) and then
+  // the exit, where the needle is free again; a suture it draws passes each in turn.
+  bool exited = false;
+  bool entry_passed = false;
+  int32_t exit_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
+  double exit_w[kAnchorAtoms] = {0, 0, 0, 0};
+  double exit_depth = 0;  // model units: depth at the exit
+};
+
+// The suture thread (suture.cc): a chain of mass points and tension-only springs whose first node
+// follows the needle's tail. Every point the thread has been drawn through is a puncture: a
+// point riding on tissue atoms that the thread slides through without friction (its arc position
+// s, in segments from node 0, follows the nearest point of the thread). A tie binds two points of
+// the thread (arc positions fixed: the knot holds the material, not the tissue) with a spring of
+// rest length 0 whose pull is bounded by the tie force: the knot drawn tight by hand. Fixed
+// arrays: the step never allocates, and a scene without a thread carries one empty struct.
+inline constexpr int kSutureSegments = 128;
+inline constexpr int kSuturePunctures = 16;
+inline constexpr int kSutureTies = 8;
+
+struct SuturePuncture {
+  int32_t atoms[kAnchorAtoms] = {-1, -1, -1, -1};
+  double w[kAnchorAtoms] = {0, 0, 0, 0};
+  double s = 0;  // arc position of the thread in it, segments from node 0
+  // Which way along the thread from the puncture before it (+1: at smaller s, -1: larger, 0: the
+  // first): punctures keep their order along the thread (the thread between two cannot be negative).
+  int32_t order = 0;
+};
+
+struct SutureTie {
+  double s_a = 0, s_b = 0;        // the knot's two arc positions
+  int32_t first = -1, last = -1;  // the punctures it sits on (the knot does not pass into them)
+};
+
+struct SutureState {
+  int32_t num_nodes = 0;  // 0: no thread (the first needle with suture.length > 0 lays one)
+  int32_t tool = -1;      // the needle slot whose tail node 0 follows (-1: it trails free)
+  // Resolved when the thread was laid (later commands do not change them).
+  double seg_len = 0;    // model units: rest length of each segment
+  double node_mass = 0;  // mass units
+  double k = 0, b = 0;   // each segment's spring (force / length) and damper (force / (length / s))
+  double hold_k = 0;     // a puncture's spring to the thread, force / length
+  double hold_b = 0;     // ... and its damper
+  double strength = 0;   // segment tension at which the thread breaks, force units (0: never)
+  double tie_force = 0;  // a knot's largest pull, force units
+  double tie_speed = 0;  // model units / s: how fast a knot cinches its loop
+  double drag = 0;       // 1 / s: the thread's air damping
+  std::array<double, 3 * (kSutureSegments + 1)> pos{};  // model units
+  std::array<double, 3 * (kSutureSegments + 1)> vel{};  // model units / s
+  std::array<SuturePuncture, kSuturePunctures> punctures{};
+  int32_t num_punctures = 0;
+  int32_t stitch_start = 0;  // the first puncture not yet tied off
+  std::array<SutureTie, kSutureTies> ties{};
+  int32_t num_ties = 0;
+  int32_t broken = -1;    // the segment that parted, or -1
+  bool tie_held = false;  // the tie command was on last tick (a tie is edge-triggered)
 };
 
 // What a tool slot remembers between ticks (thesis table 5.1 plus the tweezers of 6.1.3).
@@ -148,6 +206,7 @@ struct State {
   std::vector<int32_t> atom_linger;  // (num_atoms), ticks
 
   std::array<ToolState, kMaxTools> tools{};
+  SutureState suture;
   // Energy the dynamics gained with the tools held still, accumulated over recent ticks
   // (StabilityOptions::energy_memory_s): catches a divergence too slow for one tick's check.
   double energy_excess = 0;

@@ -149,11 +149,31 @@ struct ToolReport {
   FrictionState axial = FrictionState::kNone;
   int32_t needle_atoms = 0;
   int32_t needle_overflow = 0;
+  // Needle through the far side: its tip out of the tissue again (until it is free), and this
+  // tick the tail passed the exit (the needle drawn through, free again).
+  bool exited = false;
+  bool drawn_through = false;
+};
+
+// The suture thread (suture.cc) after the tick: what it holds, and this tick's events. All 0 /
+// false without a thread.
+struct SutureReport {
+  int32_t nodes = 0;
+  int32_t punctures = 0;      // points the thread has been drawn through
+  int32_t new_punctures = 0;  // ... this tick
+  int32_t ties = 0;
+  bool tied = false;         // this tick's tie command knotted a stitch
+  bool tie_refused = false;  // ... or found no stitch to knot (fewer than two punctures since the last tie)
+  bool broke = false;        // a segment parted this tick (SutureState::broken says which)
+  double max_tension = 0;    // force units: the tautest segment
+  double pull = 0;           // force units: the thread's pull on the needle's tail
+  int32_t substeps = 0;
 };
 
 struct StepReport {
   std::array<ToolReport, kMaxTools> tools{};
   int32_t num_tools = 0;
+  SutureReport suture;
   int32_t active_atoms = 0;
   int32_t active_elems = 0;
   int32_t substeps = 0;  // of the accepted attempt

@@ -38,6 +38,21 @@ struct NeedleParams {
   double axial_damping = -1;     // force / (length / s) (< 0 = axial_stiffness * dt)
 };
 
+// A suture thread a needle draws (suture.cc; SutureState). length 0: none. Read once, when the
+// thread is laid behind the needle's tail.
+struct SutureParams {
+  double length = 0;          // model units, >= 0 (0 = no thread)
+  int32_t segments = 64;      // 1 .. kSutureSegments
+  double mass = 0.05;         // mass units, > 0: the whole thread
+  double stiffness = 0;       // force / length, >= 0 per segment (0 = the stiffest one step holds)
+  double damping = -1;        // force / (length / s) per segment (< 0 = critical for a node pair)
+  double strength = 0;        // force units, >= 0: a segment's tension that breaks it (0 = never)
+  double hold_stiffness = 0;  // force / length, >= 0: a puncture's hold on the thread (0 = the needle's lateral one)
+  double tie_force = 2;       // force units, > 0: how hard a knot is drawn
+  double tie_speed = 5;       // model units / s, > 0: how fast a knot cinches the loop
+  double drag = 5;            // 1 / s, >= 0: air damping on the thread's nodes (it settles a slack thread)
+};
+
 struct ToolCommand {
   ToolKind kind = ToolKind::kNone;
   double pos[3] = {0, 0, 0};  // device endpoint = MIO centre (sphere, tweezers) or blade base
@@ -59,6 +74,10 @@ struct ToolCommand {
   // or non-finite is bad input), radius and stiffness the tip's sphere MIO.
   double axis[3] = {0, 0, -1};
   NeedleParams needle;
+  // Needle: the thread it draws, and the tie command (a rising edge ties off the current stitch:
+  // the thread at its first and last punctures is knotted).
+  SutureParams suture;
+  bool tie = false;
 };
 
 // A needle's axis (tail to tip) for the tool's orientation, a unit quaternion (w, x, y, z): its
@@ -68,6 +87,10 @@ void NeedleAxisOf(const double orientation[4], double axis[3]);
 // The needle's parameters as a boundary checks them (finite, in range). False with *error naming
 // the field ("needle.puncture_force must be a finite number > 0, got 0").
 bool ValidateNeedle(const ToolCommand& tool, std::string* error);
+
+// The suture's parameters as a boundary checks them. False with *error naming the field
+// ("suture.segments must be an integer in 1..128, got 0").
+bool ValidateSuture(const ToolCommand& tool, std::string* error);
 
 // One item of a friction spec on a command line ("mu_s=0.6", "mu_d", "k_t", "b_t") into the
 // tool; false when the key is not one of them or the value is not a finite number.

@@ -185,6 +185,13 @@ struct Workspace {
   // order; the first ActiveTool::num_needle_atoms are meaningful). Kept outside ActiveTool, which
   // ResolveTools resets every tick, so that a scene without a needle never touches them.
   std::array<std::array<int32_t, kNeedleAtoms>, kMaxTools> needle_atoms{};
+  // The suture (suture.cc), set by ResolveTools: its punctures pull on the tissue this tick, the
+  // needle slot that draws it (-1: none), a tie command's rising edge, and the thread's point in
+  // each puncture at the tick's start with its velocity and direction (what the tissue is pulled toward).
+  bool suture_on = false;
+  int32_t suture_tool = -1;
+  bool suture_tie = false;
+  std::array<std::array<double, 9>, kSuturePunctures> suture_points{};
 };
 
 // Sizes everything for `model` and `options` (validated: IDMS_CHECK on nonsense such as
