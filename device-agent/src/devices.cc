@@ -160,8 +160,9 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
                                         context.registration, context.dt_s);
   }
   if (!ParseScriptName(script_name, &target.script)) {
-    *error = Cat({"unknown script '", script_name}) +
-             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or (scripted) drag";
+    *error =
+        Cat({"unknown script '", script_name}) +
+        "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or (scripted) drag";
     return nullptr;
   }
   if (context.model == nullptr) {

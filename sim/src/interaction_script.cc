@@ -187,7 +187,28 @@ ScriptSample SamplePierce(const ScriptGeometry& g, double t) {
   return out;
 }
 
+ScriptSample SampleStitch(const ScriptGeometry& g, double t) {
+  t = std::clamp(t, 0.0, kStitchEnd);
+  const double length = StitchNeedle().needle.length;
+  // The tip's distance below first contact: -hover, held 0.5 s, then down at the stitch's speed.
+  const double travel = kPierceHover + length + kStitchPast;
+  const double s = -kPierceHover + std::min(travel, kStitchSpeed * std::max(0.0, t - 0.5));
+  ScriptSample out;
+  out.pos[0] = g.center[0], out.pos[1] = g.center[1], out.pos[2] = g.top_z + g.mio_radius - s;
+  out.oriented = true;  // upright: the identity, the needle's axis -z
+  out.closed = t >= kStitchTie;
+  return out;
+}
+
 }  // namespace
+
+ToolCommand StitchNeedle() {
+  ToolCommand c = PierceNeedle();
+  c.suture.length = 8;
+  c.suture.segments = 64;
+  c.suture.mass = 0.01;
+  return c;
+}
 
 ToolCommand PierceNeedle() {
   ToolCommand c;
@@ -224,6 +245,7 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
     case Script::kPluck:
     case Script::kScan:
     case Script::kPierce:
+    case Script::kStitch:
       break;
   }
   return {};
@@ -281,6 +303,8 @@ ScriptSample SampleScript(Script script, const ScriptGeometry& g, double t) {
       return SampleScan(g, t);
     case Script::kPierce:
       return SamplePierce(g, t);
+    case Script::kStitch:
+      return SampleStitch(g, t);
   }
   return {};
 }
@@ -301,6 +325,8 @@ double ScriptDuration(Script script) {
       return ScanDuration(kScanGrid);
     case Script::kPierce:
       return std::end(kPierce)[-1].t;
+    case Script::kStitch:
+      return kStitchEnd;
   }
   return 0;
 }
@@ -325,13 +351,15 @@ const char* ScriptName(Script script) {
       return "scan";
     case Script::kPierce:
       return "pierce";
+    case Script::kStitch:
+      return "stitch";
   }
   return "?";
 }
 
 bool ParseScriptName(std::string_view name, Script* script) {
   for (Script s : {Script::kPalpate, Script::kStrokeSlow, Script::kStrokeFast, Script::kPluck, Script::kStrokeGentle,
-                   Script::kScan, Script::kPierce}) {
+                   Script::kScan, Script::kPierce, Script::kStitch}) {
     if (name == ScriptName(s)) {
       *script = s;
       return true;

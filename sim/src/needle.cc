@@ -32,7 +32,10 @@
 // element (not cut) passes within the capture radius of it, more than a tip's diameter in. The
 // exit point then rides on the captured atoms nearest the tip (weights by inverse distance).
 // Pulled on, the tail passes the entry and then the exit (depths along the axis); a suture the
-// needle draws (suture.cc) passes each there, and past the exit the needle is free.
+// needle draws (suture.cc) passes each there. The hold on each atom fades out over a tip radius
+// before the tail as it does behind the tip, and the grip counts only the shaft still in the
+// tissue, so the forces fall smoothly as the tail comes through; once it holds no atom the needle
+// is free.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -145,7 +148,8 @@ Lateral LateralAt(const ActiveTool& at, const double r[3]) {
   const double d = std::sqrt(Dot3(out.perp, out.perp));
   const double rc = at.needle.capture_radius;
   if (!(d < rc)) return out;
-  const double w = std::min(1.0, -along / at.radius);
+  // Faded in over a tip radius behind the tip, and out over one before the tail.
+  const double w = std::min({1.0, -along / at.radius, (at.shaft_len + along) / at.radius});
   out.scale = w * (1 - d / rc);
   // The potential of k (1 - d / r_c) d along d^ (w held: its gradient along the axis is left out).
   out.energy = w * at.needle.lateral_stiffness * (0.5 * d * d - d * d * d / (3 * rc));
@@ -252,6 +256,9 @@ void ResolveNeedle(const State& s, const ToolState& ts, const ToolCommand& cmd, 
   if (at.needle_state.punctured && EntryPoint(s, at.needle_state, at.entry_start)) {
     const double depth = Depth(s, at);
     at.shaft_len = std::clamp(depth - at.needle_state.entry_depth, 0.0, p.length);
+    // The part in the tissue: from the entry (or the tail, past it) to the exit (or the tip).
+    const double far = at.needle_state.exited ? std::min(depth, at.needle_state.exit_depth) : depth;
+    at.grip_len = std::clamp(far - std::max(depth - p.length, 0.0), 0.0, p.length);
   }
 }
 
@@ -299,7 +306,7 @@ void BeginNeedles(const State& s, Workspace& ws, StepReport* report) {
 
 void AddNeedle(const State& s, Workspace& ws, int32_t t, Real* force, int stride) {
   ActiveTool& at = ws.tools[t];
-  at.eval_axial = at.eval_normal_needle = 0;
+  at.eval_axial = at.eval_normal_needle = at.eval_lateral = 0;
   if (!Inside(at)) return;
   const double dt = ws.options.dt_s;
   double vn[3];
@@ -327,7 +334,8 @@ void AddNeedle(const State& s, Workspace& ws, int32_t t, Real* force, int stride
     }
   }
   // Axial friction against the grip: on the entry atoms with their weights.
-  fn += at.needle.grip * at.shaft_len;
+  at.eval_lateral = fn;
+  fn += at.needle.grip * at.grip_len;
   const AxialEval ax = EvaluateAxial(s, at, fn, dt);
   at.eval_normal_needle = fn;
   if (!ax.active) return;
@@ -353,7 +361,7 @@ double NeedleEnergy(const State& s, const Workspace& ws, int32_t t) {
     energy += lat.energy;
     fn += lat.scale * at.needle.lateral_stiffness * std::sqrt(Dot3(lat.perp, lat.perp));
   }
-  const AxialEval ax = EvaluateAxial(s, at, fn + at.needle.grip * at.shaft_len, dt);
+  const AxialEval ax = EvaluateAxial(s, at, fn + at.needle.grip * at.grip_len, dt);
   return energy + (ax.active ? ax.energy : 0.0);
 }
 
@@ -433,8 +441,13 @@ void CommitNeedles(const Model& m, State& s, Workspace& ws, StepReport* report) 
           ns.entry_passed = true;
           SutureDrawnThrough(s, t, ns.entry_atoms, ns.entry_w, &report->suture);
         }
-        if (ns.entry_passed && tail_depth >= ns.exit_depth) {
+        if (ns.entry_passed && !ns.exit_passed && tail_depth >= ns.exit_depth) {
+          ns.exit_passed = true;
           SutureDrawnThrough(s, t, ns.exit_atoms, ns.exit_w, &report->suture);
+        }
+        // Free once the tail has left the last atom it held (their hold, and with it the
+        // friction's bound, faded out as it passed them: the hand feels no step).
+        if (ns.exit_passed && !(at.eval_lateral > 0)) {
           tr.drawn_through = true;
           const double ramp = ns.tip_ramp;
           ns = NeedleState{};  // free: the tip fades back in

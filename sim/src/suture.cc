@@ -14,8 +14,9 @@
 // tools' poses are); then the thread is integrated over the tick (symplectic Euler, substeps
 // bounded by its own stiffest node) against the punctures where the tissue ended, and each
 // puncture's arc position follows the thread's nearest point (searched two segments either side,
-// never across a broken segment). The needle's tail feels the first segment's tension: the hand
-// feels the thread it pulls.
+// never across a broken segment). The needle's eye (its tail) holds node 0 with a puncture's
+// spring-damper, and the hand feels that spring: a thread going taut is felt through it, at most
+// its stiffness times the tail's travel a tick, not through the thread's own far stiffer springs.
 //
 // A tie (a rising edge of ToolCommand::tie) knots the current stitch: the thread at its first and
 // last punctures since the last tie is bound by a spring of rest length 0 between those two
@@ -217,6 +218,7 @@ void Lay(SutureState& ss, const ActiveTool& at, const SutureParams& p, double dt
   for (int32_t i = 0; i < n; ++i) {
     for (int c = 0; c < 3; ++c) ss.pos[3 * i + c] = tail[c] - i * ss.seg_len * at.axis[c];
   }
+  std::copy(tail, tail + 3, ss.eye.begin());
 }
 
 // Substeps that keep symplectic Euler stable on the stiffest node: omega h <= 1 and the dampers'
@@ -331,11 +333,11 @@ void CommitSuture(State& s, Workspace& ws, StepReport* report) {
   if (ss.num_nodes == 0) return;
   const double dt = ws.options.dt_s;
   const int32_t n = ss.num_nodes;
-  // Node 0 follows the needle's tail from where it was (linearly over the substeps).
-  double tail[3] = {ss.pos[0], ss.pos[1], ss.pos[2]};
+  // The needle's eye: its tail, from where it was (linearly over the substeps).
+  double tail[3] = {ss.eye[0], ss.eye[1], ss.eye[2]};
   const bool pinned = ss.tool >= 0 && ws.tools[ss.tool].kind == ToolKind::kNeedle;
   if (pinned) TailOf(ws.tools[ss.tool], tail);
-  const double tail0[3] = {ss.pos[0], ss.pos[1], ss.pos[2]};
+  const double tail0[3] = {ss.eye[0], ss.eye[1], ss.eye[2]};
   // The punctures where the tissue ended the tick (and their velocities).
   double anchor[kSuturePunctures][6];
   for (int32_t j = 0; j < ss.num_punctures; ++j) {
@@ -402,8 +404,15 @@ void CommitSuture(State& s, Workspace& ws, StepReport* report) {
       }
       if (tension > max_tension) max_tension = tension;
       if (ss.strength > 0 && tension > ss.strength && snapped < 0) snapped = i;
-      if (i == 0) {
-        for (int c = 0; c < 3; ++c) pull[c] = tension * d[c] / l;
+    }
+    // The eye holds node 0 with the punctures' spring-damper (the hand feels it, averaged).
+    if (pinned) {
+      const double f = static_cast<double>(k + 1) / substeps;
+      for (int c = 0; c < 3; ++c) {
+        const double eye = tail0[c] + f * (tail[c] - tail0[c]), eye_v = (tail[c] - tail0[c]) / dt;
+        const double fe = ss.hold_k * (eye - ss.pos[c]) + ss.hold_b * (eye_v - ss.vel[c]);
+        force[c] += fe;
+        pull[c] += fe / substeps;
       }
     }
     // Punctures: the thread's nearest point held to each.
@@ -427,20 +436,13 @@ void CommitSuture(State& s, Workspace& ws, StepReport* report) {
       AddAt(ss, ss.ties[j].s_a, fa, force);
       AddAt(ss, ss.ties[j].s_b, fb, force);
     }
-    // Symplectic Euler; node 0 on the tail when a needle holds it.
+    // Symplectic Euler.
     const double damp = 1 / (1 + h * ss.drag);  // the air drag, implicitly
     for (int32_t i = 0; i < n; ++i) {
       for (int c = 0; c < 3; ++c) {
         double& v = ss.vel[3 * i + c];
         v = (v + h * force[3 * i + c] / ss.node_mass) * damp;
         ss.pos[3 * i + c] += h * v;
-      }
-    }
-    if (pinned) {
-      const double f = static_cast<double>(k + 1) / substeps;
-      for (int c = 0; c < 3; ++c) {
-        ss.pos[c] = tail0[c] + f * (tail[c] - tail0[c]);
-        ss.vel[c] = (tail[c] - tail0[c]) / dt;
       }
     }
     // Each puncture follows the thread's nearest point; a knot on it does not pass in.
@@ -471,10 +473,11 @@ void CommitSuture(State& s, Workspace& ws, StepReport* report) {
     ss.broken = snapped;
     sr.broke = true;
   }
-  // The hand feels the thread on the tail: the tool's force on the world gains -pull.
-  if (pinned && ss.broken != 0) {
+  // The hand feels the thread at the eye: the eye's force on node 0 is the tool's on the world.
+  std::copy(tail, tail + 3, ss.eye.begin());
+  if (pinned) {
     ActiveTool& at = ws.tools[ss.tool];
-    for (int c = 0; c < 3; ++c) at.tick_force[c] -= pull[c];
+    for (int c = 0; c < 3; ++c) at.tick_force[c] += pull[c];
     sr.pull = std::sqrt(Dot3(pull, pull));
   }
   sr.nodes = n;

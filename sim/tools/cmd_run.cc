@@ -161,15 +161,18 @@ void Run(RunArgs& a) {
   const bool drag = a.script == "drag" || a.script.rfind("drag:", 0) == 0;
   if (!drag && !ParseScriptName(a.script, &script)) {
     Fail("run", "--script '" + a.script +
-                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or "
+                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or "
                     "drag[:fraction=F,...]");
   }
   const bool pierce = !drag && script == Script::kPierce;
+  const bool stitch = !drag && script == Script::kStitch;
   ToolCommand tool;
   tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   if (pierce) tool = PierceNeedle();
+  if (stitch) tool = StitchNeedle();
   std::string error;
-  if (pierce && !a.tool.empty()) Fail("run", "--tool: the pierce's needle is PierceNeedle's (docs/needle.md)");
+  if ((pierce || stitch) && !a.tool.empty())
+    Fail("run", "--tool: the " + a.script + "'s needle is the script's own (docs/needle.md)");
   if (!a.tool.empty() && !ParseToolSpec(a.tool, &tool, &error)) Fail("run", error);
   DragOptions drag_options;
   if (drag && !ParseDragSpec(a.script, &drag_options, &error)) Fail("run", "--script: " + error);
@@ -229,6 +232,11 @@ void Run(RunArgs& a) {
   int64_t punctures = 0;
   double punctured_s = NAN, max_inserted = 0;
   bool inside = false;
+  // The suture: the needle through the far side, drawn through, the thread's punctures, ties,
+  // refused ties and breaks; its largest tension; the largest per-tick change of the device force.
+  int64_t exits = 0, draws = 0, thread_punctures = 0, ties = 0, ties_refused = 0, breaks = 0;
+  bool exited = false;
+  double max_tension = 0, max_force_step = 0;
   double friction_work = 0, friction_work_max_sum = 0, max_ft = 0;
   FrictionState last_friction = FrictionState::kNone;
   double last_force[3] = {0, 0, 0};
@@ -251,6 +259,7 @@ void Run(RunArgs& a) {
     tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
     tool.closed = sample.closed;
     if (sample.oriented) NeedleAxisOf(sample.orientation, tool.axis);
+    tool.tie = tool.kind == ToolKind::kNeedle && sample.closed;  // a needle's button ties
     input.tools[0] = tool;
     const auto start = std::chrono::steady_clock::now();
     const double cpu_start = a.full ? ThreadCpuSeconds() : 0.0;  // a system call: full mode only
@@ -266,6 +275,8 @@ void Run(RunArgs& a) {
     }
     if (a.full) cpu_us.push_back(1e6 * (ThreadCpuSeconds() - cpu_start));
     const double* f = report.tools[0].force;
+    max_force_step =
+        std::max(max_force_step, std::hypot(f[0] - last_force[0], f[1] - last_force[1], f[2] - last_force[2]));
     std::copy(f, f + 3, last_force);
     const ToolReport& tr = report.tools[0];
     const double ft =
@@ -275,6 +286,14 @@ void Run(RunArgs& a) {
     if (tr.punctured && !inside) ++punctures, punctured_s = std::isnan(punctured_s) ? state.time_s : punctured_s;
     inside = tr.punctured;
     max_inserted = std::max(max_inserted, tr.inserted);
+    exits += tr.exited && !exited;
+    exited = tr.exited;
+    draws += tr.drawn_through;
+    thread_punctures += report.suture.new_punctures;
+    ties += report.suture.tied;
+    ties_refused += report.suture.tie_refused;
+    breaks += report.suture.broke;
+    max_tension = std::max(max_tension, report.suture.max_tension);
     stick_ticks += tr.friction == FrictionState::kStick;
     slip_ticks += tr.friction == FrictionState::kSlip;
     transitions +=
@@ -376,7 +395,15 @@ void Run(RunArgs& a) {
         {"punctures", punctures},
         {"punctured_s", std::isnan(punctured_s) ? nlohmann::json(nullptr) : nlohmann::json(punctured_s)},
         {"max_inserted", max_inserted},
-        {"inside_at_end", inside}};
+        {"inside_at_end", inside},
+        {"exits", exits},
+        {"drawn_through", draws},
+        {"max_force_step", max_force_step}};
+  }
+  if (tool.kind == ToolKind::kNeedle && tool.suture.length > 0) {
+    summary["suture"] = {{"punctures", thread_punctures}, {"ties", ties},
+                         {"ties_refused", ties_refused},  {"breaks", breaks},
+                         {"max_tension", max_tension},    {"nodes", state.suture.num_nodes}};
   }
   if (a.json) {
     PrintJson(summary);
@@ -421,7 +448,7 @@ void Setup(CLI::App& app) {
   cmd->add_option("--script", a.script,
                   "palpate | stroke-slow | stroke-fast | pluck | stroke-gentle (thesis 6.1 at its speeds; gentle: a "
                   "slow stroke to watch) | scan (7 x 7 shallow presses, for fit --map; --scan-grid) | pierce (a "
-                  "needle, docs/needle.md) | "
+                  "needle, docs/needle.md) | stitch (a needle drawn through, its thread tied) | "
                   "drag[:fraction=F,depth=D,mass=M,damping=B,push=S] (press, then push "
                   "sideways at F mu_s f_n through a simulated hand; needs mu_s)")
       ->capture_default_str();

@@ -32,7 +32,8 @@ TEST(Devices, BadSpecsAreExplained) {
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
   EXPECT_NE(
-      error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or (scripted) drag"),
+      error.find(
+          "expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or (scripted) drag"),
       std::string::npos)
       << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));

@@ -169,6 +169,27 @@ TEST(RunCli, ThePierceGoesInAlongItsTiltedAxisOnceAndComesOut) {
   EXPECT_GT(held, 700);
 }
 
+// The stitch: the needle goes in once, out through the bottom, is drawn through, and leaves its
+// thread in the entry and the exit; the button ties it; the summary says so.
+TEST(RunCli, TheStitchDrawsTheThreadThroughAndTiesIt) {
+  const Output out = RunSim("run --model " + kHex + " --script stitch --json");
+  ASSERT_EQ(out.status, 0) << out.text;
+  const nlohmann::json j = nlohmann::json::parse(out.text);
+  EXPECT_EQ(j["needle"]["punctures"], 1) << j.dump();
+  EXPECT_EQ(j["needle"]["exits"], 1);
+  EXPECT_EQ(j["needle"]["drawn_through"], 1);
+  EXPECT_FALSE(j["needle"]["inside_at_end"].get<bool>());
+  EXPECT_EQ(j["suture"]["punctures"], 2);
+  EXPECT_EQ(j["suture"]["ties"], 1);
+  EXPECT_EQ(j["suture"]["ties_refused"], 0);
+  EXPECT_EQ(j["suture"]["breaks"], 0);
+  EXPECT_EQ(j["suture"]["nodes"], 65);
+  EXPECT_GT(j["suture"]["max_tension"].get<double>(), 1.8);  // the knot at its tie force, 2
+  EXPECT_EQ(j["warnings"], 0);
+  // A needle's script refuses another tool.
+  EXPECT_NE(RunSim("run --model " + kHex + " --script stitch --tool sphere:r=1").status, 0);
+}
+
 TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
   for (const char* integrator : {"euler", "symplectic", "rk4", "implicit"}) {
     const Output out = RunSim("run --model " + kHex + " --script stroke-slow --integrator " + integrator + " --json");
@@ -182,10 +203,11 @@ TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
 TEST(RunCli, BadArgumentsAreClearErrors) {
   Output out = RunSim("run --model " + kHex + " --script poke");
   EXPECT_NE(out.status, 0);
-  EXPECT_NE(out.text.find(
-                "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce or "
-                "drag[:fraction=F,...]"),
-            std::string::npos)
+  EXPECT_NE(
+      out.text.find(
+          "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or "
+          "drag[:fraction=F,...]"),
+      std::string::npos)
       << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
   EXPECT_NE(out.status, 0);

@@ -2,7 +2,8 @@
 // (6.1.2) at the thesis's speeds and plucking (6.1.3) — as reproducible MIO trajectories over any
 // model's surface; a gentle stroke slow enough to watch; and a scan, shallow palpations over a
 // grid for the fitter's stiffness map (thesis 7.2.5, issue 34); a needle's pierce, tilted, through
-// the surface and back (issue 32).
+// the surface and back, and a stitch: a needle drawn down through the tissue, its thread left in,
+// and tied (issue 32).
 // Used by `idms-sim run`, the benches and the agent's scripted device.
 #pragma once
 
@@ -17,7 +18,7 @@ namespace idms {
 
 struct Model;
 
-enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan, kPierce };
+enum class Script : uint8_t { kPalpate, kStrokeSlow, kStrokeFast, kPluck, kStrokeGentle, kScan, kPierce, kStitch };
 
 // The scan's grid: N x N points over the middle 60% of the surface in x and y, N from
 // kMinScanGrid to kMaxScanGrid (ScriptGeometry::scan_grid; kScanGrid by default).
@@ -40,8 +41,8 @@ struct ScriptGeometry {
 };
 
 // One sample of the trajectory: the MIO centre (a needle's tip) in model units, the tweezers'
-// state, and the tool's orientation where the script gives one (the pierce: a unit quaternion
-// w, x, y, z whose local -z is the needle's axis, tail to tip).
+// state (a needle's tie command: the device's button), and the tool's orientation where the script gives one (the
+// pierce: a unit quaternion w, x, y, z whose local -z is the needle's axis, tail to tip).
 struct ScriptSample {
   double pos[3] = {0, 0, 0};
   bool closed = false;
@@ -57,6 +58,17 @@ inline constexpr double kPiercePast = 2.0;
 // The needle the pierce is made for: a 0.25 tip and springs for a tissue of element k about 15
 // (the hex fragment's; docs/needle.md). The agent's scene for the script says the same.
 ToolCommand PierceNeedle();
+
+// The stitch: the pierce's needle upright over the middle atom, from kPierceHover above first
+// contact straight down at kStitchSpeed until its tail is kStitchPast below where its tip first
+// touched (a slab thinner than kStitchPast - the needle's length is passed through), held, then
+// tied (the button pressed from kStitchTie s) and held until kStitchEnd s.
+inline constexpr double kStitchSpeed = 1.0;  // model units / s
+inline constexpr double kStitchPast = 3.0;   // model units
+inline constexpr double kStitchTie = 10.5;   // s
+inline constexpr double kStitchEnd = 14.0;   // s
+// Its needle: PierceNeedle's, drawing a thread (SutureParams) of 8 units in 64 segments.
+ToolCommand StitchNeedle();
 
 // The script's geometry over `model`'s external atoms for an MIO of radius `mio_radius`, the scan
 // on a scan_grid x scan_grid grid (clamped to [kMinScanGrid, kMaxScanGrid]).
@@ -76,7 +88,7 @@ double ScriptDuration(Script script, const ScriptGeometry& geometry);
 // The scan's grid point i (0 .. scan_grid^2 - 1, x fastest): its x, y.
 std::array<double, 2> ScanPoint(const ScriptGeometry& geometry, int i);
 
-// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan", "pierce".
+// "palpate", "stroke-slow", "stroke-fast", "pluck", "stroke-gentle", "scan", "pierce", "stitch".
 const char* ScriptName(Script script);
 bool ParseScriptName(std::string_view name, Script* script);
 

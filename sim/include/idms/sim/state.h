@@ -69,16 +69,18 @@ struct NeedleState {
   // Through the far side (issue 32): the tip left the tissue (no element within the capture
   // radius of it) at exit_depth past the entry, the exit point riding on the captured atoms
   // nearest the tip then. Pulled on through, the tail passes the entry (entry_passed) and then
-  // the exit, where the needle is free again; a suture it draws passes each in turn.
+  // the exit (a suture it draws passes each in turn), and once it has left the last atom it held,
+  // the needle is free again.
   bool exited = false;
   bool entry_passed = false;
+  bool exit_passed = false;
   int32_t exit_atoms[kAnchorAtoms] = {-1, -1, -1, -1};
   double exit_w[kAnchorAtoms] = {0, 0, 0, 0};
   double exit_depth = 0;  // model units: depth at the exit
 };
 
 // The suture thread (suture.cc): a chain of mass points and tension-only springs whose first node
-// follows the needle's tail. Every point the thread has been drawn through is a puncture: a
+// the needle's tail (its eye) holds. Every point the thread has been drawn through is a puncture: a
 // point riding on tissue atoms that the thread slides through without friction (its arc position
 // s, in segments from node 0, follows the nearest point of the thread). A tie binds two points of
 // the thread (arc positions fixed: the knot holds the material, not the tissue) with a spring of
@@ -117,6 +119,7 @@ struct SutureState {
   double drag = 0;       // 1 / s: the thread's air damping
   std::array<double, 3 * (kSutureSegments + 1)> pos{};  // model units
   std::array<double, 3 * (kSutureSegments + 1)> vel{};  // model units / s
+  std::array<double, 3> eye{};                          // the needle's tail last tick: where node 0 is held
   std::array<SuturePuncture, kSuturePunctures> punctures{};
   int32_t num_punctures = 0;
   int32_t stitch_start = 0;  // the first puncture not yet tied off

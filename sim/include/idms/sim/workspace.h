@@ -62,9 +62,11 @@ struct ActiveTool {
   NeedleState needle_state;
   double entry_start[3] = {0, 0, 0};  // entry point at the tick's start
   double shaft_len = 0;               // inserted length of shaft the capture runs along, model units
+  double grip_len = 0;                // the part of it in the tissue (entry or tail to exit or tip): the grip's
   int32_t num_needle_atoms = 0;
   double eval_axial = 0;          // axial friction force on the atoms (along the axis), last evaluation
   double eval_normal_needle = 0;  // the grip it was bounded by, last evaluation
+  double eval_lateral = 0;        // ... its lateral springs' part
   double tick_axial = 0;          // ... weighted over the tick's evaluations
   double tick_normal_needle = 0;
 };
