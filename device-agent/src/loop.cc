@@ -225,6 +225,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   if (tweezers_override_ >= 0 && reading.closed != override_button_) tweezers_override_ = -1;
   last_button_ = reading.closed;
   tool.closed = tweezers_override_ < 0 ? reading.closed : tweezers_override_ == 1;
+  tool.tie = tool.kind == ToolKind::kNeedle && reading.closed;  // a needle's button ties its thread
   input_.num_tools = has_pose_ ? 1 : 0;
 
   // The DSM step; cuts found by a scalpel are applied between steps.
@@ -302,6 +303,13 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.oriented = oriented_;
   s.needle_punctured = out.punctured;
   s.needle_inserted = out.inserted;
+  s.needle_exited = out.exited;
+  s.suture_new_punctures = static_cast<uint8_t>(report.suture.new_punctures);
+  s.suture_tied = report.suture.tied;
+  s.suture_tie_refused = report.suture.tie_refused;
+  s.suture_broke = report.suture.broke;
+  s.suture_punctures = static_cast<uint16_t>(report.suture.punctures);
+  s.suture_ties = static_cast<uint16_t>(report.suture.ties);
   s.port_energy = passive.energy;
   s.port_energy_window = passive.window;
   s.passivity_damping = passive.damping;
@@ -356,6 +364,21 @@ bool Loop::PublishMesh(bool final_frame) {
     }
     published_topology_ = model.topology_version;
   }
+  // The suture thread: its nodes and the points it passes through.
+  const SutureState& ss = state.suture;
+  slot.suture_nodes = ss.num_nodes;
+  for (int32_t i = 0; i < 3 * ss.num_nodes; ++i) slot.suture_pos[i] = static_cast<float>(ss.pos[i]);
+  slot.suture_punctures = 0;
+  for (int32_t j = 0; j < ss.num_punctures; ++j) {
+    double p[3] = {0, 0, 0};
+    for (int i = 0; i < kAnchorAtoms && ss.punctures[j].atoms[i] >= 0; ++i) {
+      for (int c = 0; c < 3; ++c) p[c] += ss.punctures[j].w[i] * state.atom_pos[3 * ss.punctures[j].atoms[i] + c];
+    }
+    for (int c = 0; c < 3; ++c) slot.suture_puncture_pos[3 * slot.suture_punctures + c] = static_cast<float>(p[c]);
+    ++slot.suture_punctures;
+  }
+  slot.suture_ties = ss.num_ties;
+  slot.suture_broken = ss.broken + 1;
   slot.tick = static_cast<uint64_t>(state.tick);
   slot.time_s = state.time_s;
   slot.topology_version = model.topology_version;

@@ -14,9 +14,9 @@ namespace idms::agent {
 v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
   v1::Scene scene;
   v1::Tool* tool = scene.add_tools();
-  if (script == "pierce") {
-    // The needle the script is made for (PierceNeedle), the rest of its fields the defaults.
-    const ToolCommand c = PierceNeedle();
+  if (script == "pierce" || script == "stitch") {
+    // The needle the script is made for (PierceNeedle, StitchNeedle), the rest of its fields the defaults.
+    const ToolCommand c = script == "stitch" ? StitchNeedle() : PierceNeedle();
     tool->set_kind(v1::Tool::KIND_NEEDLE);
     tool->set_name("needle");
     tool->set_radius(c.radius);
@@ -30,6 +30,12 @@ v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
     n->set_capture_radius(c.needle.capture_radius);
     n->set_lateral_stiffness(c.needle.lateral_stiffness);
     n->set_axial_stiffness(c.needle.axial_stiffness);
+    if (c.suture.length > 0) {
+      v1::Suture* u = n->mutable_suture();
+      u->set_length(c.suture.length);
+      u->set_segments(static_cast<uint32_t>(c.suture.segments));
+      u->set_mass(c.suture.mass);
+    }
   } else {
     tool->set_kind(script == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
     tool->set_name(script == "pluck" ? "tweezers" : "finger");
@@ -202,6 +208,25 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   if (n.has_lateral_damping()) np.lateral_damping = n.lateral_damping();
   if (n.has_axial_stiffness()) np.axial_stiffness = n.axial_stiffness();
   if (n.has_axial_damping()) np.axial_damping = n.axial_damping();
+  // Its thread where the scene gives one (the rest: SutureParams' defaults).
+  if (n.has_suture()) {
+    const v1::Suture& u = n.suture();
+    SutureParams& sp = c.suture;
+    sp.length = u.length();
+    if (u.has_segments()) sp.segments = static_cast<int32_t>(u.segments());
+    if (u.has_mass()) sp.mass = u.mass();
+    if (u.has_stiffness()) sp.stiffness = u.stiffness();
+    if (u.has_damping()) sp.damping = u.damping();
+    if (u.has_strength()) sp.strength = u.strength();
+    if (u.has_hold_stiffness()) sp.hold_stiffness = u.hold_stiffness();
+    if (u.has_tie_force()) sp.tie_force = u.tie_force();
+    if (u.has_tie_speed()) sp.tie_speed = u.tie_speed();
+    if (u.has_drag()) sp.drag = u.drag();
+    if (!ValidateSuture(c, error)) {
+      *error = "scene: tools[0].needle." + *error;
+      return false;
+    }
+  }
   *tool = c;
 
   // Registration: p_model = scale * Rz Ry Rx * p_device + offset.

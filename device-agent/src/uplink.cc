@@ -227,13 +227,26 @@ struct Uplink::Impl final : ConnectionHandler {
             s.needle_punctured ? "the needle punctured the surface and went in" : "the needle came out");
       needle_in = s.needle_punctured;
     }
+    // Through the far side, the thread drawn through a point, a knot, a break.
+    if (s.needle_exited && !needle_out)
+      Event(s, v1::SessionEvent::KIND_NEEDLE_EXIT, "the needle's tip came out through the far side");
+    needle_out = s.needle_exited;
+    if (s.suture_new_punctures > 0) {
+      Event(s, v1::SessionEvent::KIND_THREAD_PUNCTURE, "the needle drew its thread through", s.suture_punctures);
+    }
+    if (s.suture_tied) Event(s, v1::SessionEvent::KIND_TIE, "a knot was tied on the stitch", s.suture_ties);
+    if (s.suture_tie_refused) {
+      Event(s, v1::SessionEvent::KIND_TIE, "no knot: the thread has not passed through two points since the last knot",
+            s.suture_ties);
+    }
+    if (s.suture_broke) Event(s, v1::SessionEvent::KIND_THREAD_BREAK, "the suture thread parted above its strength");
     // Bounded: the oldest goes; one the server never got is a drop, counted and reported.
     backlog.Accept(s);
   }
 
   // An event from the loop's sample at its tick and time (the control queue is bounded: beyond 64
   // waiting, it is dropped).
-  void Event(const TickSample& s, v1::SessionEvent::Kind kind, const char* message) {
+  void Event(const TickSample& s, v1::SessionEvent::Kind kind, const char* message, uint64_t count = 0) {
     if (control.size() >= 64) return;
     v1::Envelope envelope;
     v1::SessionEvent* event = envelope.mutable_session_event();
@@ -241,6 +254,7 @@ struct Uplink::Impl final : ConnectionHandler {
     event->set_tick(s.tick);
     event->set_time_s(s.time_s);
     event->set_message(message);
+    if (count > 0) event->set_count(count);
     control.push_back(std::move(envelope));
   }
 
@@ -523,6 +537,15 @@ struct Uplink::Impl final : ConnectionHandler {
       const MeshSlot& slot = loop.slot(pending_mesh);
       last_surface.assign(slot.pos.begin(), slot.pos.end());
       last_surface_time_s = slot.time_s;
+      last_suture.Clear();
+      has_suture = slot.suture_nodes > 0;
+      if (has_suture) {
+        last_suture.mutable_nodes()->Add(slot.suture_pos.begin(), slot.suture_pos.begin() + 3 * slot.suture_nodes);
+        last_suture.mutable_punctures()->Add(slot.suture_puncture_pos.begin(),
+                                             slot.suture_puncture_pos.begin() + 3 * slot.suture_punctures);
+        last_suture.set_ties(static_cast<uint32_t>(slot.suture_ties));
+        last_suture.set_broken_segment(slot.suture_broken);
+      }
       loop.ReleaseMeshSlot(pending_mesh);
       pending_mesh = -1;
     }
@@ -533,6 +556,10 @@ struct Uplink::Impl final : ConnectionHandler {
     if (!encoder.Encode(last_surface_time_s, last_surface, &scratch, &error, &es)) {
       std::fprintf(stderr, "idms-agent: surface frame not sent: %s\n", error.c_str());
       return false;
+    }
+    if (has_suture) {
+      *(scratch.has_mesh_keyframe() ? scratch.mutable_mesh_keyframe()->mutable_suture()
+                                    : scratch.mutable_mesh_delta()->mutable_suture()) = last_suture;
     }
     ++stats.mesh_frames;
     stats.keyframes += es.keyframe ? 1 : 0;
@@ -680,8 +707,9 @@ struct Uplink::Impl final : ConnectionHandler {
   uint64_t limited_unreported = 0;  // clamped ticks since the last KIND_FORCE_LIMIT event
   double limited_event_time_s = 0;
   bool has_limited_event = false;
-  bool grasping = false;   // the tweezers held an atom in the last sample
-  bool needle_in = false;  // the needle was in the tissue in the last sample
+  bool grasping = false;    // the tweezers held an atom in the last sample
+  bool needle_in = false;   // the needle was in the tissue in the last sample
+  bool needle_out = false;  // ... and out through the far side
   uint64_t warnings_unreported = 0;
   double warned_time_s = 0;
   bool has_warned = false;
@@ -691,6 +719,8 @@ struct Uplink::Impl final : ConnectionHandler {
   int32_t pending_mesh = -1;
   std::vector<double> last_surface;  // (num_external x 3): the last surface encoded
   double last_surface_time_s = 0;
+  v1::SutureShape last_suture;  // the thread with the last surface, when it has one
+  bool has_suture = false;
   bool resend_surface = false;
 
   // Loop statistics mirrored from the samples.

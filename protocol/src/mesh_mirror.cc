@@ -3,9 +3,38 @@
 #include "idms/protocol/mesh_mirror.h"
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 
+#include "idms/sim/state.h"
+
 namespace idms {
+
+bool ValidSutureShape(const v1::SutureShape& shape, std::string* error) {
+  const auto fail = [error](const std::string& what) {
+    if (error != nullptr) *error = "suture: " + what;
+    return false;
+  };
+  const int nodes = shape.nodes_size(), punctures = shape.punctures_size();
+  if (nodes % 3 != 0 || nodes > 3 * (kSutureSegments + 1) || nodes == 3) {
+    return fail("nodes must hold x, y, z of 2 to " + std::to_string(kSutureSegments + 1) + " nodes, got " +
+                std::to_string(nodes) + " values");
+  }
+  if (punctures % 3 != 0 || punctures > 3 * kSuturePunctures) {
+    return fail("punctures must hold x, y, z of at most " + std::to_string(kSuturePunctures) + " points, got " +
+                std::to_string(punctures) + " values");
+  }
+  for (const float v : shape.nodes()) {
+    if (!std::isfinite(v)) return fail("a node is not finite");
+  }
+  for (const float v : shape.punctures()) {
+    if (!std::isfinite(v)) return fail("a puncture is not finite");
+  }
+  if (shape.broken_segment() < 0 || shape.broken_segment() > nodes / 3) {
+    return fail("broken_segment " + std::to_string(shape.broken_segment()) + " is not a segment + 1 (or 0)");
+  }
+  return true;
+}
 
 const char* MirrorStatusName(MirrorStatus status) {
   switch (status) {
@@ -24,6 +53,7 @@ MeshMirror::MeshMirror(const DecodeLimits& limits) : limits_(limits) {}
 MirrorStatus MeshMirror::Apply(const v1::MeshKeyframe& keyframe, std::string* error) {
   // Decode into scratch; only a fully valid keyframe replaces the state. A refused frame leaves
   // no buffer behind, whatever it inflated to.
+  if (!ValidSutureShape(keyframe.suture(), error)) return MirrorStatus::kInvalid;
   if (!DecodeKeyframe(keyframe, limits_, ctx_, &scratch_, error)) {
     ctx_.ReleaseScratchAbove(KeepBytes());
     return MirrorStatus::kInvalid;
@@ -38,6 +68,7 @@ MirrorStatus MeshMirror::Apply(const v1::MeshKeyframe& keyframe, std::string* er
   pos_.resize(q_.size());
   Dequantize(q_, quant_step_, pos_);
   changed_.clear();
+  suture_ = keyframe.suture();
   ctx_.ReleaseScratchAbove(KeepBytes());
   return MirrorStatus::kOk;
 }
@@ -77,6 +108,7 @@ MirrorStatus MeshMirror::Apply(const v1::MeshDelta& delta, std::string* error) {
     return MirrorStatus::kInvalid;
   }
   // Decode and apply (all or nothing), then refresh the moved vertices' float positions.
+  if (!ValidSutureShape(delta.suture(), error)) return MirrorStatus::kInvalid;
   if (!ApplyDelta(delta, limits_, ctx_, q_, &changed_, error)) {
     ctx_.ReleaseScratchAbove(KeepBytes());
     return MirrorStatus::kInvalid;
@@ -87,6 +119,7 @@ MirrorStatus MeshMirror::Apply(const v1::MeshDelta& delta, std::string* error) {
   }
   sequence_ = delta.sequence();
   time_s_ = delta.time_s();
+  suture_ = delta.suture();
   return MirrorStatus::kOk;
 }
 
@@ -112,7 +145,13 @@ bool MeshMirror::MakeKeyframe(v1::MeshKeyframe* out, std::string* error) {
                        .topology_version = topology_version_,
                        .time_s = time_s_,
                        .quant_step = quant_step_};
-  return EncodeKeyframe(info, q_, tri_verts_, ctx_, out, error);
+  if (!EncodeKeyframe(info, q_, tri_verts_, ctx_, out, error)) return false;
+  if (suture_.nodes_size() > 0) {
+    *out->mutable_suture() = suture_;
+  } else {
+    out->clear_suture();  // a reused message keeps nothing of an earlier thread
+  }
+  return true;
 }
 
 }  // namespace idms

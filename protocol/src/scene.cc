@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "idms/sim/preset.h"
+#include "idms/sim/state.h"
 
 namespace idms {
 namespace {
@@ -136,6 +137,22 @@ void CheckNeedle(const v1::Tool& tool, int i, Checker* c) {
   if (n.has_lateral_damping()) c->Range(path("lateral_damping"), n.lateral_damping(), 0, kInf, false);
   if (n.has_axial_stiffness()) c->Range(path("axial_stiffness"), n.axial_stiffness(), 0, kInf, true);
   if (n.has_axial_damping()) c->Range(path("axial_damping"), n.axial_damping(), 0, kInf, false);
+  if (!n.has_suture()) return;
+  const v1::Suture& u = n.suture();
+  const auto upath = [i](const char* field) {
+    return std::vector<std::pair<std::string, int>>{{"tools", i}, {"needle", -1}, {"suture", -1}, {field, -1}};
+  };
+  if (!u.has_length()) c->Fail(upath("length"), "required (model units, > 0)");
+  if (u.has_length()) c->Range(upath("length"), u.length(), 0, kInf, true);
+  if (u.has_segments()) c->Range(upath("segments"), u.segments(), 1, kSutureSegments, false);
+  if (u.has_mass()) c->Range(upath("mass"), u.mass(), 0, kInf, true);
+  if (u.has_stiffness()) c->Range(upath("stiffness"), u.stiffness(), 0, kInf, false);
+  if (u.has_damping()) c->Range(upath("damping"), u.damping(), 0, kInf, false);
+  if (u.has_strength()) c->Range(upath("strength"), u.strength(), 0, kInf, false);
+  if (u.has_hold_stiffness()) c->Range(upath("hold_stiffness"), u.hold_stiffness(), 0, kInf, true);
+  if (u.has_tie_force()) c->Range(upath("tie_force"), u.tie_force(), 0, kInf, true);
+  if (u.has_tie_speed()) c->Range(upath("tie_speed"), u.tie_speed(), 0, kInf, true);
+  if (u.has_drag()) c->Range(upath("drag"), u.drag(), 0, kInf, false);
 }
 
 void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {

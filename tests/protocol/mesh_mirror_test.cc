@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -193,6 +194,52 @@ TEST_F(StrokedMirror, MalformedDeltaLeavesStateUntouched) {
   v1::Envelope other;
   other.mutable_command()->set_kind(v1::Command::KIND_RESET);
   EXPECT_EQ(mirror.Apply(other, &error), MirrorStatus::kInvalid);
+}
+
+// A needle's thread rides on the mesh frames: the mirror keeps the last frame's, a keyframe it
+// makes for a late joiner carries it, a frame without one clears it, and a shape out of bounds
+// (too many nodes, a non-finite one, a broken segment it does not have) is refused with the
+// mirror as it was.
+TEST_F(StrokedMirror, KeepsTheSutureThreadAndRefusesOneOutOfBounds) {
+  ASSERT_EQ(Apply(1), MirrorStatus::kOk) << error;
+  ASSERT_TRUE(encoder.Encode(1.1, stroke.At(1.1), &env, &error));
+  v1::MeshDelta delta = env.mesh_delta();
+  v1::SutureShape* shape = delta.mutable_suture();
+  for (int i = 0; i < 3 * 65; ++i) shape->add_nodes(0.1f * i);
+  for (int i = 0; i < 6; ++i) shape->add_punctures(0.5f * i);
+  shape->set_ties(1);
+  for (const auto& [bad, why] : std::vector<std::pair<std::function<void(v1::SutureShape*)>, std::string>>{
+           {[](v1::SutureShape* s) { s->add_nodes(1); }, "x, y, z of 2 to 129 nodes, got 196 values"},
+           {[](v1::SutureShape* s) {
+              for (int i = 0; i < 3 * 65; ++i) s->add_nodes(0);
+            },
+            "got 390 values"},
+           {[](v1::SutureShape* s) { s->set_nodes(7, std::nanf("")); }, "a node is not finite"},
+           {[](v1::SutureShape* s) {
+              for (int i = 0; i < 3 * 16; ++i) s->add_punctures(0);
+            },
+            "at most 16 points, got 54 values"},
+           {[](v1::SutureShape* s) { s->set_broken_segment(66); }, "broken_segment 66"}}) {
+    v1::MeshDelta wrong = delta;
+    bad(wrong.mutable_suture());
+    EXPECT_EQ(mirror.Apply(wrong, &error), MirrorStatus::kInvalid) << why;
+    EXPECT_NE(error.find("suture: "), std::string::npos) << error;
+    EXPECT_NE(error.find(why), std::string::npos) << error;
+    EXPECT_EQ(mirror.sequence(), 1u);
+  }
+  ASSERT_EQ(mirror.Apply(delta, &error), MirrorStatus::kOk) << error;
+  EXPECT_EQ(mirror.suture().nodes_size(), 3 * 65);
+  v1::MeshKeyframe joiner;
+  ASSERT_TRUE(mirror.MakeKeyframe(&joiner, &error)) << error;
+  EXPECT_EQ(joiner.suture().nodes_size(), 3 * 65);
+  EXPECT_EQ(joiner.suture().punctures_size(), 6);
+  EXPECT_EQ(joiner.suture().ties(), 1u);
+  // A frame without the thread: none shown, none in the next keyframe.
+  ASSERT_TRUE(encoder.Encode(1.2, stroke.At(1.2), &env, &error));
+  ASSERT_EQ(mirror.Apply(env, &error), MirrorStatus::kOk) << error;
+  EXPECT_EQ(mirror.suture().nodes_size(), 0);
+  ASSERT_TRUE(mirror.MakeKeyframe(&joiner, &error)) << error;
+  EXPECT_FALSE(joiner.has_suture());
 }
 
 TEST(MeshMirror, TopologyChangeArrivesAsKeyframe) {

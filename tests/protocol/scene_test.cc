@@ -265,5 +265,30 @@ TEST(SceneTest, NeedleParametersAreCheckedByField) {
             "test.scene:6:3: tools[0].static_friction: friction applies to KIND_SPHERE and KIND_TWEEZERS only");
 }
 
+// A needle's suture thread: its parameters checked by field (its length required, its segments
+// 1 to 128), each refusal at its own column.
+TEST(SceneTest, SutureParametersAreCheckedByField) {
+  const std::string needle = "model: \"hex\"\ntools {\n  kind: KIND_NEEDLE\n  radius: 0.2\n  stiffness: 400\n";
+  v1::Scene scene;
+  std::string error;
+  ASSERT_TRUE(LoadSceneText(needle + "  needle { length: 5 suture { length: 8 segments: 64 tie_force: 3 } }\n}\n",
+                            "n.scene", &scene, &error))
+      << error;
+  EXPECT_EQ(scene.tools(0).needle().suture().segments(), 64u);
+  EXPECT_EQ(LoadError(needle + "  needle { suture { segments: 8 } }\n}\n"),
+            "test.scene:6:12: tools[0].needle.suture.length: required (model units, > 0)");
+  const std::pair<const char*, const char*> bad[] = {
+      {"segments: 0", "segments: must be in [1, 128], got 0"},
+      {"segments: 129", "segments: must be in [1, 128], got 129"},
+      {"mass: 0", "mass: must be in (0, inf), got 0"},
+      {"tie_force: -2", "tie_force: must be in (0, inf), got -2"},
+      {"strength: inf", "strength: must be in [0, inf), got inf"},
+  };
+  for (const auto& [field, message] : bad) {
+    EXPECT_EQ(LoadError(needle + "  needle { suture { length: 8 " + field + " } }\n}\n"),
+              std::string("test.scene:6:31: tools[0].needle.suture.") + message);
+  }
+}
+
 }  // namespace
 }  // namespace idms

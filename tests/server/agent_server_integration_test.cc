@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "idms/sim/interaction_script.h"
 #include "server_process.h"
 #include "session_checks.h"
 
@@ -287,6 +288,74 @@ TEST(AgentAndServer, APierceIsRecordedWithTheNeedlesOrientationPunctureAndDepth)
   const json row = Sessions(server.port(), observer)[0];
   EXPECT_EQ(row["summary"]["punctures"], 1) << row.dump();
   EXPECT_NEAR(row["summary"]["needle_deepest"].get<double>(), deepest, 1e-12);
+}
+
+// The stitch (scripted:stitch): the needle drawn down through the fragment leaves its thread in
+// the entry and the exit, and the device's button ties it. The recording holds the events (in,
+// out through the far side, the two points the thread was drawn through, the knot, out) at their
+// ticks, and its mesh frames carry the thread: 65 nodes, then its two punctures and the knot.
+TEST(AgentAndServer, AStitchIsRecordedWithItsThreadPuncturesAndKnot) {
+  const std::string dir = TempDir("agent-stitch");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
+       dir + "/cache", "--device", "scripted:stitch", "--duration", "14", "--no-realtime"},
+      dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(120)), 0) << agent.Log();
+  const std::string id = EndedSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
+  ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
+  std::vector<v1::SessionEvent::Kind> kinds;
+  uint64_t last_puncture_count = 0, ties = 0;
+  double tie_s = -1;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/rec.mcap")) {
+    switch (e.kind()) {
+      case v1::SessionEvent::KIND_THREAD_PUNCTURE:
+        last_puncture_count = e.count();
+        [[fallthrough]];
+      case v1::SessionEvent::KIND_NEEDLE_IN:
+      case v1::SessionEvent::KIND_NEEDLE_OUT:
+      case v1::SessionEvent::KIND_NEEDLE_EXIT:
+        kinds.push_back(e.kind());
+        break;
+      case v1::SessionEvent::KIND_TIE:
+        kinds.push_back(e.kind());
+        ties = e.count();
+        tie_s = e.time_s();
+        EXPECT_EQ(e.message(), "a knot was tied on the stitch");
+        break;
+      default:
+        break;
+    }
+  }
+  const std::vector<v1::SessionEvent::Kind> expected = {
+      v1::SessionEvent::KIND_NEEDLE_IN,       v1::SessionEvent::KIND_NEEDLE_EXIT,
+      v1::SessionEvent::KIND_THREAD_PUNCTURE, v1::SessionEvent::KIND_THREAD_PUNCTURE,
+      v1::SessionEvent::KIND_NEEDLE_OUT,      v1::SessionEvent::KIND_TIE};
+  EXPECT_EQ(kinds, expected);
+  EXPECT_EQ(last_puncture_count, 2u);
+  EXPECT_EQ(ties, 1u);
+  EXPECT_NEAR(tie_s, kStitchTie, 0.01);
+  // The mesh frames: the thread in every one, its punctures once drawn through, the knot after it.
+  int frames = 0, with_thread = 0, with_both_points = 0, with_knot = 0;
+  for (const v1::Envelope& e : RecordedMeshFrames(dir + "/rec.mcap")) {
+    const v1::SutureShape* shape = e.has_mesh_keyframe() ? &e.mesh_keyframe().suture() : &e.mesh_delta().suture();
+    ++frames;
+    with_thread += shape->nodes_size() == 3 * 65;
+    with_both_points += shape->punctures_size() == 6;
+    with_knot += shape->ties() == 1;
+    EXPECT_EQ(shape->broken_segment(), 0);
+  }
+  std::printf("[ figures  ] stitch: %d mesh frames, %d with the thread, %d through both points, %d knotted\n", frames,
+              with_thread, with_both_points, with_knot);
+  EXPECT_GT(frames, 500);
+  EXPECT_GT(with_thread, frames - 5);   // every frame once the needle is there (it is from the first tick)
+  EXPECT_GT(with_both_points, 60 * 4);  // from about 8 s on
+  EXPECT_GT(with_knot, 60 * 3);         // from 10.5 s
+  IndependentReaderAccepts(dir + "/rec.mcap", 0);
 }
 
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {

@@ -114,6 +114,16 @@ std::vector<v1::SessionEvent> RecordedSessionEvents(const std::string& path) {
   return events;
 }
 
+std::vector<v1::Envelope> RecordedMeshFrames(const std::string& path) {
+  RecordingReaderOptions options;
+  options.device = options.events = options.annotations = false;
+  std::vector<v1::Envelope> frames;
+  ForEachRecorded(path, options, [&](const v1::Envelope& e) {
+    if (e.has_mesh_keyframe() || e.has_mesh_delta()) frames.push_back(e);
+  });
+  return frames;
+}
+
 namespace asio = boost::asio;
 namespace beast = boost::beast;
 namespace websocket = beast::websocket;

@@ -42,6 +42,9 @@ std::vector<uint64_t> RecordedTicks(const std::string& path);
 // Every SessionEvent on the recording's /events channel, in order.
 std::vector<v1::SessionEvent> RecordedSessionEvents(const std::string& path);
 
+// Every mesh frame (keyframe or delta envelope) of a recording, in order.
+std::vector<v1::Envelope> RecordedMeshFrames(const std::string& path);
+
 // The MCAP project's own reader (@mcap/core, from npm) and protobufjs agree: every record and CRC,
 // every message decoded from the schemas stored in the file, and `ticks` device ticks once, in
 // order (any count when `ticks` is 0).

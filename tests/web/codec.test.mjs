@@ -211,3 +211,27 @@ test('FrameDecoder.each hands over a Frames message\'s envelopes in order, and a
   // A Frames cut short throws, as any malformed message does.
   assert.throws(() => decoder.each(gathered.subarray(0, gathered.length - 3), () => {}), RangeError);
 });
+
+test('FrameDecoder reads a delta\'s suture thread as the generated decoder does, and refuses one too long', () => {
+  const nodes = Array.from({ length: 3 * 65 }, (_, i) => Math.fround(0.25 * i - 7));
+  const punctures = [1.5, 1.75, 0, Math.fround(1.5), Math.fround(1.7), Math.fround(-0.8)];
+  const bytes = Envelope.encode({ meshDelta: { sequence: 3, baseSequence: 2, numChanged: 0,
+    suture: { nodes, punctures, ties: 1, brokenSegment: 12 } } }).finish();
+  const decoder = new FrameDecoder();
+  const f = decoder.decode(bytes);
+  const s = f.meshDelta?.suture;
+  assert.ok(s, 'the delta carries its thread');
+  assert.equal(s.numNodes, 65);
+  assert.deepEqual([...s.nodes.subarray(0, 3 * 65)], nodes);
+  assert.equal(s.numPunctures, 2);
+  assert.deepEqual([...s.punctures.subarray(0, 6)], punctures.map(Math.fround));
+  assert.equal(s.ties, 1);
+  assert.equal(s.brokenSegment, 12);
+  // The next delta without one has none (the pool's old thread is not shown again).
+  const bare = decoder.decode(Envelope.encode({ meshDelta: { sequence: 4, baseSequence: 3 } }).finish());
+  assert.equal(bare.meshDelta?.suture, null);
+  // More nodes than a frame may carry (129): refused, as the server refuses it.
+  const long = Envelope.encode({ meshDelta: { sequence: 5, baseSequence: 4,
+    suture: { nodes: new Array(3 * 130).fill(0) } } }).finish();
+  assert.throws(() => decoder.decode(long), /suture: more than 129 nodes/);
+});

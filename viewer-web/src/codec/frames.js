@@ -38,6 +38,13 @@ import { idms } from './proto.js';
  */
 
 /**
+ * A needle's suture thread as a mesh frame carries it (idms.v1.SutureShape): nodes[0, 3 numNodes)
+ * and punctures[0, 3 numPunctures), x y z each.
+ * @typedef {{nodes: Float32Array, numNodes: number, punctures: Float32Array, numPunctures: number, ties: number,
+ *   brokenSegment: number}} Suture
+ */
+
+/**
  * A decoded frame: exactly one of its fields is set. The per-frame ones (meshDelta,
  * deviceSamples) are this decoder's and valid until its next decode; the others are the
  * generated decoder's messages.
@@ -69,7 +76,12 @@ export class FrameDecoder {
     this.stats = { ticks: 0, overruns: 0, periodP99Us: 0, computeP99Us: 0, realtime: false, passivityTicks: 0,
       passivityDissipated: 0 };
     /** @type {Delta} */
-    this.delta = { sequence: 0, baseSequence: 0, topologyVersion: 0, timeS: 0, numChanged: 0, compression: 0, payload: new Uint8Array(0) };
+    /** @type {Suture} the delta's thread, when it carries one (pooled: at most 129 nodes, 16 punctures) */
+    this.suture = { nodes: new Float32Array(3 * 129), numNodes: 0, punctures: new Float32Array(3 * 16), numPunctures: 0,
+      ties: 0, brokenSegment: 0 };
+    /** @type {Delta & {suture: Suture | null}} */
+    this.delta = { sequence: 0, baseSequence: 0, topologyVersion: 0, timeS: 0, numChanged: 0, compression: 0,
+      payload: new Uint8Array(0), suture: null };
     /** @type {Frame} */
     this.samplesFrame = { deviceSamples: this.batch };
     /** @type {Frame} */
@@ -288,6 +300,7 @@ export class FrameDecoder {
     d.timeS = 0;
     d.numChanged = 0;
     d.compression = 0;
+    d.suture = null;
     let payloadAt = 0, payloadEnd = 0;
     while (r.pos < end) {
       const tag = r.uint32();
@@ -305,11 +318,49 @@ export class FrameDecoder {
           r.pos = payloadEnd;
           break;
         }
+        case 8:
+          this.readSuture(r.uint32() + r.pos);
+          d.suture = this.suture;
+          break;
         default: r.skipType(tag & 7);
       }
     }
     checkEnd(r, end);
     d.payload = r.buf.subarray(payloadAt, payloadEnd);
+  }
+
+  /**
+   * SutureShape up to `end` into the pool: its packed floats (a list longer than the pool's is
+   * refused, as the server refuses it). @param {number} end
+   */
+  readSuture(end) {
+    const r = this.reader;
+    const u = this.suture;
+    u.numNodes = u.numPunctures = u.ties = u.brokenSegment = 0;
+    let nodes = 0, punctures = 0;
+    while (r.pos < end) {
+      const tag = r.uint32();
+      const f = tag >>> 3;
+      if ((f === 1 || f === 2) && (tag & 7) === kWireLength) {
+        const listEnd = r.uint32() + r.pos;
+        if (listEnd > end) throw RangeError(`index out of range: ${listEnd} > ${end}`);
+        const into = f === 1 ? u.nodes : u.punctures;
+        let count = f === 1 ? nodes : punctures;
+        while (r.pos < listEnd) {
+          if (count === into.length) throw RangeError(`suture: more than ${into.length / 3} ${f === 1 ? 'nodes' : 'punctures'}`);
+          into[count++] = r.float();
+        }
+        if (f === 1) nodes = count;
+        else punctures = count;
+      } else if (f === 3 && (tag & 7) === kWireVarint) {
+        u.ties = r.uint32();
+      } else if (f === 4 && (tag & 7) === kWireVarint) {
+        u.brokenSegment = r.int32();
+      } else r.skipType(tag & 7);
+    }
+    checkEnd(r, end);
+    u.numNodes = Math.floor(nodes / 3);
+    u.numPunctures = Math.floor(punctures / 3);
   }
 }
 

@@ -45,6 +45,17 @@ export function toolWords(sample) {
 }
 
 /**
+ * A generated decoder's SutureShape (a keyframe's) as SurfaceView.setSuture takes it; null
+ * without a thread.
+ * @param {idms.v1.ISutureShape | null | undefined} shape
+ */
+export function sutureOf(shape) {
+  if (!shape || !shape.nodes || shape.nodes.length < 6) return null;
+  return { nodes: shape.nodes, numNodes: Math.floor(shape.nodes.length / 3), punctures: shape.punctures ?? [],
+    numPunctures: Math.floor((shape.punctures?.length ?? 0) / 3), ties: shape.ties ?? 0, brokenSegment: shape.brokenSegment ?? 0 };
+}
+
+/**
  * A needle's shaft length (its scene's Needle.length, protocol/idms.proto's default 10 when not
  * given), model units; 0 for a tool that is not a needle (no shaft drawn).
  * @param {idms.v1.ITool | null | undefined} tool the scene's first
@@ -139,11 +150,13 @@ export class LiveView {
   /** @param {any} msg a MeshKeyframe */
   applyKeyframe(msg) {
     this.onMesh(this.mirror.applyKeyframe(msg), true);
+    this.view.setSuture(sutureOf(msg.suture));
   }
 
-  /** @param {any} msg a MeshDelta */
+  /** @param {any} msg a MeshDelta (the frame decoder's: its suture already unpacked) */
   applyDelta(msg) {
     this.onMesh(this.mirror.applyDelta(msg), false);
+    this.view.setSuture(msg.suture?.numNodes !== undefined ? msg.suture : sutureOf(msg.suture));
   }
 
   /** @param {'ok' | 'gap' | 'invalid'} status @param {boolean} keyframe */

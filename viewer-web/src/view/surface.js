@@ -200,6 +200,28 @@ export class SurfaceView {
         return m;
       });
     this.contact = false;
+    // A needle's suture thread (display.json's "suture"): a line through its nodes as segments
+    // (a parted one left out) and its punctures as squares, over the surface. Sized for the most a
+    // frame carries (idms.proto's SutureShape: 129 nodes, 16 punctures), so a frame allocates nothing.
+    this.threadGeometry = new THREE.BufferGeometry();
+    this.threadGeometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(2 * 128 * 3), 3));
+    this.thread = new THREE.LineSegments(this.threadGeometry, new THREE.LineBasicMaterial({
+      color: new THREE.Color(String(display.suture.thread_srgb)), depthTest: false, depthWrite: false }));
+    this.thread.frustumCulled = false;
+    this.thread.renderOrder = 4;
+    this.thread.visible = false;
+    this.scene.add(this.thread);
+    this.punctureGeometry = new THREE.BufferGeometry();
+    this.punctureGeometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(16 * 3), 3));
+    this.punctureMarks = new THREE.Points(this.punctureGeometry, new THREE.PointsMaterial({
+      color: new THREE.Color(String(display.suture.puncture_srgb)), size: Number(display.suture.puncture_px),
+      sizeAttenuation: false, depthTest: false, depthWrite: false }));
+    this.punctureMarks.frustumCulled = false;
+    this.punctureMarks.renderOrder = 4;
+    this.punctureMarks.visible = false;
+    this.scene.add(this.punctureMarks);
+    /** What the thread shows: its nodes, segments drawn, punctures and knots (for the tests). */
+    this.sutureShown = { nodes: 0, segments: 0, punctures: 0, ties: 0, brokenSegment: 0 };
     // The tool and the force.
     this.tool = new ToolMesh(kToolFree, 0x1d5fa8);
     this.tool.visible = false;
@@ -412,6 +434,45 @@ export class SurfaceView {
   setToolRadius(radius) {
     this.toolRadius = radius > 0 ? radius : 1.5;
     this.tool.setRadius(this.toolRadius);
+    this.invalidate();
+  }
+
+  /**
+   * A needle's suture thread as the last mesh frame showed it (idms.proto's SutureShape), or none.
+   * @param {{nodes: ArrayLike<number>, numNodes: number, punctures: ArrayLike<number>, numPunctures: number,
+   *   ties: number, brokenSegment: number} | null} shape
+   */
+  setSuture(shape) {
+    const n = shape ? Math.min(shape.numNodes, 129) : 0;
+    const shown = this.sutureShown;
+    if (n < 2) {
+      if (!this.thread.visible && shown.nodes === 0) return;
+      this.thread.visible = this.punctureMarks.visible = false;
+      shown.nodes = shown.segments = shown.punctures = shown.ties = shown.brokenSegment = 0;
+      this.invalidate();
+      return;
+    }
+    const s = /** @type {NonNullable<typeof shape>} */ (shape);
+    const seg = /** @type {Float32Array} */ (this.threadGeometry.getAttribute('position').array);
+    let k = 0;
+    for (let i = 0; i + 1 < n; i++) {
+      if (i + 1 === s.brokenSegment) continue;  // the parted segment (+ 1)
+      for (let c = 0; c < 6; c++) seg[k++] = s.nodes[3 * i + c];
+    }
+    this.threadGeometry.setDrawRange(0, k / 3);
+    this.threadGeometry.getAttribute('position').needsUpdate = true;
+    const np = Math.min(s.numPunctures, 16);
+    const marks = /** @type {Float32Array} */ (this.punctureGeometry.getAttribute('position').array);
+    for (let i = 0; i < 3 * np; i++) marks[i] = s.punctures[i];
+    this.punctureGeometry.setDrawRange(0, np);
+    this.punctureGeometry.getAttribute('position').needsUpdate = true;
+    this.thread.visible = true;
+    this.punctureMarks.visible = np > 0;
+    shown.nodes = n;
+    shown.segments = k / 6;
+    shown.punctures = np;
+    shown.ties = s.ties;
+    shown.brokenSegment = s.brokenSegment;
     this.invalidate();
   }
 

@@ -3,6 +3,7 @@
 // It never allocates, locks, logs or touches the network; the I/O thread (uplink.h) drains it.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <boost/lockfree/spsc_queue.hpp>
 #include <cstdint>
@@ -57,6 +58,12 @@ struct TickSample {
   bool oriented = false;
   bool needle_punctured = false;
   double needle_inserted = 0;
+  // The needle through the far side, and its suture (SutureReport): this tick's new points drawn
+  // through, a knot tied or refused, a break; the thread's points and knots so far.
+  bool needle_exited = false;
+  uint8_t suture_new_punctures = 0;
+  bool suture_tied = false, suture_tie_refused = false, suture_broke = false;
+  uint16_t suture_punctures = 0, suture_ties = 0;
 };
 
 // A surface snapshot in a preallocated pool slot, loop -> I/O thread and back.
@@ -68,6 +75,14 @@ struct MeshSlot {
   std::vector<double> pos;         // (num_external x 3), model units; sized once
   int32_t num_tris = -1;           // triangles in tri_verts when the topology changed, else -1
   std::vector<int32_t> tri_verts;  // (num_tris x 3) vertex ids; capacity of the initial surface
+  // The suture thread (State::suture) when there is one: its nodes and punctures (model frame,
+  // float), its knots, the parted segment + 1 (0: whole). Fixed arrays: publishing allocates nothing.
+  int32_t suture_nodes = 0;
+  std::array<float, 3 * (kSutureSegments + 1)> suture_pos{};
+  int32_t suture_punctures = 0;
+  std::array<float, 3 * kSuturePunctures> suture_puncture_pos{};
+  int32_t suture_ties = 0;
+  int32_t suture_broken = 0;
 };
 
 // A command from the server, I/O thread -> loop. Tweezers close/open hold until the device's own

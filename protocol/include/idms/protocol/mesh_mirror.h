@@ -48,6 +48,8 @@ class MeshMirror {
   std::span<const int32_t> triangles() const { return tri_verts_; }  // (num_triangles x 3), vertex ids
   // Vertices the last delta moved (all of them after a keyframe: empty, see positions()).
   std::span<const int32_t> changed() const { return changed_; }
+  // The suture thread the last frame showed (empty nodes: none). A keyframe made here carries it.
+  const v1::SutureShape& suture() const { return suture_; }
 
  private:
   size_t KeepBytes() const;  // scratch kept between frames
@@ -63,7 +65,12 @@ class MeshMirror {
   std::vector<float> pos_;
   std::vector<int32_t> tri_verts_;
   std::vector<int32_t> changed_;
+  v1::SutureShape suture_;
   DecodedKeyframe scratch_;
 };
+
+// A frame's suture shape within its bounds (whole xyz triples, at most 129 nodes and 16
+// punctures, finite, the broken segment one of its own); false with *error saying what.
+bool ValidSutureShape(const v1::SutureShape& shape, std::string* error);
 
 }  // namespace idms
