@@ -561,6 +561,67 @@ TEST_F(RecordingRenderTest, ANeedlesShaftIsDrawnAlongItsAxisInItsStatesColour) {
   EXPECT_EQ(near(image, red, x, y), 0);
 }
 
+// A needle's suture thread (issue 32): a line through its nodes in display.json's thread colour,
+// over the surface, with its punctures as squares in theirs; a parted segment is not drawn, and a
+// frame without a thread draws none.
+TEST_F(RecordingRenderTest, ASutureThreadIsDrawnOverTheSurfaceWithItsPunctures) {
+  const test::RecordedSession& s = test::Session();
+  std::string error;
+  ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
+  SceneView view = player_.state().View();
+  EXPECT_TRUE(view.suture_nodes.empty());  // the palpation's frames carry none
+  view.has_tool = false;  // its see-through disc would tint the thread under it
+  // A thread across the middle of the surface, in 16 segments, 1 above it; two punctures on it.
+  const std::array<double, 3> lo = {0.5, 1.0, 0.5}, hi = {3.5, 1.0, 0.5};
+  std::vector<float> nodes, punctures = {1.25f, 1.0f, 0.5f, 2.75f, 1.0f, 0.5f};
+  for (int i = 0; i <= 16; ++i) {
+    for (int c = 0; c < 3; ++c) nodes.push_back(static_cast<float>(lo[c] + (hi[c] - lo[c]) * i / 16.0));
+  }
+  view.suture_nodes = nodes;
+  view.suture_punctures = punctures;
+  RenderOptions o;
+  o.width = 800, o.height = 600;
+  o.show_tool = true;
+  o.camera = CameraFor(view, o);
+  const Display& d = TheDisplay();
+  auto is = [](const Srgb& c) {
+    return [c](const uint8_t* p) { return std::abs(p[0] - c[0]) < 8 && std::abs(p[1] - c[1]) < 8 && std::abs(p[2] - c[2]) < 8; };
+  };
+  auto near = [](const Image& image, auto match, double x, double y) {
+    int n = 0;
+    for (int dy = -4; dy <= 4; ++dy) {
+      for (int dx = -4; dx <= 4; ++dx) {
+        const int px = int(x) + dx, py = int(y) + dy;
+        if (px >= 0 && py >= 0 && px < image.width && py < image.height) n += match(image.Pixel(px, py));
+      }
+    }
+    return n;
+  };
+  auto at = [&](double f, double* x, double* y) {
+    return renderer_.Project({lo[0] + (hi[0] - lo[0]) * f, lo[1], lo[2]}, x, y);
+  };
+  Image image;
+  ASSERT_TRUE(renderer_.Render(view, o, &image, &error)) << error;
+  double x = 0, y = 0;
+  // On the thread between the punctures (segment 9 of 16 holds f = 0.59).
+  ASSERT_TRUE(at(0.59, &x, &y));
+  EXPECT_GT(near(image, is(d.suture_thread), x, y), 3) << "at (" << x << ", " << y << ")";
+  ASSERT_TRUE(renderer_.Project({1.25, 1.0, 0.5}, &x, &y));
+  EXPECT_GT(near(image, is(d.suture_puncture), x, y), 10);
+  // Parted at segment 9 (+ 1 = 10): nothing there, the rest still drawn.
+  view.suture_broken = 10;
+  ASSERT_TRUE(renderer_.Render(view, o, &image, &error)) << error;
+  ASSERT_TRUE(at(0.59, &x, &y));
+  EXPECT_EQ(near(image, is(d.suture_thread), x, y), 0);
+  ASSERT_TRUE(at(0.2, &x, &y));
+  EXPECT_GT(near(image, is(d.suture_thread), x, y), 3);
+  // No thread: none drawn.
+  view.suture_nodes = {};
+  view.suture_punctures = {};
+  ASSERT_TRUE(renderer_.Render(view, o, &image, &error)) << error;
+  EXPECT_EQ(near(image, is(d.suture_thread), x, y), 0);
+}
+
 TEST_F(RecordingRenderTest, TheSameTimeRenderedTwiceIsTheSameImage) {
   const test::RecordedSession& s = test::Session();
   std::string error;

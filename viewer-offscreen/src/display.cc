@@ -72,6 +72,10 @@ Display Parse() {
     d.contact_inner = ParseSrgb(contact.at("inner_srgb"));
     d.contact_outer_px = contact.at("outer_px").get<double>();
     d.contact_inner_px = contact.at("inner_px").get<double>();
+    const auto& suture = j.at("suture");
+    d.suture_thread = ParseSrgb(suture.at("thread_srgb"));
+    d.suture_puncture = ParseSrgb(suture.at("puncture_srgb"));
+    d.suture_puncture_px = suture.at("puncture_px").get<double>();
   } catch (const nlohmann::json::exception& e) {
     Broken(e.what());
   }

@@ -449,6 +449,32 @@ struct Renderer::Impl {
     glPopMatrix();
   }
 
+  // A needle's suture thread over everything (the part in the tissue shows), as the browser draws
+  // it: a line through its nodes (a parted segment left out), 2 pixels, and the points it passes
+  // through as squares (display.json's "suture").
+  void DrawSuture(const SceneView& scene) {
+    const size_t n = scene.suture_nodes.size() / 3;
+    if (n < 2) return;
+    const Display& d = TheDisplay();
+    glDisable(GL_DEPTH_TEST);
+    glLineWidth(2);
+    Colour(d.suture_thread);
+    glBegin(GL_LINES);
+    for (size_t i = 0; i + 1 < n; ++i) {
+      if (static_cast<int32_t>(i) + 1 == scene.suture_broken) continue;
+      glVertex3fv(&scene.suture_nodes[3 * i]);
+      glVertex3fv(&scene.suture_nodes[3 * i + 3]);
+    }
+    glEnd();
+    glLineWidth(1);
+    glPointSize(static_cast<float>(d.suture_puncture_px));
+    Colour(d.suture_puncture);
+    glBegin(GL_POINTS);
+    for (size_t j = 0; j + 2 < scene.suture_punctures.size(); j += 3) glVertex3fv(&scene.suture_punctures[j]);
+    glEnd();
+    glEnable(GL_DEPTH_TEST);
+  }
+
   // The force arrow from the tool's surface, lit by one light from the viewer's upper left.
   // The device force, and its tangential (friction) part when there is one, each an arrow from
   // the tool's surface along it, the same length per unit of force.
@@ -582,6 +608,7 @@ bool Renderer::Render(const SceneView& scene, const RenderOptions& o, Image* out
   impl_->DrawSurface(scene, drawn.positions, o.colour_by, o.wireframe);
   glDisableClientState(GL_NORMAL_ARRAY);
   impl_->DrawContacts(drawn.positions);
+  if (o.show_tool) impl_->DrawSuture(scene);
   if (scene.has_tool && (o.show_tool || o.show_force)) {
     const Camera around = AutoCamera(drawn.positions, 1);
     const double r = scene.tool_radius > 0 ? scene.tool_radius : 0.05 * Norm(Sub(around.eye, around.target));

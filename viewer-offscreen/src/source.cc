@@ -38,6 +38,10 @@ SceneView ViewerState::View() const {
       }
     }
   }
+  const v1::SutureShape& suture = mirror.suture();
+  v.suture_nodes = std::span<const float>(suture.nodes().data(), static_cast<size_t>(suture.nodes_size()));
+  v.suture_punctures = std::span<const float>(suture.punctures().data(), static_cast<size_t>(suture.punctures_size()));
+  v.suture_broken = suture.broken_segment();
   if (rest.size() == v.positions.size()) v.rest = rest, v.rest_time_s = rest_time_s;
   if (stiffness.size() * 3 == v.positions.size()) v.stiffness = stiffness;
   return v;

@@ -209,7 +209,18 @@ export function sessionPage(id, role, mode) {
   /** @type {any} */ (window).__idmsSurface = () => ({ contacts: view.view.numContacts, lo: view.view.surface.lo, hi: view.view.surface.hi,
     colourBy: view.view.surface.colourBy, scale: view.view.surface.scale, restTimeS: view.view.surface.restTimeS,
     camera: view.view.camera.position.toArray(), tool: view.view.tool.position.toArray(), toolRadius: view.view.toolRadius,
-    moved: movedVertices(view.view.surface), needle: needleShown(view.view.tool) });
+    moved: movedVertices(view.view.surface), needle: needleShown(view.view.tool),
+    suture: { ...view.view.sutureShown } });
+  // The thread's nodes and punctures as drawn (model frame), for the tests.
+  /** @type {any} */ (window).__idmsSuturePoints = () => {
+    const v = view.view, n = v.sutureShown.segments;
+    const seg = v.threadGeometry.getAttribute('position').array, marks = v.punctureGeometry.getAttribute('position').array;
+    const nodes = [];
+    for (let i = 0; i < n; i++) nodes.push([seg[6 * i], seg[6 * i + 1], seg[6 * i + 2]]);
+    const punctures = [];
+    for (let i = 0; i < v.sutureShown.punctures; i++) punctures.push([marks[3 * i], marks[3 * i + 1], marks[3 * i + 2]]);
+    return { nodes, punctures };
+  };
   /** @type {any} */ (window).__idmsProject = (/** @type {number} */ x, /** @type {number} */ y, /** @type {number} */ z) => view.view.project(x, y, z);
   Object.defineProperty(st, 'depthSamples', { get: () => view.depthPlot.count, enumerable: true });
   // The force-against-depth plot's axes as last drawn, for the tests.

@@ -39,6 +39,8 @@ struct Display {
   double contact_radius_tolerance = 0;
   Srgb contact_outer{}, contact_inner{};
   double contact_outer_px = 0, contact_inner_px = 0;
+  Srgb suture_thread{}, suture_puncture{};  // a needle's thread and the points it passes through
+  double suture_puncture_px = 0;
 };
 const Display& TheDisplay();
 

@@ -64,6 +64,11 @@ struct SceneView {
   double needle_length = 0;
   std::array<double, 3> needle_axis{0, 0, -1};
   bool needle_punctured = false;
+  // Its suture thread (the mesh frame's SutureShape), when it has one: nodes from the eye (x, y,
+  // z each), the points it passes through, the parted segment + 1 (0: whole).
+  std::span<const float> suture_nodes;
+  std::span<const float> suture_punctures;
+  int32_t suture_broken = 0;
   // The surface at rest (num_vertices x 3), model units; empty: `positions` are taken as rest.
   std::span<const float> rest;
   double rest_time_s = 0;             // session time of `rest`; > 0: not the session's start (a late join)
