@@ -570,7 +570,7 @@ TEST_F(RecordingRenderTest, ASutureThreadIsDrawnOverTheSurfaceWithItsPunctures) 
   ASSERT_TRUE(player_.MoveTo(s.peak_force_t_s, &error)) << error;
   SceneView view = player_.state().View();
   EXPECT_TRUE(view.suture_nodes.empty());  // the palpation's frames carry none
-  view.has_tool = false;  // its see-through disc would tint the thread under it
+  view.has_tool = false;                   // its see-through disc would tint the thread under it
   // A thread across the middle of the surface, in 16 segments, 1 above it; two punctures on it.
   const std::array<double, 3> lo = {0.5, 1.0, 0.5}, hi = {3.5, 1.0, 0.5};
   std::vector<float> nodes, punctures = {1.25f, 1.0f, 0.5f, 2.75f, 1.0f, 0.5f};
@@ -585,7 +585,9 @@ TEST_F(RecordingRenderTest, ASutureThreadIsDrawnOverTheSurfaceWithItsPunctures) 
   o.camera = CameraFor(view, o);
   const Display& d = TheDisplay();
   auto is = [](const Srgb& c) {
-    return [c](const uint8_t* p) { return std::abs(p[0] - c[0]) < 8 && std::abs(p[1] - c[1]) < 8 && std::abs(p[2] - c[2]) < 8; };
+    return [c](const uint8_t* p) {
+      return std::abs(p[0] - c[0]) < 8 && std::abs(p[1] - c[1]) < 8 && std::abs(p[2] - c[2]) < 8;
+    };
   };
   auto near = [](const Image& image, auto match, double x, double y) {
     int n = 0;
