@@ -2,6 +2,9 @@
 // slabs of 10^3 to 10^6 atoms with the default step (StepOptions{}: local window, thesis MIO); tick
 // compute p50 / p99 / max, and the 10^6 : 10^4 ratio. Prints a table (CSV with --csv); never
 // fails on time. Goal (issue 3): flat, the 10^6 tick within 1.5x of the 10^4 tick, p99 < 100 us.
+// The suture row (issue 32): the scripted stitch on the hex fragment (interaction_script.h) with
+// a 100-segment thread, the ticks with the needle in the tissue or the thread through it; goal
+// p99 <= 100 us.
 #include <time.h>
 
 #include <algorithm>
@@ -15,6 +18,7 @@
 #include "idms/sim/generate.h"
 #include "idms/sim/interaction_script.h"
 #include "idms/sim/step.h"
+#include "idms/sim/tool.h"
 #include "idms/sim/workspace.h"
 
 namespace {
@@ -98,6 +102,55 @@ SizeResult RunSize(int64_t atoms, double duration_s, double local_radius, Integr
   return r;
 }
 
+// The stitch with a 100-segment thread: the ticks from the puncture on (the needle in the tissue,
+// then the thread through it and tied).
+struct StitchResult {
+  int64_t ticks = 0, warnings = 0;
+  int32_t punctures = 0, ties = 0, substeps = 0;
+  Percentiles wall, cpu;
+};
+
+StitchResult RunStitch(int32_t segments) {
+  StitchResult r;
+  const Model model = GenerateSlab(SlabOptions{});
+  ToolCommand tool = StitchNeedle();
+  tool.suture.segments = segments;
+  const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius);
+  StepOptions options;
+  State state = MakeState(model);
+  Workspace ws = MakeWorkspace(model, options);
+  ResyncWorkspace(model, state, ws);
+  ToolInput input;
+  input.num_tools = 1;
+  const int64_t ticks = static_cast<int64_t>(std::llround(ScriptDuration(Script::kStitch) / options.dt_s));
+  std::vector<double> wall, cpu;
+  wall.reserve(ticks), cpu.reserve(ticks);
+  bool counting = false;
+  for (int64_t i = 0; i < ticks; ++i) {
+    const ScriptSample sample = SampleScript(Script::kStitch, geometry, static_cast<double>(i + 1) * options.dt_s);
+    std::copy(sample.pos, sample.pos + 3, tool.pos);
+    NeedleAxisOf(sample.orientation, tool.axis);
+    tool.tie = sample.closed;
+    input.tools[0] = tool;
+    const double c0 = ThreadCpuNs();
+    const auto w0 = std::chrono::steady_clock::now();
+    const StepReport report = Step(model, state, ws, input);
+    const auto w1 = std::chrono::steady_clock::now();
+    const double c1 = ThreadCpuNs();
+    counting = counting || report.tools[0].punctured;
+    if (!counting) continue;
+    wall.push_back(std::chrono::duration<double, std::micro>(w1 - w0).count());
+    cpu.push_back(1e-3 * (c1 - c0));
+    r.ties += report.suture.tied;
+    r.substeps = std::max(r.substeps, report.suture.substeps);
+  }
+  r.ticks = static_cast<int64_t>(wall.size());
+  r.punctures = state.suture.num_punctures;
+  r.warnings = TotalWarnings(state.warnings);
+  if (!wall.empty()) r.wall = Summarize(wall), r.cpu = Summarize(cpu);
+  return r;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -171,6 +224,14 @@ int main(int argc, char** argv) {
                 small->atoms, large.wall.p50 / small->wall.p50, large.wall.p99 / small->wall.p99,
                 large.cpu.p50 / small->cpu.p50, large.cpu.p99 / small->cpu.p99);
   }
+  // The suture row.
+  const StitchResult st = RunStitch(100);
+  std::printf(
+      "\nsuture: the stitch on the hex fragment, a 100-segment thread (%d substeps at most), %lld ticks from the "
+      "puncture on:\n  wall us p50 %.1f p99 %.1f max %.1f | cpu us p50 %.1f p99 %.1f max %.1f | %d points drawn "
+      "through, %d knots, %lld warnings\n",
+      st.substeps, static_cast<long long>(st.ticks), st.wall.p50, st.wall.p99, st.wall.max, st.cpu.p50, st.cpu.p99,
+      st.cpu.max, st.punctures, st.ties, static_cast<long long>(st.warnings));
   std::printf(
       "wall = steady clock around Step (what a 1 kHz loop sees, preemption included); cpu = this thread's\n"
       "CPU time in Step (the machine is shared); active = mean / max atoms in the window.\n");

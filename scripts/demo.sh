@@ -76,8 +76,9 @@ curl -s -H "Authorization: Bearer $admin" -X PUT -F fem=@"$out/broken.fem" -F pl
 # One recorded session per interaction of thesis chapter 6, the model fetched by name.
 ws="ws://${url#http://}"
 # Each for its script's length (thesis figures 6-2, 6-6 and 6-8; the fast stroke at the thesis's speed);
-# then a needle's pierce (thesis 7.2.4: in at a slant, held, and out, docs/needle.md).
-for run in palpate:5.5 stroke-fast:5.8 pluck:5 pierce:12; do
+# then a needle's pierce (thesis 7.2.4: in at a slant, held, and out, docs/needle.md) and a stitch
+# (a needle drawn down through the fragment, its thread left in and tied).
+for run in palpate:5.5 stroke-fast:5.8 pluck:5 pierce:12 stitch:14; do
   script=${run%%:*} seconds=${run#*:}
   echo "== idms-agent: $script on hex_4x5_home, $seconds s at 1 kHz, published and recorded"
   "$bin/idms-agent" --server "$ws" --token "$agent" --model hex_4x5_home --device "scripted:$script" \
@@ -91,7 +92,7 @@ for run in palpate:5.5 stroke-fast:5.8 pluck:5 pierce:12; do
 done
 
 echo "== idms-render: the palpation at t = 2.5 s, the pluck lifting the tissue at 3.5 s, the needle in at 5 s,"
-echo "   the tissue at rest"
+echo "   the stitch tied at 12 s, the tissue at rest"
 "$bin/idms-render" --recording "$out/palpate.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
   --out "$out/palpate.png"
 "$bin/idms-render" --model models/hex_4x5_home --size 1280x720 --out "$out/rest.png"
@@ -99,6 +100,8 @@ echo "   the tissue at rest"
   --out "$out/pluck.png"
 "$bin/idms-render" --recording "$out/pierce.mcap" --at 5 --size 1280x720 --show-tool --show-force \
   --out "$out/pierce.png"
+"$bin/idms-render" --recording "$out/stitch.mcap" --at 12 --size 1280x720 --show-tool --camera 6,-5,3:1.5,1.7,-1.5 \
+  --out "$out/stitch.png"
 ls -l "$out"/*.png | awk '{print "   " $NF " (" $5 " bytes)"}'
 
 if $headless; then
@@ -126,8 +129,9 @@ cat <<MSG
   Replays:             $url/replay/$id_palpate?t=2.5   (palpation)
                        $url/replay/$id_pluck           (pluck)
                        $url/replay/$id_pierce?t=5      (a needle's pierce)
+                       $url/replay/$id_stitch?t=12     (a stitch, its thread tied)
   The model library:   $url/models
-  Screenshots:         $out/palpate.png, $out/pluck.png, $out/pierce.png, $out/rest.png
+  Screenshots:         $out/palpate.png, $out/pluck.png, $out/pierce.png, $out/stitch.png, $out/rest.png
   Recordings:          $out/*.mcap (and $data/recordings/)
   Tokens:              $data/tokens
 
