@@ -38,7 +38,6 @@
 // is free.
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <string>
 #include <utility>
@@ -61,51 +60,40 @@ void NeedleAxisOf(const double q[4], double axis[3]) {
 
 namespace {
 
-// The first needle parameter out of range, with what it must be, or null: no allocation, so the
-// step can ask it too.
-struct NeedleRule {
-  const char* field;
-  const char* expected;
-};
-const NeedleRule* BadNeedleField(const NeedleParams& n, double* value) {
-  static constexpr NeedleRule kRules[] = {
-      {"length", "a finite number > 0"},
-      {"puncture_force", "a finite number > 0"},
-      {"mu", "a finite number >= 0"},
-      {"grip", "a finite number >= 0"},
-      {"capture_radius", "a finite number >= 0 (0 = 2 x the tip radius)"},
-      {"lateral_stiffness", "a finite number >= 0 (0 = the tool's stiffness)"},
-      {"lateral_damping", "a finite number (< 0 = lateral_stiffness * dt)"},
-      {"axial_stiffness", "a finite number >= 0 (0 = the tool's stiffness)"},
-      {"axial_damping", "a finite number (< 0 = axial_stiffness * dt)"},
+// The needle's parameters as rules (internal::ParamRule), in the order the message names them.
+constexpr int kNeedleRules = 9;
+void NeedleRules(const NeedleParams& n, internal::ParamRule out[kNeedleRules]) {
+  using internal::ParamBound;
+  const internal::ParamRule rules[kNeedleRules] = {
+      {"length", "a finite number > 0", n.length, ParamBound::kPositive},
+      {"puncture_force", "a finite number > 0", n.puncture_force, ParamBound::kPositive},
+      {"mu", "a finite number >= 0", n.mu, ParamBound::kNonNegative},
+      {"grip", "a finite number >= 0", n.grip, ParamBound::kNonNegative},
+      {"capture_radius", "a finite number >= 0 (0 = 2 x the tip radius)", n.capture_radius, ParamBound::kNonNegative},
+      {"lateral_stiffness", "a finite number >= 0 (0 = the tool's stiffness)", n.lateral_stiffness,
+       ParamBound::kNonNegative},
+      {"lateral_damping", "a finite number (< 0 = lateral_stiffness * dt)", n.lateral_damping, ParamBound::kAny},
+      {"axial_stiffness", "a finite number >= 0 (0 = the tool's stiffness)", n.axial_stiffness,
+       ParamBound::kNonNegative},
+      {"axial_damping", "a finite number (< 0 = axial_stiffness * dt)", n.axial_damping, ParamBound::kAny},
   };
-  // Lower bounds in the order of kRules: > 0, >= 0, or any finite value.
-  enum Bound { kPositive, kNonNegative, kAny };
-  const double values[] = {
-      n.length,          n.puncture_force,  n.mu,           n.grip, n.capture_radius, n.lateral_stiffness,
-      n.lateral_damping, n.axial_stiffness, n.axial_damping};
-  const Bound bounds[] = {kPositive,    kPositive, kNonNegative, kNonNegative, kNonNegative,
-                          kNonNegative, kAny,      kNonNegative, kAny};
-  for (int i = 0; i < 9; ++i) {
-    const double v = values[i];
-    const bool ok = std::isfinite(v) && (bounds[i] == kAny || (bounds[i] == kPositive ? v > 0 : v >= 0));
-    if (!ok) {
-      *value = v;
-      return &kRules[i];
-    }
-  }
-  return nullptr;
+  std::copy(rules, rules + kNeedleRules, out);
+}
+
+bool NeedleParamsValid(const NeedleParams& n) {
+  internal::ParamRule rules[kNeedleRules];
+  NeedleRules(n, rules);
+  return internal::FirstBadParam(rules, kNeedleRules) == nullptr;
 }
 
 }  // namespace
 
 bool ValidateNeedle(const ToolCommand& t, std::string* error) {
-  double v = 0;
-  const NeedleRule* bad = BadNeedleField(t.needle, &v);
+  internal::ParamRule rules[kNeedleRules];
+  NeedleRules(t.needle, rules);
+  const internal::ParamRule* bad = internal::FirstBadParam(rules, kNeedleRules);
   if (bad == nullptr) return true;
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%g", v);
-  *error = std::string("needle.") + bad->field + " must be " + bad->expected + ", got " + buf;
+  *error = internal::BadParamMessage("needle", *bad);
   return false;
 }
 
@@ -228,10 +216,8 @@ bool ExitAnchor(const State& s, const Workspace& ws, int32_t t, int32_t atoms[kA
 }  // namespace
 
 bool ValidNeedleCommand(const ToolCommand& c) {
-  double unused = 0;
   const double n2 = Dot3(c.axis, c.axis);
-  return Finite3(c.axis) && n2 > 1e-24 && std::isfinite(n2) && BadNeedleField(c.needle, &unused) == nullptr &&
-         ValidSutureCommand(c);
+  return Finite3(c.axis) && n2 > 1e-24 && std::isfinite(n2) && NeedleParamsValid(c.needle) && ValidSutureCommand(c);
 }
 
 void ResolveNeedle(const State& s, const ToolState& ts, const ToolCommand& cmd, double dt, ActiveTool& at) {
@@ -240,8 +226,7 @@ void ResolveNeedle(const State& s, const ToolState& ts, const ToolCommand& cmd, 
   for (int c = 0; c < 3; ++c) at.axis[c] = ts.axis[c] / n;
   // Defaults: the tool's stiffness for the springs, k dt for their dampers, 2 r for the capture.
   NeedleParams p = cmd.needle;
-  double unused = 0;
-  if (BadNeedleField(p, &unused) != nullptr) p = NeedleParams{};  // held input: the defaults
+  if (!NeedleParamsValid(p)) p = NeedleParams{};  // held input: the defaults
   if (!(p.capture_radius > 0)) p.capture_radius = 2 * at.radius;
   if (!(p.lateral_stiffness > 0)) p.lateral_stiffness = ts.stiffness;
   if (p.lateral_damping < 0) p.lateral_damping = p.lateral_stiffness * dt;

@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <string>
 
 #include "idms/sim/model.h"
 #include "idms/sim/state.h"
@@ -38,6 +40,21 @@ inline double SegmentDist2(const double p[3], const double a[3], const double b[
 // SphereContact's own first test, inline: the loops over full mode's contact candidates (every
 // external atom) skip the call for the atoms a tool cannot touch.
 inline bool InsideSphere(const double d[3], double r) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < r * r; }
+
+// A tool parameter as a boundary checks it (the needle's, the suture's): its name, what it must
+// be, its value, its lower bound and its largest value. FirstBadParam: the first rule whose value
+// is not finite or out of its bounds, or null (no allocation: the step asks it too).
+// BadParamMessage: "prefix.field must be <expected>, got <value>".
+enum class ParamBound : uint8_t { kPositive, kNonNegative, kAny };
+struct ParamRule {
+  const char* field;
+  const char* expected;
+  double value;
+  ParamBound bound;
+  double max = std::numeric_limits<double>::infinity();
+};
+const ParamRule* FirstBadParam(const ParamRule* rules, int n);
+std::string BadParamMessage(const char* prefix, const ParamRule& rule);
 
 // Adds the steady-clock time from its construction to its end to *sink: the one idiom for the
 // stage times of StepReport.

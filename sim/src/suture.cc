@@ -33,7 +33,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -44,46 +43,25 @@
 namespace idms {
 namespace {
 
-struct SutureRule {
-  const char* field;
-  const char* expected;
-};
-
-// The first suture parameter out of range, or null; no allocation (the step asks it too).
-const SutureRule* BadSutureField(const SutureParams& p, double* value) {
+// The suture's parameters as rules (internal::ParamRule), in the order the message names them.
+constexpr int kSutureRules = 10;
+void SutureRules(const SutureParams& p, internal::ParamRule out[kSutureRules]) {
+  using internal::ParamBound;
   static_assert(kSutureSegments == 128, "the rule's text says 1..128");
-  static constexpr SutureRule kRules[] = {
-      {"length", "a finite number >= 0 (0 = no thread)"},
-      {"segments", "an integer in 1..128"},
-      {"mass", "a finite number > 0"},
-      {"stiffness", "a finite number >= 0 (0 = the stiffest one tick holds)"},
-      {"damping", "a finite number (< 0 = near critical)"},
-      {"strength", "a finite number >= 0 (0 = unbreakable)"},
-      {"hold_stiffness", "a finite number >= 0 (0 = the needle's lateral stiffness)"},
-      {"tie_force", "a finite number > 0"},
-      {"tie_speed", "a finite number > 0"},
-      {"drag", "a finite number >= 0"},
+  const internal::ParamRule rules[kSutureRules] = {
+      {"length", "a finite number >= 0 (0 = no thread)", p.length, ParamBound::kNonNegative},
+      {"segments", "an integer in 1..128", static_cast<double>(p.segments), ParamBound::kPositive, kSutureSegments},
+      {"mass", "a finite number > 0", p.mass, ParamBound::kPositive},
+      {"stiffness", "a finite number >= 0 (0 = the stiffest one tick holds)", p.stiffness, ParamBound::kNonNegative},
+      {"damping", "a finite number (< 0 = near critical)", p.damping, ParamBound::kAny},
+      {"strength", "a finite number >= 0 (0 = unbreakable)", p.strength, ParamBound::kNonNegative},
+      {"hold_stiffness", "a finite number >= 0 (0 = the needle's lateral stiffness)", p.hold_stiffness,
+       ParamBound::kNonNegative},
+      {"tie_force", "a finite number > 0", p.tie_force, ParamBound::kPositive},
+      {"tie_speed", "a finite number > 0", p.tie_speed, ParamBound::kPositive},
+      {"drag", "a finite number >= 0", p.drag, ParamBound::kNonNegative},
   };
-  enum Bound { kPositive, kNonNegative, kAny, kSegments };
-  const double values[] = {p.length,         static_cast<double>(p.segments),
-                           p.mass,           p.stiffness,
-                           p.damping,        p.strength,
-                           p.hold_stiffness, p.tie_force,
-                           p.tie_speed,      p.drag};
-  const Bound bounds[] = {kNonNegative, kSegments,    kPositive, kNonNegative, kAny,
-                          kNonNegative, kNonNegative, kPositive, kPositive,    kNonNegative};
-  for (int i = 0; i < 10; ++i) {
-    const double v = values[i];
-    bool ok = std::isfinite(v);
-    if (bounds[i] == kPositive) ok = ok && v > 0;
-    if (bounds[i] == kNonNegative) ok = ok && v >= 0;
-    if (bounds[i] == kSegments) ok = p.segments >= 1 && p.segments <= kSutureSegments;
-    if (!ok) {
-      *value = v;
-      return &kRules[i];
-    }
-  }
-  return nullptr;
+  std::copy(rules, rules + kSutureRules, out);
 }
 
 inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -91,12 +69,11 @@ inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1]
 }  // namespace
 
 bool ValidateSuture(const ToolCommand& t, std::string* error) {
-  double v = 0;
-  const SutureRule* bad = BadSutureField(t.suture, &v);
+  internal::ParamRule rules[kSutureRules];
+  SutureRules(t.suture, rules);
+  const internal::ParamRule* bad = internal::FirstBadParam(rules, kSutureRules);
   if (bad == nullptr) return true;
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%g", v);
-  *error = std::string("suture.") + bad->field + " must be " + bad->expected + ", got " + buf;
+  *error = internal::BadParamMessage("suture", *bad);
   return false;
 }
 
@@ -233,8 +210,9 @@ int32_t Substeps(const SutureState& ss, double dt) {
 }  // namespace
 
 bool ValidSutureCommand(const ToolCommand& c) {
-  double unused = 0;
-  return BadSutureField(c.suture, &unused) == nullptr;
+  internal::ParamRule rules[kSutureRules];
+  SutureRules(c.suture, rules);
+  return FirstBadParam(rules, kSutureRules) == nullptr;
 }
 
 void ResolveSuture(State& s, Workspace& ws, const ToolInput& input) {

@@ -209,6 +209,25 @@ bool ParseToolSpec(std::string_view spec, ToolCommand* tool, std::string* error)
 }
 
 namespace internal {
+
+const ParamRule* FirstBadParam(const ParamRule* rules, int n) {
+  for (int i = 0; i < n; ++i) {
+    const ParamRule& r = rules[i];
+    const double v = r.value;
+    bool ok = std::isfinite(v) && v <= r.max;
+    if (r.bound == ParamBound::kPositive) ok = ok && v > 0;
+    if (r.bound == ParamBound::kNonNegative) ok = ok && v >= 0;
+    if (!ok) return &r;
+  }
+  return nullptr;
+}
+
+std::string BadParamMessage(const char* prefix, const ParamRule& rule) {
+  char value[32];
+  std::snprintf(value, sizeof(value), "%g", rule.value);
+  return std::string(prefix) + "." + rule.field + " must be " + rule.expected + ", got " + value;
+}
+
 namespace {
 
 // Friction's parameters as the step takes them: finite, 0 <= mu_d <= mu_s, and a stiffness and

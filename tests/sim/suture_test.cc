@@ -26,24 +26,18 @@ namespace {
 // Above atom 10 of the hex fragment, (1.5, 1.732, 0): an inner atom of the top surface. The slab
 // is 0.816 deep (its apex layer); nothing is below it.
 constexpr double kX = 1.5, kY = 1.732;
-constexpr double kTip = 0.25;
+constexpr double kTip = 0.25;  // PierceNeedle's tip radius
 constexpr double kNeedleLength = 3;
 
+// The pierce's needle (PierceNeedle), shorter and sliding more easily, drawing a thread.
 ToolCommand SutureNeedle(double z, double thread_length) {
-  ToolCommand c;
-  c.kind = ToolKind::kNeedle;
+  ToolCommand c = PierceNeedle();
   c.pos[0] = kX, c.pos[1] = kY, c.pos[2] = z;
   c.axis[0] = 0, c.axis[1] = 0, c.axis[2] = -1;
-  c.radius = kTip;
-  c.stiffness = 400;
-  c.law = ContactLaw::kLinear;
   c.needle.length = kNeedleLength;
   c.needle.puncture_force = 0.5;
   c.needle.mu = 0.2;
   c.needle.grip = 0.2;
-  c.needle.capture_radius = 0.7;
-  c.needle.lateral_stiffness = 20;
-  c.needle.axial_stiffness = 100;
   c.suture.length = thread_length;
   c.suture.segments = 24;
   c.suture.mass = 0.01;
