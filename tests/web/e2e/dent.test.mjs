@@ -7,7 +7,7 @@
 // the tumour model's inclusion where the plain slab has none.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, shot, startAgent, decodePng, clearChange } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, shot, startAgent, decodePng, clearChange, frames, surface } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -38,9 +38,6 @@ after(async () => {
   assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
 });
 
-/** Two animation frames: what changed is drawn and composited. @param {import('playwright-core').Page} page */
-const frames = (page) => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(() => r(null)))));
-
 /** The paused replay at t, drawn, with the tool in the state asked. @param {import('playwright-core').Page} page @param {number} t @param {string} tool */
 async function at(page, t, tool) {
   await page.waitForFunction(([t, tool]) => {
@@ -64,8 +61,7 @@ test('replay: the contact region changes clearly between before contact and the 
   await at(page, kDeepestS, 'in contact');
   const canvas = page.locator('#view3d canvas');
   /** @returns {Promise<any>} */
-  const surface = () => page.evaluate(() => /** @type {any} */ (window).__idmsSurface());
-  const deep = await surface();
+  const deep = await surface(page);
   assert.ok(deep.contacts >= 1, `${deep.contacts} contact vertices marked at the deepest press`);
   assert.equal(deep.colourBy, 'displacement');
   assert.equal(deep.hi, 0.1, 'the fragment of unit sides spans 0.1 model units');
@@ -79,7 +75,7 @@ test('replay: the contact region changes clearly between before contact and the 
   assert.match(legend, /≥0\.1/);
   await page.locator('#seek').fill(String(kBeforeContactS));
   await at(page, kBeforeContactS, 'free');
-  const free = await surface();
+  const free = await surface(page);
   assert.equal(free.contacts, 0);
   assert.deepEqual(free.camera, deep.camera, 'the camera moved between the two images');
   const beforePng = await shot(canvas, 'dent-before-contact.png');

@@ -145,6 +145,12 @@ export async function login(page, server, role, next = '/sessions') {
  * IDMS_UPDATE_DOCS is set: a test run does not rewrite tracked files.
  * @param {import('playwright-core').Page | import('playwright-core').Locator} page @param {string} name
  */
+/** Two animation frames: what changed is drawn and composited. @param {import('playwright-core').Page} page */
+export const frames = (page) => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(() => r(null)))));
+
+/** What the session page's 3-D view shows (its __idmsSurface). @param {import('playwright-core').Page} page @returns {Promise<any>} */
+export const surface = (page) => page.evaluate(() => /** @type {any} */ (window).__idmsSurface());
+
 export async function docShot(page, name) {
   await shot(page, name);
   if (!process.env.IDMS_UPDATE_DOCS) return;

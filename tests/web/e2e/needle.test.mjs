@@ -6,7 +6,7 @@
 // shaft should cover, against lines beside it.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng, frames, surface } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -27,12 +27,6 @@ after(async () => {
   await server?.stop();
   assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
 });
-
-/** Two animation frames: what changed is drawn and composited. @param {import('playwright-core').Page} page */
-const frames = (page) => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(() => r(null)))));
-
-/** @param {import('playwright-core').Page} page @returns {Promise<any>} */
-const surface = (page) => page.evaluate(() => /** @type {any} */ (window).__idmsSurface());
 
 /** @typedef {{width: number, height: number, data: Uint8Array}} Pixels */
 

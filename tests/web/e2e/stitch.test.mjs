@@ -6,7 +6,7 @@
 // the thread's projected line, and the punctures' colour at their points.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng, frames, surface } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -26,12 +26,6 @@ after(async () => {
   await server?.stop();
   assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
 });
-
-/** Two animation frames: what changed is drawn and composited. @param {import('playwright-core').Page} page */
-const frames = (page) => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(() => r(null)))));
-
-/** @param {import('playwright-core').Page} page @returns {Promise<any>} */
-const surface = (page) => page.evaluate(() => /** @type {any} */ (window).__idmsSurface());
 
 // protocol/display.json's suture colours: the thread #4b1d8f (a 1-pixel line, antialiased: its hue,
 // blue well above red and green, not its exact value), the punctures #f2a900 (squares: the value).
