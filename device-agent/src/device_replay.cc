@@ -77,7 +77,7 @@ std::unique_ptr<Device> MakeReplayDevice(std::string_view path, const Registrati
       ReplaySample r;
       r.time_s = s.time_s() - t0;
       r.pos_model[0] = s.tool_pos().x(), r.pos_model[1] = s.tool_pos().y(), r.pos_model[2] = s.tool_pos().z();
-      r.closed = s.grasp();
+      r.closed = s.grasp() || s.tie();  // the button: the tweezers' hold, or a needle's tie
       if (s.has_tool_orientation()) {
         const v1::Quat& q = s.tool_orientation();
         r.oriented = true;

@@ -304,6 +304,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.needle_punctured = out.punctured;
   s.needle_inserted = out.inserted;
   s.needle_exited = out.exited;
+  s.tie = tool.tie;
   s.suture_new_punctures = static_cast<uint8_t>(report.suture.new_punctures);
   s.suture_tied = report.suture.tied;
   s.suture_tie_refused = report.suture.tie_refused;

@@ -596,6 +596,7 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_contact(s.contact);
     out->set_force_limited(s.force_limited);
     out->set_grasp(s.grasp);
+    if (s.tie) out->set_tie(true);
     out->set_substeps(s.substeps);
     out->set_warnings(s.warnings);
     out->set_num_contacts(s.num_contacts);

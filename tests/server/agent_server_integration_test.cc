@@ -356,6 +356,46 @@ TEST(AgentAndServer, AStitchIsRecordedWithItsThreadPuncturesAndKnot) {
   EXPECT_GT(with_both_points, 60 * 4);  // from about 8 s on
   EXPECT_GT(with_knot, 60 * 3);         // from 10.5 s
   IndependentReaderAccepts(dir + "/rec.mcap", 0);
+  // The button is recorded (10.5 s to the end), and a replay of the recording ties again.
+  int64_t tied_ticks = 0;
+  for (const v1::DeviceSample& s : RecordedSamples(dir + "/rec.mcap")) tied_ticks += s.tie();
+  EXPECT_NEAR(tied_ticks, 3500, 5);
+  // The stitch's needle and thread as a scene (StitchNeedle's), for a device that is not the script.
+  const ToolCommand needle = StitchNeedle();
+  std::ofstream(dir + "/stitch.scene") << "model: \"hex_4x5_home\"\ntools {\n  kind: KIND_NEEDLE\n  radius: "
+                                       << needle.radius << "\n  stiffness: " << needle.stiffness
+                                       << "\n  force_law: FORCE_LAW_LINEAR\n  needle {\n    length: "
+                                       << needle.needle.length
+                                       << "\n    puncture_force: " << needle.needle.puncture_force
+                                       << "\n    axial_friction: " << needle.needle.mu
+                                       << "\n    grip: " << needle.needle.grip
+                                       << "\n    capture_radius: " << needle.needle.capture_radius
+                                       << "\n    lateral_stiffness: " << needle.needle.lateral_stiffness
+                                       << "\n    axial_stiffness: " << needle.needle.axial_stiffness
+                                       << "\n    suture { length: " << needle.suture.length
+                                       << " segments: " << needle.suture.segments << " mass: " << needle.suture.mass
+                                       << " }\n  }\n}\npreset: PRESET_DEFAULT\ndt_s: 0.001\ndevice { max_force: 8 }\n";
+  ChildProcess replay(
+      IDMS_AGENT_BIN,
+      {"--server", WsUrl(server), "--token", server.Token("agent"), "--model", "hex_4x5_home", "--cache-dir",
+       dir + "/cache", "--scene", dir + "/stitch.scene", "--device", "replay:" + dir + "/rec.mcap", "--no-realtime"},
+      dir + "/replay.log");
+  ASSERT_EQ(replay.Wait(seconds(120)), 0) << replay.Log();
+  std::string replayed;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(server.port(), observer);
+    if (s.empty() || s[0]["state"] != "ended" || s[0]["id"] == id) return false;
+    replayed = s[0]["id"];
+    return true;
+  }));
+  ASSERT_TRUE(DownloadRecording(server.port(), replayed, observer, dir + "/replayed.mcap"));
+  int replayed_ties = 0, replayed_holes = 0;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/replayed.mcap")) {
+    replayed_ties += e.kind() == v1::SessionEvent::KIND_TIE && e.message() == "a knot was tied on the stitch";
+    replayed_holes += e.kind() == v1::SessionEvent::KIND_THREAD_PUNCTURE;
+  }
+  EXPECT_EQ(replayed_holes, 2) << replay.Log();
+  EXPECT_EQ(replayed_ties, 1) << replay.Log();
 }
 
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {

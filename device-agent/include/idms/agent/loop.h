@@ -61,6 +61,7 @@ struct TickSample {
   // The needle through the far side, and its suture (SutureReport): this tick's new points drawn
   // through, a knot tied or refused, a break; the thread's points and knots so far.
   bool needle_exited = false;
+  bool tie = false;  // the needle's tie command (its button) this tick
   uint8_t suture_new_punctures = 0;
   bool suture_tied = false, suture_tie_refused = false, suture_broke = false;
   uint16_t suture_punctures = 0, suture_ties = 0;
