@@ -31,8 +31,6 @@
 namespace idms::internal {
 namespace {
 
-inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-
 // The anchor spread over the tick's strongest contacts.
 void SpreadAnchor(ActiveTool& at) { SpreadOverStrongest(at, at.anchor_atoms, at.anchor_w); }
 

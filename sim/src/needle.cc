@@ -91,10 +91,7 @@ bool NeedleParamsValid(const NeedleParams& n) {
 bool ValidateNeedle(const ToolCommand& t, std::string* error) {
   internal::ParamRule rules[kNeedleRules];
   NeedleRules(t.needle, rules);
-  const internal::ParamRule* bad = internal::FirstBadParam(rules, kNeedleRules);
-  if (bad == nullptr) return true;
-  *error = internal::BadParamMessage("needle", *bad);
-  return false;
+  return internal::CheckParams("needle", rules, kNeedleRules, error);
 }
 
 namespace internal {
@@ -103,8 +100,6 @@ namespace {
 // The largest time the tip contact takes to fade out after a puncture (or back in after a
 // withdrawal), s: a bound for a press so slow that its per-tick change is tiny.
 constexpr double kMaxTipFadeS = 0.25;
-
-inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 // The entry point (friction.cc's AnchorPoint over the entry atoms). False when there is none or it
 // is not finite.

@@ -24,6 +24,8 @@ inline constexpr Real kMinLength = sizeof(Real) == 4 ? Real(1e-6) : Real(1e-12);
 
 inline bool Finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
+inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
 // Squared distance from p to segment ab; *t (when given) the nearest point's parameter in [0, 1].
 inline double SegmentDist2(const double p[3], const double a[3], const double b[3], double* t = nullptr) {
   double ab[3], ap[3];
@@ -44,7 +46,8 @@ inline bool InsideSphere(const double d[3], double r) { return d[0] * d[0] + d[1
 // A tool parameter as a boundary checks it (the needle's, the suture's): its name, what it must
 // be, its value, its lower bound and its largest value. FirstBadParam: the first rule whose value
 // is not finite or out of its bounds, or null (no allocation: the step asks it too).
-// BadParamMessage: "prefix.field must be <expected>, got <value>".
+// BadParamMessage: "prefix.field must be <expected>, got <value>". CheckParams: true when every
+// rule holds, otherwise false with *error the first bad one's message.
 enum class ParamBound : uint8_t { kPositive, kNonNegative, kAny };
 struct ParamRule {
   const char* field;
@@ -55,6 +58,7 @@ struct ParamRule {
 };
 const ParamRule* FirstBadParam(const ParamRule* rules, int n);
 std::string BadParamMessage(const char* prefix, const ParamRule& rule);
+bool CheckParams(const char* prefix, const ParamRule* rules, int n, std::string* error);
 
 // Adds the steady-clock time from its construction to its end to *sink: the one idiom for the
 // stage times of StepReport.

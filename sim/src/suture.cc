@@ -64,17 +64,12 @@ void SutureRules(const SutureParams& p, internal::ParamRule out[kSutureRules]) {
   std::copy(rules, rules + kSutureRules, out);
 }
 
-inline double Dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-
 }  // namespace
 
 bool ValidateSuture(const ToolCommand& t, std::string* error) {
   internal::ParamRule rules[kSutureRules];
   SutureRules(t.suture, rules);
-  const internal::ParamRule* bad = internal::FirstBadParam(rules, kSutureRules);
-  if (bad == nullptr) return true;
-  *error = internal::BadParamMessage("suture", *bad);
-  return false;
+  return internal::CheckParams("suture", rules, kSutureRules, error);
 }
 
 namespace internal {

@@ -228,6 +228,13 @@ std::string BadParamMessage(const char* prefix, const ParamRule& rule) {
   return std::string(prefix) + "." + rule.field + " must be " + rule.expected + ", got " + value;
 }
 
+bool CheckParams(const char* prefix, const ParamRule* rules, int n, std::string* error) {
+  const ParamRule* bad = FirstBadParam(rules, n);
+  if (bad == nullptr) return true;
+  *error = BadParamMessage(prefix, *bad);
+  return false;
+}
+
 namespace {
 
 // Friction's parameters as the step takes them: finite, 0 <= mu_d <= mu_s, and a stiffness and
