@@ -200,6 +200,173 @@ ScriptSample SampleStitch(const ScriptGeometry& g, double t) {
   return out;
 }
 
+// The suture: keys of the tool's pose, eased from each to the next with half-cosines. For the
+// needle, p is the needle's midpoint and theta its turn about x (0: upright, the axis -z; pi:
+// the axis +z), so a turn swings it about its middle and a move with theta held slides it along
+// its own axis; for the scalpel, p is the blade's base. Between keys of different tools the first
+// is held; the button is the first key's.
+struct SutureKey {
+  double t = 0;
+  ToolKind kind = ToolKind::kNeedle;
+  double p[3] = {0, 0, 0};
+  double theta = 0;
+  bool button = false;
+};
+constexpr int kMaxSutureKeys = 6 + 12 * kSutureStitches;  // the incision's 5, 12 a stitch, the hold
+
+// The needle's midpoint for its tip at `tip` with the turn theta.
+void MidpointFor(const double tip[3], double theta, double half, double out[3]) {
+  out[0] = tip[0], out[1] = tip[1] - half * std::sin(theta), out[2] = tip[2] + half * std::cos(theta);
+}
+
+int SutureKeys(const ScriptGeometry& g, SutureKey keys[kMaxSutureKeys]) {
+  int n = 0;
+  double t = 0;
+  auto add = [&](double dt, ToolKind kind, const double p[3], double theta, bool button = false) {
+    t += dt;
+    SutureKey& k = keys[std::min(n++, kMaxSutureKeys - 1)];  // SutureKeyCount's test: n < kMaxSutureKeys
+    k.t = t, k.kind = kind, k.theta = theta, k.button = button;
+    std::copy(p, p + 3, k.p);
+  };
+  // The incision: the blade plunged at the start, swept to the end, lifted.
+  const double top = g.top_z;
+  const double blade = top - g.bottom_z + 2 * kSutureClear;  // IncisionScalpel's length
+  const double above[3] = {g.incision_x, g.incision_y[0], top + kSutureClear + blade};
+  const double in[3] = {g.incision_x, g.incision_y[0], top + kSutureClear};
+  const double end[3] = {g.incision_x, g.incision_y[1], top + kSutureClear};
+  const double lifted[3] = {g.incision_x, g.incision_y[1], top + kSutureClear + blade};
+  add(0, ToolKind::kScalpel, above, 0);
+  add(0.5, ToolKind::kScalpel, above, 0);
+  add(1.0, ToolKind::kScalpel, in, 0);
+  add((g.incision_y[1] - g.incision_y[0]) / kIncisionSpeed, ToolKind::kScalpel, end, 0);
+  add(1.0, ToolKind::kScalpel, lifted, 0);
+  // The stitches.
+  const double len = SutureScriptNeedle().needle.length, half = 0.5 * len, r = SutureScriptNeedle().radius;
+  const double pi = std::numbers::pi;
+  for (int k = 0; k < kSutureStitches; ++k) {
+    const int row = std::max(g.stitch_rows[k], 0);
+    const double* a = g.incision_rest[row][0];
+    const double* b = g.incision_rest[row][1];
+    double m[3];
+    // Over A, upright, its tip kPierceHover above first contact (the first: where it appears).
+    const double hover[3] = {a[0], a[1], a[2] + r + kPierceHover};
+    MidpointFor(hover, 0, half, m);
+    add(k == 0 ? 0.5 : 1.5, ToolKind::kNeedle, m, 0);
+    add(0.5, ToolKind::kNeedle, m, 0);
+    // Down through A until the tail is kSutureClear below the slab.
+    const double below[3] = {a[0], a[1], g.bottom_z - kSutureClear - len};
+    MidpointFor(below, 0, half, m);
+    add((hover[2] - below[2]) / kStitchSpeed, ToolKind::kNeedle, m, 0);
+    // Turned over beneath, then across under B.
+    add(2.0, ToolKind::kNeedle, m, pi);
+    const double under[3] = {b[0], b[1], g.bottom_z - kSutureClear};
+    MidpointFor(under, pi, half, m);
+    add(1.0, ToolKind::kNeedle, m, pi);
+    // Up through B until the tail is kSutureClear above it; tied there, held.
+    const double out[3] = {b[0], b[1], b[2] + kSutureClear + len};
+    MidpointFor(out, pi, half, m);
+    add((out[2] - under[2]) / kStitchSpeed, ToolKind::kNeedle, m, pi);
+    // Drawn on through (the stitch snug against the knot before it, or the first leaving a short
+    // tail) and back: what lies beyond this stitch's knot makes the next.
+    const double pulled[3] = {m[0], m[1], m[2] + kSuturePull[k]};
+    add(kSuturePull[k] / kSuturePullSpeed, ToolKind::kNeedle, pulled, pi);
+    add(kSuturePull[k] / kSuturePullSpeed, ToolKind::kNeedle, m, pi);
+    add(0.25, ToolKind::kNeedle, m, pi, true);
+    add(1.75, ToolKind::kNeedle, m, pi);
+    add(0.5, ToolKind::kNeedle, m, pi);
+    // Turned back upright above (its tip swings back the way it came).
+    add(2.0, ToolKind::kNeedle, m, 0);
+  }
+  // Held still: the stitches released.
+  add(kSutureHold, ToolKind::kNeedle, keys[n - 1].p, 0);
+  return n;
+}
+
+ScriptSample SampleSuture(const ScriptGeometry& g, double t) {
+  SutureKey keys[kMaxSutureKeys];
+  const int n = SutureKeys(g, keys);
+  t = std::clamp(t, 0.0, keys[n - 1].t);
+  int i = 0;
+  while (i + 2 < n && t >= keys[i + 1].t) ++i;
+  const SutureKey& a = keys[i];
+  const SutureKey& b = keys[i + 1];
+  const double s = a.kind == b.kind && b.t > a.t ? Ease((t - a.t) / (b.t - a.t)) : (t >= b.t ? 1.0 : 0.0);
+  const SutureKey& held = a.kind == b.kind ? a : (t >= b.t ? b : a);
+  ScriptSample out;
+  out.kind = held.kind;
+  out.closed = a.button && t < b.t;
+  double p[3];
+  for (int c = 0; c < 3; ++c) p[c] = a.kind == b.kind ? a.p[c] + s * (b.p[c] - a.p[c]) : held.p[c];
+  if (out.kind == ToolKind::kScalpel) {
+    std::copy(p, p + 3, out.pos);
+    return out;
+  }
+  const double theta = a.kind == b.kind ? a.theta + s * (b.theta - a.theta) : held.theta;
+  const double half = 0.5 * SutureScriptNeedle().needle.length;
+  // The tip: the midpoint plus half the length along the axis (0, sin theta, -cos theta).
+  out.pos[0] = p[0], out.pos[1] = p[1] + half * std::sin(theta), out.pos[2] = p[2] - half * std::cos(theta);
+  out.oriented = true;
+  out.orientation[0] = std::cos(theta / 2), out.orientation[1] = std::sin(theta / 2);
+  return out;
+}
+
+double SutureDuration(const ScriptGeometry& g) {
+  SutureKey keys[kMaxSutureKeys];
+  return keys[SutureKeys(g, keys) - 1].t;
+}
+
+// The incision's rows and pairs, the stitches' rows, and the slab's bottom (ScriptGeometry).
+void MakeIncision(const Model& model, ScriptGeometry& g) {
+  const double cx = g.center[0], cy = g.center[1];
+  double spacing = std::numeric_limits<double>::infinity(), pitch = spacing;
+  for (int32_t atom : model.external_atoms) {
+    const double* p = &model.atom_pos_eq[3 * atom];
+    const double d = std::hypot(p[0] - cx, p[1] - cy);
+    if (d > 1e-9) spacing = std::min(spacing, d);
+  }
+  if (!std::isfinite(spacing)) return;
+  for (int32_t atom : model.external_atoms) {
+    const double dy = model.atom_pos_eq[3 * atom + 1] - cy;
+    if (dy > 0.25 * spacing) pitch = std::min(pitch, dy);
+  }
+  if (!std::isfinite(pitch)) pitch = spacing;
+  g.incision_x = cx + 0.25 * spacing;
+  g.bottom_z = g.top_z;
+  for (int32_t i = 0; i < model.num_atoms; ++i) {
+    const double* p = &model.atom_pos_eq[3 * i];
+    if (!model.atom_fixed[i] && std::hypot(p[0] - cx, p[1] - cy) < 1.5 * spacing)
+      g.bottom_z = std::min(g.bottom_z, p[2]);
+  }
+  // Three rows either side of the centre's: the facing pair in each.
+  constexpr int kRowsEachSide = 3;
+  static_assert(2 * kRowsEachSide + 1 <= kMaxIncisionRows);
+  std::fill(g.stitch_rows, g.stitch_rows + kSutureStitches, -1);
+  int first = kRowsEachSide + 1, last = -kRowsEachSide - 1;
+  for (int j = -kRowsEachSide; j <= kRowsEachSide; ++j) {
+    const double y = cy + j * pitch;
+    int32_t pair[2] = {-1, -1};
+    double best[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    for (int32_t atom : model.external_atoms) {
+      const double* p = &model.atom_pos_eq[3 * atom];
+      if (std::fabs(p[1] - y) > 0.25 * pitch) continue;
+      const int side = p[0] < g.incision_x ? 0 : 1;
+      const double d = std::fabs(p[0] - g.incision_x);
+      if (d < best[side] && d < 1.5 * spacing) best[side] = d, pair[side] = atom;
+    }
+    if (pair[0] < 0 || pair[1] < 0) continue;
+    const int row = g.num_incision_rows++;
+    for (int side = 0; side < 2; ++side) {
+      g.incision_pairs[row][side] = pair[side];
+      std::copy_n(&model.atom_pos_eq[3 * pair[side]], 3, g.incision_rest[row][side]);
+    }
+    if (j >= -1 && j <= 1) g.stitch_rows[j + 1] = row;
+    first = std::min(first, j), last = std::max(last, j);
+  }
+  if (g.num_incision_rows == 0) return;
+  g.incision_y[0] = cy + (first - 0.5) * pitch;
+  g.incision_y[1] = cy + (last + 0.5) * pitch;
+}
+
 }  // namespace
 
 ToolCommand StitchNeedle() {
@@ -208,6 +375,50 @@ ToolCommand StitchNeedle() {
   c.suture.segments = 64;
   c.suture.mass = 0.01;
   return c;
+}
+
+ToolCommand IncisionScalpel(const ScriptGeometry& g) {
+  ToolCommand c;
+  c.kind = ToolKind::kScalpel;
+  c.radius = 0.05;
+  c.blade[2] = -(g.top_z - g.bottom_z + 2 * kSutureClear);
+  return c;
+}
+
+ToolCommand SutureScriptNeedle() {
+  ToolCommand c = PierceNeedle();
+  c.needle.length = 3;
+  c.needle.puncture_force = 0.3;
+  c.needle.grip = 0.2;
+  c.needle.capture_radius = 0.7;
+  c.needle.lateral_stiffness = 3;
+  c.needle.axial_stiffness = 30;
+  c.suture.length = 24;
+  c.suture.segments = 128;
+  c.suture.mass = 0.02;
+  c.suture.tie_force = 2;
+  c.suture.hold_stiffness = 30;  // a hole holds its thread within a tie force / 30 = 0.07
+  return c;
+}
+
+double IncisionGap(const ScriptGeometry& g, const Real* atom_pos, bool stitched_only) {
+  int lo = 0, hi = g.num_incision_rows - 1;
+  if (stitched_only) {
+    lo = kMaxIncisionRows, hi = -1;
+    for (int row : g.stitch_rows) {
+      if (row >= 0) lo = std::min(lo, row), hi = std::max(hi, row);
+    }
+  }
+  double sum = 0;
+  int n = 0;
+  for (int row = lo; row <= hi; ++row) {
+    const Real* a = &atom_pos[3 * g.incision_pairs[row][0]];
+    const Real* b = &atom_pos[3 * g.incision_pairs[row][1]];
+    sum += std::hypot(static_cast<double>(b[0] - a[0]), static_cast<double>(b[1] - a[1]),
+                      static_cast<double>(b[2] - a[2]));
+    ++n;
+  }
+  return n > 0 ? sum / n : std::nan("");
 }
 
 ToolCommand PierceNeedle() {
@@ -246,6 +457,7 @@ std::vector<std::array<double, 2>> StrokeCrossings(Script script) {
     case Script::kScan:
     case Script::kPierce:
     case Script::kStitch:
+    case Script::kSuture:
       break;
   }
   return {};
@@ -284,6 +496,7 @@ ScriptGeometry MakeScriptGeometry(const Model& model, double mio_radius, int sca
   g.top_z = TopUnder(model, {g.center[0], g.center[1]}, mio_radius, hi[2]);
   for (int i = 0; i < g.scan_grid * g.scan_grid; ++i)
     g.scan_top_z[i] = ContactUnder(model, ScanPoint(g, i), mio_radius, hi[2]);
+  MakeIncision(model, g);
   return g;
 }
 
@@ -305,6 +518,8 @@ ScriptSample SampleScript(Script script, const ScriptGeometry& g, double t) {
       return SamplePierce(g, t);
     case Script::kStitch:
       return SampleStitch(g, t);
+    case Script::kSuture:
+      return SampleSuture(g, t);
   }
   return {};
 }
@@ -327,11 +542,14 @@ double ScriptDuration(Script script) {
       return std::end(kPierce)[-1].t;
     case Script::kStitch:
       return kStitchEnd;
+    case Script::kSuture:
+      break;  // the geometry's: the overload
   }
   return 0;
 }
 
 double ScriptDuration(Script script, const ScriptGeometry& geometry) {
+  if (script == Script::kSuture) return SutureDuration(geometry);
   return script == Script::kScan ? ScanDuration(geometry.scan_grid) : ScriptDuration(script);
 }
 
@@ -353,13 +571,15 @@ const char* ScriptName(Script script) {
       return "pierce";
     case Script::kStitch:
       return "stitch";
+    case Script::kSuture:
+      return "suture";
   }
   return "?";
 }
 
 bool ParseScriptName(std::string_view name, Script* script) {
   for (Script s : {Script::kPalpate, Script::kStrokeSlow, Script::kStrokeFast, Script::kPluck, Script::kStrokeGentle,
-                   Script::kScan, Script::kPierce, Script::kStitch}) {
+                   Script::kScan, Script::kPierce, Script::kStitch, Script::kSuture}) {
     if (name == ScriptName(s)) {
       *script = s;
       return true;

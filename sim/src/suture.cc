@@ -138,15 +138,14 @@ void SlideRange(const SutureState& ss, double u, int32_t* lo, int32_t* hi) {
 
 // A knot sits on the punctures it was tied at: the thread between its two arc positions (the
 // loop) cannot grow by sliding out through them, so puncture j's arc position u stays on the
-// loop's side of any knot tied there.
+// loop's side of any knot tied there; and the punctures the loop passes stay on it (were one to
+// slide past a knot's point, the loop would lose it).
 double KnotStop(const SutureState& ss, int32_t j, double u) {
   for (int32_t k = 0; k < ss.num_ties; ++k) {
     const SutureTie& t = ss.ties[k];
-    const double lo = std::min(t.s_a, t.s_b), hi = std::max(t.s_a, t.s_b);
-    const bool at_lo = (t.s_a <= t.s_b ? t.first : t.last) == j;
-    const bool at_hi = (t.s_a <= t.s_b ? t.last : t.first) == j;
-    if (at_lo) u = std::max(u, lo);
-    if (at_hi) u = std::min(u, hi);
+    // Every puncture of the stitch, the knot's two and those between, is on the loop.
+    if (j >= std::min(t.first, t.last) && j <= std::max(t.first, t.last))
+      u = std::clamp(u, std::min(t.s_a, t.s_b), std::max(t.s_a, t.s_b));
   }
   return u;
 }

@@ -161,17 +161,19 @@ void Run(RunArgs& a) {
   const bool drag = a.script == "drag" || a.script.rfind("drag:", 0) == 0;
   if (!drag && !ParseScriptName(a.script, &script)) {
     Fail("run", "--script '" + a.script +
-                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or "
-                    "drag[:fraction=F,...]");
+                    "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch, "
+                    "suture or drag[:fraction=F,...]");
   }
   const bool pierce = !drag && script == Script::kPierce;
   const bool stitch = !drag && script == Script::kStitch;
+  const bool suture = !drag && script == Script::kSuture;
   ToolCommand tool;
   tool.kind = !drag && script == Script::kPluck ? ToolKind::kTweezers : ToolKind::kSphere;
   if (pierce) tool = PierceNeedle();
   if (stitch) tool = StitchNeedle();
+  if (suture) tool = SutureScriptNeedle();
   std::string error;
-  if ((pierce || stitch) && !a.tool.empty())
+  if ((pierce || stitch || suture) && !a.tool.empty())
     Fail("run", "--tool: the " + a.script + "'s needle is the script's own (docs/needle.md)");
   if (!a.tool.empty() && !ParseToolSpec(a.tool, &tool, &error)) Fail("run", error);
   DragOptions drag_options;
@@ -198,7 +200,9 @@ void Run(RunArgs& a) {
   options.dt_s = a.dt;
   options.full = a.full;
   options.threads = a.full ? a.threads : 1;
-  options.local_radius = a.local_radius > 0 ? a.local_radius : settings.local_radius_per_tool_radius * tool.radius;
+  options.local_radius = a.local_radius > 0 ? a.local_radius
+                         : suture           ? kSutureLocalRadius
+                                            : settings.local_radius_per_tool_radius * tool.radius;
   options.lambda = a.lambda;
 
   // Step through the script, a CSV row per tick.
@@ -208,6 +212,13 @@ void Run(RunArgs& a) {
   if (options.full) AdviseHugePages(state, workspace);
   const ScriptGeometry geometry = MakeScriptGeometry(model, tool.radius, a.scan_grid);
   DragHand hand(geometry, drag_options);
+  // The suture's scalpel (it incises before the needle comes), and the incision's figures: its gap
+  // when the needle comes, at the end, the widest while held; stitches across it; elements cut.
+  ToolCommand scalpel = IncisionScalpel(geometry);
+  if (suture && geometry.num_incision_rows == 0) Fail("run", "--script suture: found no rows of top atoms to incise");
+  double gap_open = NAN, gap_widest_held = 0;
+  int64_t stitches = 0, cut_elements = 0;
+  const double hold_from = ScriptDuration(script, geometry) - kSutureHold;
   std::unique_ptr<GlobalDynamics> global;
   if (a.global_rate > 0) {
     global = std::make_unique<GlobalDynamics>(
@@ -219,13 +230,14 @@ void Run(RunArgs& a) {
   std::FILE* csv = a.csv.empty() ? nullptr : std::fopen(a.csv.c_str(), "w");
   if (!a.csv.empty() && !csv) Fail("run", "--csv " + a.csv + ": cannot write");
   // Friction's columns come after the ten of a frictionless run, so their readers keep working.
-  // The tweezers' closed state last (0 or 1: what the fitter replays them with).
+  // The tweezers' closed state last (0 or 1: what the fitter replays them with); the suture's gap.
   const bool tweezers = tool.kind == ToolKind::kTweezers;
   if (csv) {
     std::fputs(a.friction ? "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us,ftx,fty,ftz,ft,fn,friction"
                           : "t,x,y,z,fx,fy,fz,active_atoms,substeps,compute_us",
                csv);
-    std::fputs(tweezers ? ",closed\n" : "\n", csv);
+    std::fputs(tweezers ? ",closed" : "", csv);
+    std::fputs(suture ? ",gap\n" : "\n", csv);  // the suture: its incision's gap over the stitched rows
   }
   int64_t stick_ticks = 0, slip_ticks = 0, transitions = 0;
   // The needle: punctures (entries), the first one's time, the deepest insertion, in at the end.
@@ -256,11 +268,14 @@ void Run(RunArgs& a) {
   for (int64_t n = 0; n < ticks; ++n) {
     const ScriptSample sample =
         drag ? hand.Next((n + 1) * a.dt, last_force) : SampleScript(script, geometry, (n + 1) * a.dt);
-    tool.pos[0] = sample.pos[0], tool.pos[1] = sample.pos[1], tool.pos[2] = sample.pos[2];
-    tool.closed = sample.closed;
-    if (sample.oriented) NeedleAxisOf(sample.orientation, tool.axis);
-    tool.tie = tool.kind == ToolKind::kNeedle && sample.closed;  // a needle's button ties
-    input.tools[0] = tool;
+    ToolCommand& held = sample.kind == ToolKind::kScalpel ? scalpel : tool;
+    held.pos[0] = sample.pos[0], held.pos[1] = sample.pos[1], held.pos[2] = sample.pos[2];
+    held.closed = sample.closed;
+    if (sample.oriented) NeedleAxisOf(sample.orientation, held.axis);
+    held.tie = held.kind == ToolKind::kNeedle && sample.closed;  // a needle's button ties
+    if (suture && sample.kind == ToolKind::kNeedle && std::isnan(gap_open))
+      gap_open = IncisionGap(geometry, state.atom_pos.data(), true);
+    input.tools[0] = held;
     const auto start = std::chrono::steady_clock::now();
     const double cpu_start = a.full ? ThreadCpuSeconds() : 0.0;  // a system call: full mode only
     const StepReport report = Step(model, state, workspace, input);
@@ -291,6 +306,21 @@ void Run(RunArgs& a) {
     draws += tr.drawn_through;
     thread_punctures += report.suture.new_punctures;
     ties += report.suture.tied;
+    cut_elements += report.tools[0].cut_elements;
+    if (suture && report.suture.tied && state.suture.num_ties > 0) {
+      // A stitch: the tie's punctures lie on both sides of the incision (at rest).
+      const SutureTie& tie = state.suture.ties[state.suture.num_ties - 1];
+      bool side[2] = {false, false};
+      for (int32_t j = tie.first; j <= tie.last; ++j) {
+        const SuturePuncture& pu = state.suture.punctures[j];
+        double x = 0;
+        for (int i = 0; i < kAnchorAtoms && pu.atoms[i] >= 0; ++i) x += pu.w[i] * model.atom_pos_eq[3 * pu.atoms[i]];
+        side[x < geometry.incision_x ? 0 : 1] = true;
+      }
+      stitches += side[0] && side[1];
+    }
+    if (suture && state.time_s >= hold_from - 1e-9)
+      gap_widest_held = std::max(gap_widest_held, IncisionGap(geometry, state.atom_pos.data(), true));
     ties_refused += report.suture.tie_refused;
     breaks += report.suture.broke;
     max_tension = std::max(max_tension, report.suture.max_tension);
@@ -303,9 +333,9 @@ void Run(RunArgs& a) {
     friction_work_max_sum = std::max(friction_work_max_sum, friction_work);
     max_force = std::max(max_force, std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]));
     max_fz = std::max(max_fz, f[2]);
-    if (std::isnan(onset_z) && std::abs(f[2]) > 1e-3) onset_z = tool.pos[2];
-    if (f[2] > 1e-3 && tool.pos[2] < last_z - 1e-12) loading.push_back({tool.pos[2], f[2]});
-    last_z = tool.pos[2];
+    if (std::isnan(onset_z) && std::abs(f[2]) > 1e-3) onset_z = held.pos[2];
+    if (f[2] > 1e-3 && held.pos[2] < last_z - 1e-12) loading.push_back({held.pos[2], f[2]});
+    last_z = held.pos[2];
     fallbacks += report.fallback;
     fused_ticks += report.fused;
     sections = std::max(sections, GetFusedPassStatus(workspace).sections);
@@ -314,14 +344,15 @@ void Run(RunArgs& a) {
       if (state.time_s > c.t0 && state.time_s <= c.t1 + 1e-9) c.Add(state.time_s, f);
     }
     if (csv) {
-      std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f", state.time_s, tool.pos[0], tool.pos[1],
-                   tool.pos[2], f[0], f[1], f[2], report.active_atoms, report.substeps, us);
+      std::fprintf(csv, "%.6f,%.6f,%.6f,%.6f,%.6g,%.6g,%.6g,%d,%d,%.2f", state.time_s, held.pos[0], held.pos[1],
+                   held.pos[2], f[0], f[1], f[2], report.active_atoms, report.substeps, us);
       if (a.friction) {
         static constexpr const char* kState[] = {"none", "stick", "slip"};
         std::fprintf(csv, ",%.6g,%.6g,%.6g,%.6g,%.6g,%s", tr.friction_force[0], tr.friction_force[1],
                      tr.friction_force[2], ft, tr.normal_force, kState[static_cast<int>(tr.friction)]);
       }
       if (tweezers) std::fprintf(csv, ",%d", tool.closed ? 1 : 0);
+      if (suture) std::fprintf(csv, ",%.6g", IncisionGap(geometry, state.atom_pos.data(), true));
       std::fputc('\n', csv);
     }
   }
@@ -404,6 +435,23 @@ void Run(RunArgs& a) {
     summary["suture"] = {{"punctures", thread_punctures}, {"ties", ties},
                          {"ties_refused", ties_refused},  {"breaks", breaks},
                          {"max_tension", max_tension},    {"nodes", state.suture.num_nodes}};
+  }
+  // The suture's incision (model units): its gap over the stitched rows when the needle came and
+  // at the end, the widest over the last kSutureHold s, and over every row it crossed at the end.
+  if (suture) {
+    const double gap_final = IncisionGap(geometry, state.atom_pos.data(), true);
+    auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    summary["gap_open"] = number(gap_open);
+    summary["gap_final"] = number(gap_final);
+    summary["gap_final_fraction"] = number(gap_final / gap_open);
+    summary["gap_widest_held"] = number(gap_widest_held);
+    summary["gap_incision_final"] = number(IncisionGap(geometry, state.atom_pos.data(), false));
+    summary["stitches"] = stitches;
+    summary["ties"] = ties;
+    summary["incision"] = {{"rows", geometry.num_incision_rows},
+                           {"elements_cut", cut_elements},
+                           {"x", geometry.incision_x},
+                           {"y", {geometry.incision_y[0], geometry.incision_y[1]}}};
   }
   if (a.json) {
     PrintJson(summary);

@@ -190,6 +190,39 @@ TEST(RunCli, TheStitchDrawsTheThreadThroughAndTiesIt) {
   EXPECT_NE(RunSim("run --model " + kHex + " --script stitch --tool sphere:r=1").status, 0);
 }
 
+// The suture (issue 32) on the shipped soft slab: the scalpel opens an incision through the slab,
+// the needle places three stitches across it and ties each; the stitched rows' gap falls from its
+// open width to at most a tenth of it and stays there while the hand holds still for 5 s. The CSV
+// carries the gap per tick.
+TEST(RunCli, TheSutureClosesTheIncisionItMade) {
+  const std::string csv = testing::TempDir() + "/suture.csv";
+  const Output out = RunSim("run --model " + std::string(IDMS_SOURCE_DIR) +
+                            "/models/suture_slab --script suture --csv " + csv + " --json");
+  ASSERT_EQ(out.status, 0) << out.text;
+  const nlohmann::json j = nlohmann::json::parse(out.text);
+  EXPECT_EQ(j["incision"]["rows"], 7) << j.dump();
+  EXPECT_GT(j["incision"]["elements_cut"].get<int>(), 20);
+  const double open = j["gap_open"].get<double>();
+  EXPECT_NEAR(open, 1.0, 0.05);  // the cut runs between two columns of the unit grid
+  EXPECT_LE(j["gap_final"].get<double>(), 0.1 * open);
+  EXPECT_LE(j["gap_widest_held"].get<double>(), 0.1 * open);
+  EXPECT_GT(j["gap_incision_final"].get<double>(), j["gap_final"].get<double>());  // the unstitched ends gape
+  EXPECT_EQ(j["stitches"], 3);
+  EXPECT_EQ(j["ties"], 3);
+  EXPECT_EQ(j["needle"]["punctures"], 6);  // down through A, up through B, three times
+  EXPECT_EQ(j["needle"]["drawn_through"], 6);
+  EXPECT_EQ(j["suture"]["punctures"], 12);
+  EXPECT_EQ(j["suture"]["breaks"], 0);
+  EXPECT_EQ(j["warnings"], 0);
+  // The gap column: open when the needle first comes, closed at the end.
+  std::ifstream in(csv);
+  std::string header, line, last;
+  std::getline(in, header);
+  EXPECT_EQ(header.substr(header.rfind(',') + 1), "gap");
+  while (std::getline(in, line)) last = line;
+  EXPECT_NEAR(std::stod(last.substr(last.rfind(',') + 1)), j["gap_final"].get<double>(), 1e-5);
+}
+
 TEST(RunCli, EveryIntegratorRunsTheStrokeWithoutWarnings) {
   for (const char* integrator : {"euler", "symplectic", "rk4", "implicit"}) {
     const Output out = RunSim("run --model " + kHex + " --script stroke-slow --integrator " + integrator + " --json");
@@ -205,8 +238,8 @@ TEST(RunCli, BadArgumentsAreClearErrors) {
   EXPECT_NE(out.status, 0);
   EXPECT_NE(
       out.text.find(
-          "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or "
-          "drag[:fraction=F,...]"),
+          "--script 'poke': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch, "
+          "suture or drag[:fraction=F,...]"),
       std::string::npos)
       << out.text;
   out = RunSim("run --model " + kHex + " --tool sphere:r=-1");
