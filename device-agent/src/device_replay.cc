@@ -20,6 +20,7 @@ struct ReplaySample {
   bool closed = false;  // the recording's grasp flag stands for the button
   bool oriented = false;
   float orientation[4] = {1, 0, 0, 0};  // model frame (float: the bound's memory, 1e-7 of a turn)
+  int32_t tool = 0;                     // the scene tool held (DeviceSample.tool_index)
 };
 
 class ReplayDevice final : public Device {
@@ -37,6 +38,7 @@ class ReplayDevice final : public Device {
       out->oriented = registration_.OrientationToDevice(q, out->orientation);
     }
     out->closed = s.closed;
+    out->tool = s.tool;
     out->valid = true;
     finished_ = next_ + 1 >= samples_.size() && t_s >= s.time_s;
   }
@@ -78,6 +80,7 @@ std::unique_ptr<Device> MakeReplayDevice(std::string_view path, const Registrati
       r.time_s = s.time_s() - t0;
       r.pos_model[0] = s.tool_pos().x(), r.pos_model[1] = s.tool_pos().y(), r.pos_model[2] = s.tool_pos().z();
       r.closed = s.grasp() || s.tie();  // the button: the tweezers' hold, or a needle's tie
+      r.tool = static_cast<int32_t>(std::min<uint32_t>(s.tool_index(), kMaxTools - 1));  // the loop checks the scene's
       if (s.has_tool_orientation()) {
         const v1::Quat& q = s.tool_orientation();
         r.oriented = true;

@@ -30,14 +30,27 @@ struct ScriptTarget {
   ScriptGeometry geometry;
   Registration registration;
   double duration_s = 0;
+  ToolKind tool_kinds[kMaxTools] = {ToolKind::kSphere};
+  int32_t num_tools = 1;
 
   // The position and button; the orientation too where the script gives one (the pierce).
   void At(double t_s, double pos_device[3], bool* closed, DeviceReading* orientation = nullptr) const {
-    const ScriptSample s = SampleScript(script, geometry, PingPong(t_s, duration_s));
+    // The suture is played once and then held: played backwards, its needle would unpick it.
+    const double t = script == Script::kSuture ? std::min(t_s, duration_s) : PingPong(t_s, duration_s);
+    const ScriptSample s = SampleScript(script, geometry, t);
     registration.ModelToDevice(s.pos, pos_device);
     *closed = s.closed;
     if (orientation != nullptr && s.oriented)
       orientation->oriented = registration.OrientationToDevice(s.orientation, orientation->orientation);
+    // The tool the script holds now: the scene's first of its kind (none: the one held).
+    if (orientation != nullptr && s.kind != ToolKind::kNone) {
+      for (int32_t i = 0; i < num_tools; ++i) {
+        if (tool_kinds[i] == s.kind) {
+          orientation->tool = i;
+          break;
+        }
+      }
+    }
   }
 };
 
@@ -160,9 +173,10 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
                                         context.registration, context.dt_s);
   }
   if (!ParseScriptName(script_name, &target.script)) {
-    *error =
-        Cat({"unknown script '", script_name}) +
-        "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or (scripted) drag";
+    *error = Cat({"unknown script '", script_name}) +
+             "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch, suture or "
+             "(scripted) "
+             "drag";
     return nullptr;
   }
   if (context.model == nullptr) {
@@ -170,6 +184,8 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
     return nullptr;
   }
   target.registration = context.registration;
+  std::copy(context.tool_kinds, context.tool_kinds + kMaxTools, target.tool_kinds);
+  target.num_tools = context.num_tools;
   const std::string name = std::string(human ? "human:" : "scripted:") + std::string(script_name);
   // Hand parameters: a light hand (50 g) on a soft arm (5 Hz), damped; the scan's grid.
   double mass = 0.05, k = 60, zeta = 0.7;

@@ -206,6 +206,11 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     pose_fault = 1;
     counters_.pose_faults.fetch_add(1, std::memory_order_relaxed);
   }
+  // A change of tool (the suture's scalpel, then its needle): the scene's other tool from now on.
+  if (reading.valid && reading.tool >= 0 && reading.tool < options_.num_tools && reading.tool != tool_index_) {
+    input_.tools[0] = options_.tools[reading.tool];
+    tool_index_ = reading.tool;
+  }
   ToolCommand& tool = input_.tools[0];
   if (reading.valid) {
     registration_.DeviceToModel(reading.pos, tool.pos);
@@ -305,6 +310,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.needle_inserted = out.inserted;
   s.needle_exited = out.exited;
   s.tie = tool.tie;
+  s.tool_index = static_cast<uint8_t>(tool_index_);
   s.suture_new_punctures = static_cast<uint8_t>(report.suture.new_punctures);
   s.suture_tied = report.suture.tied;
   s.suture_tie_refused = report.suture.tie_refused;

@@ -418,6 +418,7 @@ int Main(int argc, char** argv) {
   if (const int status = LoadSceneModel(a, scene, up, offline, &model); status != 0) return status;
   LoopOptions lo;
   if (!MakeLoopOptions(a, scene, &lo, &error)) return Fail(error);
+  if (!SceneTools(scene, &lo.tools, &lo.num_tools, &error)) return Fail(error);
   lo.passivity = PassivityFromScene(scene, registration, step.dt_s);
   lo.global_rate_hz = scene.global_rate_hz();
   // The cores the loop does not use (sections of a renumbered model; one otherwise).
@@ -436,6 +437,8 @@ int Main(int argc, char** argv) {
   dc.mio_radius = tool.radius;
   dc.mu_s = tool.mu_s;
   dc.dt_s = step.dt_s;
+  dc.num_tools = lo.num_tools;
+  for (int32_t i = 0; i < lo.num_tools; ++i) dc.tool_kinds[i] = lo.tools[i].kind;
   std::unique_ptr<Device> device = MakeDevice(a.device, dc, &error);
   if (!device) return Fail(error);
   if (std::abs(lo.rate_hz * step.dt_s - 1) > 1e-9) {

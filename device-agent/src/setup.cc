@@ -14,9 +14,12 @@ namespace idms::agent {
 v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
   v1::Scene scene;
   v1::Tool* tool = scene.add_tools();
-  if (script == "pierce" || script == "stitch") {
-    // The needle the script is made for (PierceNeedle, StitchNeedle), the rest of its fields the defaults.
-    const ToolCommand c = script == "stitch" ? StitchNeedle() : PierceNeedle();
+  if (script == "pierce" || script == "stitch" || script == "suture") {
+    // The needle the script is made for (PierceNeedle, StitchNeedle, SutureScriptNeedle), the rest
+    // of its fields the defaults.
+    const ToolCommand c = script == "suture"   ? SutureScriptNeedle()
+                          : script == "stitch" ? StitchNeedle()
+                                               : PierceNeedle();
     tool->set_kind(v1::Tool::KIND_NEEDLE);
     tool->set_name("needle");
     tool->set_radius(c.radius);
@@ -35,6 +38,21 @@ v1::Scene DefaultScene(const std::string& script, v1::Preset preset) {
       u->set_length(c.suture.length);
       u->set_segments(static_cast<uint32_t>(c.suture.segments));
       u->set_mass(c.suture.mass);
+      if (script == "suture") {
+        u->set_tie_force(c.suture.tie_force);
+        u->set_hold_stiffness(c.suture.hold_stiffness);
+      }
+    }
+    if (script == "suture") {
+      // Its window: the tissue around each hole moves as the wound is drawn together; and the
+      // scalpel that opens the incision first (the script changes to it, then to the needle).
+      tool->set_local_radius(kSutureLocalRadius);
+      v1::Tool* scalpel = scene.add_tools();
+      scalpel->set_kind(v1::Tool::KIND_SCALPEL);
+      scalpel->set_name("scalpel");
+      scalpel->set_radius(0.05);
+      scalpel->set_stiffness(400);
+      scalpel->set_blade_length(kSutureBlade);
     }
   } else {
     tool->set_kind(script == "pluck" ? v1::Tool::KIND_TWEEZERS : v1::Tool::KIND_SPHERE);
@@ -133,10 +151,86 @@ PassivityOptions PassivityFromScene(const v1::Scene& scene, const Registration& 
   return o;
 }
 
+namespace {
+
+// Scene.tools(i) as the step takes it. False with a message naming the field.
+bool ToolFromScene(const v1::Scene& scene, int i, ToolCommand* tool, std::string* error) {
+  const v1::Tool& t = scene.tools(i);
+  ToolCommand c;
+  switch (t.kind()) {
+    case v1::Tool::KIND_TWEEZERS:
+      c.kind = ToolKind::kTweezers;
+      break;
+    case v1::Tool::KIND_SCALPEL:
+      c.kind = ToolKind::kScalpel;
+      break;
+    case v1::Tool::KIND_NEEDLE:
+      c.kind = ToolKind::kNeedle;  // its axis stays -z until the device sample carries an orientation
+      break;
+    default:
+      c.kind = ToolKind::kSphere;
+      break;
+  }
+  c.radius = t.radius();
+  c.stiffness = t.stiffness();
+  if (t.has_blade_length()) c.blade[2] = -t.blade_length();
+  c.law = t.force_law() == v1::FORCE_LAW_LINEAR ? ContactLaw::kLinear : ContactLaw::kThesis;  // unspecified = thesis
+  // Friction (unset: frictionless; ApplySceneDefaults filled the rest where mu_s > 0).
+  c.mu_s = t.static_friction();
+  c.mu_d = t.has_kinetic_friction() ? t.kinetic_friction() : t.static_friction();
+  c.friction_stiffness = t.friction_stiffness();                              // 0 = the tool's stiffness
+  c.friction_damping = t.has_friction_damping() ? t.friction_damping() : -1;  // < 0 = k_t dt
+  // The needle's parameters where the scene sets them (the rest: NeedleParams' defaults).
+  const v1::Needle& n = t.needle();
+  NeedleParams& np = c.needle;
+  if (n.has_length()) np.length = n.length();
+  if (n.has_puncture_force()) np.puncture_force = n.puncture_force();
+  if (n.has_axial_friction()) np.mu = n.axial_friction();
+  if (n.has_grip()) np.grip = n.grip();
+  if (n.has_capture_radius()) np.capture_radius = n.capture_radius();
+  if (n.has_lateral_stiffness()) np.lateral_stiffness = n.lateral_stiffness();
+  if (n.has_lateral_damping()) np.lateral_damping = n.lateral_damping();
+  if (n.has_axial_stiffness()) np.axial_stiffness = n.axial_stiffness();
+  if (n.has_axial_damping()) np.axial_damping = n.axial_damping();
+  // Its thread where the scene gives one (the rest: SutureParams' defaults).
+  if (n.has_suture()) {
+    const v1::Suture& u = n.suture();
+    SutureParams& sp = c.suture;
+    sp.length = u.length();
+    if (u.has_segments()) sp.segments = static_cast<int32_t>(u.segments());
+    if (u.has_mass()) sp.mass = u.mass();
+    if (u.has_stiffness()) sp.stiffness = u.stiffness();
+    if (u.has_damping()) sp.damping = u.damping();
+    if (u.has_strength()) sp.strength = u.strength();
+    if (u.has_hold_stiffness()) sp.hold_stiffness = u.hold_stiffness();
+    if (u.has_tie_force()) sp.tie_force = u.tie_force();
+    if (u.has_tie_speed()) sp.tie_speed = u.tie_speed();
+    if (u.has_drag()) sp.drag = u.drag();
+    if (!ValidateSuture(c, error)) {
+      *error = "scene: tools[" + std::to_string(i) + "].needle." + *error;
+      return false;
+    }
+  }
+  *tool = c;
+  return true;
+}
+
+}  // namespace
+
+bool SceneTools(const v1::Scene& scene, std::array<ToolCommand, kMaxTools>* tools, int32_t* num_tools,
+                std::string* error) {
+  *num_tools = 0;
+  for (int i = 0; i < scene.tools_size() && i < kMaxTools; ++i) {
+    if (!ToolFromScene(scene, i, &(*tools)[i], error)) return false;
+    *num_tools = i + 1;
+  }
+  return true;
+}
+
 bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,
                  std::string* error) {
-  if (scene.tools_size() != 1) {
-    *error = "scene: tools: the agent drives exactly one tool with its one device, got " +
+  if (scene.tools_size() < 1 || scene.tools_size() > kMaxTools) {
+    *error = "scene: tools: the agent's one device holds one of 1 to " + std::to_string(kMaxTools) + " tools, got " +
              std::to_string(scene.tools_size());
     return false;
   }
@@ -172,62 +266,8 @@ bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, R
   o.transition_force_rate = d.transition_force_rate() / d.force_scale();
   *step = o;
 
-  // The tool.
-  ToolCommand c;
-  switch (t.kind()) {
-    case v1::Tool::KIND_TWEEZERS:
-      c.kind = ToolKind::kTweezers;
-      break;
-    case v1::Tool::KIND_SCALPEL:
-      c.kind = ToolKind::kScalpel;
-      break;
-    case v1::Tool::KIND_NEEDLE:
-      c.kind = ToolKind::kNeedle;  // its axis stays -z until the device sample carries an orientation
-      break;
-    default:
-      c.kind = ToolKind::kSphere;
-      break;
-  }
-  c.radius = t.radius();
-  c.stiffness = t.stiffness();
-  c.law = t.force_law() == v1::FORCE_LAW_LINEAR ? ContactLaw::kLinear : ContactLaw::kThesis;  // unspecified = thesis
-  // Friction (unset: frictionless; ApplySceneDefaults filled the rest where mu_s > 0).
-  c.mu_s = t.static_friction();
-  c.mu_d = t.has_kinetic_friction() ? t.kinetic_friction() : t.static_friction();
-  c.friction_stiffness = t.friction_stiffness();                              // 0 = the tool's stiffness
-  c.friction_damping = t.has_friction_damping() ? t.friction_damping() : -1;  // < 0 = k_t dt
-  // The needle's parameters where the scene sets them (the rest: NeedleParams' defaults).
-  const v1::Needle& n = t.needle();
-  NeedleParams& np = c.needle;
-  if (n.has_length()) np.length = n.length();
-  if (n.has_puncture_force()) np.puncture_force = n.puncture_force();
-  if (n.has_axial_friction()) np.mu = n.axial_friction();
-  if (n.has_grip()) np.grip = n.grip();
-  if (n.has_capture_radius()) np.capture_radius = n.capture_radius();
-  if (n.has_lateral_stiffness()) np.lateral_stiffness = n.lateral_stiffness();
-  if (n.has_lateral_damping()) np.lateral_damping = n.lateral_damping();
-  if (n.has_axial_stiffness()) np.axial_stiffness = n.axial_stiffness();
-  if (n.has_axial_damping()) np.axial_damping = n.axial_damping();
-  // Its thread where the scene gives one (the rest: SutureParams' defaults).
-  if (n.has_suture()) {
-    const v1::Suture& u = n.suture();
-    SutureParams& sp = c.suture;
-    sp.length = u.length();
-    if (u.has_segments()) sp.segments = static_cast<int32_t>(u.segments());
-    if (u.has_mass()) sp.mass = u.mass();
-    if (u.has_stiffness()) sp.stiffness = u.stiffness();
-    if (u.has_damping()) sp.damping = u.damping();
-    if (u.has_strength()) sp.strength = u.strength();
-    if (u.has_hold_stiffness()) sp.hold_stiffness = u.hold_stiffness();
-    if (u.has_tie_force()) sp.tie_force = u.tie_force();
-    if (u.has_tie_speed()) sp.tie_speed = u.tie_speed();
-    if (u.has_drag()) sp.drag = u.drag();
-    if (!ValidateSuture(c, error)) {
-      *error = "scene: tools[0].needle." + *error;
-      return false;
-    }
-  }
-  *tool = c;
+  // The tool the device holds first.
+  if (!ToolFromScene(scene, 0, tool, error)) return false;
 
   // Registration: p_model = scale * Rz Ry Rx * p_device + offset.
   Registration r;

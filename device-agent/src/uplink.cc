@@ -597,6 +597,7 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_force_limited(s.force_limited);
     out->set_grasp(s.grasp);
     if (s.tie) out->set_tie(true);
+    if (s.tool_index != 0) out->set_tool_index(s.tool_index);
     out->set_substeps(s.substeps);
     out->set_warnings(s.warnings);
     out->set_num_contacts(s.num_contacts);

@@ -188,6 +188,10 @@ void CheckTool(const v1::Tool& tool, int i, bool full_simulation, Checker* c) {
   if (tool.has_friction_stiffness()) c->Range(path("friction_stiffness"), tool.friction_stiffness(), 0, kInf, true);
   if (tool.has_friction_damping()) c->Range(path("friction_damping"), tool.friction_damping(), 0, kInf, false);
   CheckNeedle(tool, i, c);
+  if (tool.has_blade_length()) {
+    c->Range(path("blade_length"), tool.blade_length(), 0, kInf, true);
+    if (tool.kind() != v1::Tool::KIND_SCALPEL) c->Fail(path("blade_length"), "is for KIND_SCALPEL only");
+  }
   if (tool.has_local_radius()) {
     c->Range(path("local_radius"), tool.local_radius(), 0, kInf, true);
     if (!full_simulation && tool.local_radius() < tool.radius()) {

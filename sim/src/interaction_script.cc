@@ -230,7 +230,7 @@ int SutureKeys(const ScriptGeometry& g, SutureKey keys[kMaxSutureKeys]) {
   };
   // The incision: the blade plunged at the start, swept to the end, lifted.
   const double top = g.top_z;
-  const double blade = top - g.bottom_z + 2 * kSutureClear;  // IncisionScalpel's length
+  const double blade = kSutureBlade;  // IncisionScalpel's
   const double above[3] = {g.incision_x, g.incision_y[0], top + kSutureClear + blade};
   const double in[3] = {g.incision_x, g.incision_y[0], top + kSutureClear};
   const double end[3] = {g.incision_x, g.incision_y[1], top + kSutureClear};
@@ -377,11 +377,11 @@ ToolCommand StitchNeedle() {
   return c;
 }
 
-ToolCommand IncisionScalpel(const ScriptGeometry& g) {
+ToolCommand IncisionScalpel() {
   ToolCommand c;
   c.kind = ToolKind::kScalpel;
   c.radius = 0.05;
-  c.blade[2] = -(g.top_z - g.bottom_z + 2 * kSutureClear);
+  c.blade[2] = -kSutureBlade;
   return c;
 }
 

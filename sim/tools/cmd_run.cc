@@ -214,7 +214,7 @@ void Run(RunArgs& a) {
   DragHand hand(geometry, drag_options);
   // The suture's scalpel (it incises before the needle comes), and the incision's figures: its gap
   // when the needle comes, at the end, the widest while held; stitches across it; elements cut.
-  ToolCommand scalpel = IncisionScalpel(geometry);
+  ToolCommand scalpel = IncisionScalpel();
   if (suture && geometry.num_incision_rows == 0) Fail("run", "--script suture: found no rows of top atoms to incise");
   double gap_open = NAN, gap_widest_held = 0;
   int64_t stitches = 0, cut_elements = 0;

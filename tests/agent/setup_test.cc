@@ -1,6 +1,6 @@
 // Scene -> loop (device-agent/src/setup.cc): the passivity controller's scene options and
 // --passivity (issue 31): who gets it by default, the items, the round trip through a scene's text,
-// validation, and the conversion into the model's units.
+// validation, and the conversion into the model's units; the suture's two tools (issue 32).
 #include "idms/agent/setup.h"
 
 #include <google/protobuf/text_format.h>
@@ -9,6 +9,7 @@
 #include <string>
 
 #include "idms/protocol/scene.h"
+#include "idms/sim/interaction_script.h"
 
 namespace idms::agent {
 namespace {
@@ -102,6 +103,47 @@ TEST(Setup, PassivityOptionsAreConvertedIntoModelUnits) {
   EXPECT_EQ(o.dt_s, 1e-3);
   EXPECT_DOUBLE_EQ(o.max_damping, 2.0 / (2 * 4));  // (F_dev / 2) / (4 L_dev / s)
   EXPECT_DOUBLE_EQ(o.quantum, 4e-3);
+}
+
+// The suture's scene (models/suture.scene) and scripted:suture's built-in one hold the needle the
+// script is made for (SutureScriptNeedle) first and its scalpel second, with the blade through the
+// slab; a scene of more tools than a device can hold is refused naming the count.
+TEST(Setup, TheSutureScenesHoldTheScriptsNeedleAndScalpel) {
+  v1::Scene file;
+  std::string error;
+  ASSERT_TRUE(LoadScene(std::string(IDMS_SOURCE_DIR) + "/models/suture.scene", &file, &error)) << error;
+  ASSERT_TRUE(ValidateScene(file, &error)) << error;
+  const ToolCommand want = SutureScriptNeedle();
+  for (const v1::Scene& scene : {file, DefaultScene("suture")}) {
+    std::array<ToolCommand, kMaxTools> tools{};
+    int32_t n = 0;
+    ASSERT_TRUE(SceneTools(scene, &tools, &n, &error)) << error;
+    ASSERT_EQ(n, 2);
+    const ToolCommand& needle = tools[0];
+    EXPECT_EQ(needle.kind, ToolKind::kNeedle);
+    EXPECT_EQ(needle.radius, want.radius);
+    EXPECT_EQ(needle.needle.length, want.needle.length);
+    EXPECT_EQ(needle.needle.puncture_force, want.needle.puncture_force);
+    EXPECT_EQ(needle.needle.grip, want.needle.grip);
+    EXPECT_EQ(needle.needle.capture_radius, want.needle.capture_radius);
+    EXPECT_EQ(needle.needle.lateral_stiffness, want.needle.lateral_stiffness);
+    EXPECT_EQ(needle.needle.axial_stiffness, want.needle.axial_stiffness);
+    EXPECT_EQ(needle.suture.length, want.suture.length);
+    EXPECT_EQ(needle.suture.segments, want.suture.segments);
+    EXPECT_EQ(needle.suture.mass, want.suture.mass);
+    EXPECT_EQ(needle.suture.tie_force, want.suture.tie_force);
+    EXPECT_EQ(needle.suture.hold_stiffness, want.suture.hold_stiffness);
+    EXPECT_EQ(tools[1].kind, ToolKind::kScalpel);
+    EXPECT_EQ(tools[1].blade[2], -kSutureBlade);
+    EXPECT_EQ(scene.tools(0).local_radius(), kSutureLocalRadius);
+  }
+  v1::Scene five = file;
+  for (int i = 0; i < 3; ++i) *five.add_tools() = file.tools(1);
+  StepOptions step;
+  ToolCommand first;
+  Registration reg;
+  EXPECT_FALSE(SceneToLoop(five, &step, &first, &reg, &error));
+  EXPECT_NE(error.find("holds one of 1 to 4 tools, got 5"), std::string::npos) << error;
 }
 
 }  // namespace

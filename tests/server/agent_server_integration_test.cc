@@ -398,6 +398,88 @@ TEST(AgentAndServer, AStitchIsRecordedWithItsThreadPuncturesAndKnot) {
   EXPECT_EQ(replayed_ties, 1) << replay.Log();
 }
 
+// The suture (issue 32) live through the real server, from models/suture.scene, at 5 times real
+// time: the scalpel first (the device holds the scene's second tool, recorded as its index), the
+// incision's cuts as new topologies, then the needle's three stitches: twelve points the thread
+// passes and three knots, as session events, and the thread in the mesh frames.
+TEST(AgentAndServer, ASutureIsIncisedStitchedAndTiedLive) {
+  const std::string dir = TempDir("agent-suture");
+  ServerProcess server(dir + "/data");
+  ASSERT_TRUE(server.ready()) << server.Log();
+  const std::string observer = server.Token("observer");
+  const double duration_s = 100;  // the script's 98 s, and a little held
+  ChildProcess agent(
+      IDMS_AGENT_BIN,
+      {"--server", WsUrl(server), "--token", server.Token("agent"), "--scene",
+       std::string(IDMS_SOURCE_DIR) + "/models/suture.scene", "--cache-dir", dir + "/cache", "--device",
+       "scripted:suture", "--rate", "5000", "--duration", std::to_string(duration_s / 5), "--no-realtime"},
+      dir + "/agent.log");
+  ASSERT_EQ(agent.Wait(seconds(180)), 0) << agent.Log();
+  const std::string id = EndedSession(server.port(), observer);
+  ASSERT_FALSE(id.empty()) << server.Log();
+  ASSERT_TRUE(DownloadRecording(server.port(), id, observer, dir + "/rec.mcap"));
+  // The tool held: the scalpel (index 1) from the first tick, the needle (0) from its first key on.
+  int64_t scalpel_ticks = 0, needle_ticks = 0, changes = 0;
+  uint32_t last = 1;
+  for (const v1::DeviceSample& s : RecordedSamples(dir + "/rec.mcap")) {
+    scalpel_ticks += s.tool_index() == 1;
+    needle_ticks += s.tool_index() == 0;
+    changes += s.tool_index() != last;
+    last = s.tool_index();
+  }
+  EXPECT_EQ(changes, 1);
+  // The incision's 9 s: 0.5 s held, 1 s plunging, 6.06 s along its 7 rows, 1 s lifting, 0.5 s more.
+  EXPECT_NEAR(scalpel_ticks, 9062, 5);
+  EXPECT_GT(needle_ticks, 85000);
+  // (B's two holes are drawn through in one tick: the tip comes up between the bottom's atoms and
+  // punctures B's top one from beneath, so its entry and exit coincide; one event counts both.)
+  uint64_t holes = 0;
+  int ties = 0, needle_in = 0;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/rec.mcap")) {
+    if (e.kind() == v1::SessionEvent::KIND_THREAD_PUNCTURE) holes = e.count();
+    ties += e.kind() == v1::SessionEvent::KIND_TIE;
+    needle_in += e.kind() == v1::SessionEvent::KIND_NEEDLE_IN;
+  }
+  EXPECT_EQ(needle_in, 6) << agent.Log();
+  EXPECT_EQ(holes, 12u);
+  EXPECT_EQ(ties, 3);
+  // The incision changed the topology; the thread is in the frames, knotted three times at the end.
+  uint64_t topology = 0;
+  int knotted = 0;
+  for (const v1::Envelope& e : RecordedMeshFrames(dir + "/rec.mcap")) {
+    if (e.has_mesh_keyframe()) topology = std::max(topology, e.mesh_keyframe().topology_version());
+    const v1::SutureShape* shape = e.has_mesh_keyframe() ? &e.mesh_keyframe().suture() : &e.mesh_delta().suture();
+    knotted += shape->ties() == 3;
+  }
+  EXPECT_GT(topology, 0u);
+  EXPECT_GT(knotted, 60);  // the last second at least
+  IndependentReaderAccepts(dir + "/rec.mcap", 0);
+  // Replayed, the recorded tool index takes the scalpel again: the incision is cut again.
+  ChildProcess replay(IDMS_AGENT_BIN,
+                      {"--server", WsUrl(server), "--token", server.Token("agent"), "--scene",
+                       std::string(IDMS_SOURCE_DIR) + "/models/suture.scene", "--cache-dir", dir + "/cache", "--device",
+                       "replay:" + dir + "/rec.mcap", "--rate", "5000", "--no-realtime"},
+                      dir + "/replay.log");
+  ASSERT_EQ(replay.Wait(seconds(180)), 0) << replay.Log();
+  std::string replayed;
+  ASSERT_TRUE(Eventually([&] {
+    const json s = Sessions(server.port(), observer);
+    if (s.empty() || s[0]["state"] != "ended" || s[0]["id"] == id) return false;
+    replayed = s[0]["id"];
+    return true;
+  }));
+  ASSERT_TRUE(DownloadRecording(server.port(), replayed, observer, dir + "/replayed.mcap"));
+  uint64_t replayed_topology = 0;
+  for (const v1::Envelope& e : RecordedMeshFrames(dir + "/replayed.mcap")) {
+    if (e.has_mesh_keyframe()) replayed_topology = std::max(replayed_topology, e.mesh_keyframe().topology_version());
+  }
+  int replayed_ties = 0;
+  for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/replayed.mcap"))
+    replayed_ties += e.kind() == v1::SessionEvent::KIND_TIE;
+  EXPECT_EQ(replayed_topology, topology) << replay.Log();
+  EXPECT_EQ(replayed_ties, 3);
+}
+
 TEST(AgentAndServer, AModelByNameIsDownloadedOnceThenCachedAndUsedOffline) {
   const std::string dir = TempDir("agent-library");
   const std::string cache = dir + "/cache";

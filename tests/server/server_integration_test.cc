@@ -78,7 +78,8 @@ TEST(ServerIntegration, FirstStartImportsShippedModelsAndWritesPrivateTokens) {
     names.push_back(m["name"]);
     EXPECT_EQ(m["latest_version"], 1);
   }
-  EXPECT_EQ(names, (std::vector<std::string>{"hex_4x5_home", "slab_40x40", "slab_40x40_tumour", "sphere_cap"}));
+  EXPECT_EQ(names,
+            (std::vector<std::string>{"hex_4x5_home", "slab_40x40", "slab_40x40_tumour", "sphere_cap", "suture_slab"}));
   const HttpReply health = Http(server.port(), HttpCall{"GET", "/api/health", {}, ""});
   EXPECT_EQ(health.status, 200);
   EXPECT_EQ(json::parse(health.body)["status"], "ok");
@@ -554,7 +555,7 @@ TEST(ServerIntegration, TlsServesHttpsAndWss) {
       Http(server.port(), HttpCall{"GET", "/api/models", {{"Authorization", "Bearer " + server.Token("observer")}}, ""},
            &tls);
   ASSERT_EQ(r.status, 200) << r.error;
-  EXPECT_EQ(json::parse(r.body)["models"].size(), 4u);
+  EXPECT_EQ(json::parse(r.body)["models"].size(), 5u);
   // Login over TLS sets a Secure cookie.
   const HttpReply login =
       Http(server.port(), HttpCall{"POST", "/api/login", {}, json{{"token", server.Token("observer")}}.dump()}, &tls);

@@ -156,7 +156,8 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
     samples: Array.from({ length: n }, (_, k) => ({ tick: 2 ** 40 + k, timeS: k / 1000, toolPos: { x: k, y: -k, z: 0.5 },
       force: k % 2 ? { x: 0.25, z: -k } : null, contact: k % 3 === 0, grasp: k === 1, warnings: k === 2 ? 3 : 0, substeps: 1,
       forceLimited: k % 4 === 1, ...(k === 4 ? { frictionForce: { x: 0.3, y: -0.1 }, normalForce: 1.25, friction: 2 } : {}),
-      ...(k === 5 ? { toolOrientation: { w: 0.966, y: 0.259 }, needlePunctured: true, needleInserted: 1.5 } : {}) })),
+      ...(k === 5 ? { toolOrientation: { w: 0.966, y: 0.259 }, needlePunctured: true, needleInserted: 1.5 } : {}),
+      ...(k === 6 ? { toolIndex: 1 } : {}) })),
     stats: stats ? { ticks: 2 ** 45, overruns: 7, periodP99Us: 1010, computeP99Us: 40, realtime: true, periodMaxUs: 9 } : null,
     samplesDropped: 12, sentUnixNs: 1.7e18 } }).finish();
   const first = decoder.decode(batch(17, true));
@@ -174,7 +175,9 @@ test('FrameDecoder reads device samples into the same objects every batch, with 
       friction: k === 4 ? 2 : 0, portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0,
       // A needle's pose and state (k = 5); unset, the orientation is the identity.
       toolOrientation: k === 5 ? { w: 0.966, x: 0, y: 0.259, z: 0 } : { w: 1, x: 0, y: 0, z: 0 },
-      needlePunctured: k === 5, needleInserted: k === 5 ? 1.5 : 0 }, `sample ${k}`);
+      needlePunctured: k === 5, needleInserted: k === 5 ? 1.5 : 0,
+      // The scene tool held (k = 6: the second, as the suture's scalpel).
+      toolIndex: k === 6 ? 1 : 0 }, `sample ${k}`);
   }
   const sample3 = d.samples[3];
   // A smaller batch without statistics: the same objects, rewritten.

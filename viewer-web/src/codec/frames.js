@@ -14,7 +14,7 @@ import { idms } from './proto.js';
  * @typedef {{timeS: number, toolPos: Vec3, force: Vec3, contact: boolean, grasp: boolean, warnings: number,
  *   forceLimited: boolean, frictionForce: Vec3, normalForce: number, friction: number, portEnergy: number,
  *   portEnergyWindow: number, passivityDamping: number, toolOrientation: Quat, needlePunctured: boolean,
- *   needleInserted: number}} Sample
+ *   needleInserted: number, toolIndex: number}} Sample
  *   friction: idms.v1.FrictionState (0 none, 1 stick, 2 slip); portEnergy, portEnergyWindow, passivityDamping: the
  *   passivity controller's (0 when off); toolOrientation: the identity when unset (as the protocol says), its
  *   fields 0 when unset inside a set one
@@ -64,7 +64,7 @@ const kWireLength = 2;
 const newSample = () => ({ timeS: 0, toolPos: { x: 0, y: 0, z: 0 }, force: { x: 0, y: 0, z: 0 }, contact: false, grasp: false, warnings: 0,
   forceLimited: false, frictionForce: { x: 0, y: 0, z: 0 }, normalForce: 0, friction: 0,
   portEnergy: 0, portEnergyWindow: 0, passivityDamping: 0, toolOrientation: { w: 1, x: 0, y: 0, z: 0 },
-  needlePunctured: false, needleInserted: 0 });
+  needlePunctured: false, needleInserted: 0, toolIndex: 0 });
 
 export class FrameDecoder {
   constructor() {
@@ -198,6 +198,7 @@ export class FrameDecoder {
     s.passivityDamping = 0;
     s.needlePunctured = false;
     s.needleInserted = 0;
+    s.toolIndex = 0;
     const q = s.toolOrientation;
     q.w = 1;
     q.x = q.y = q.z = 0;
@@ -223,6 +224,7 @@ export class FrameDecoder {
         case 19: this.readQuat(q, r.uint32() + r.pos); break;
         case 20: s.needlePunctured = r.bool(); break;
         case 21: s.needleInserted = r.double(); break;
+        case 23: s.toolIndex = r.uint32(); break;
         default: r.skipType(tag & 7);
       }
     }

@@ -105,6 +105,29 @@ export class LiveView {
     this.units = kModelUnits;
     this.ls = 1;
     this.fs = 1;
+    /** @type {idms.v1.ITool[]} the scene's tools; the device holds one (DeviceSample.toolIndex) */
+    this.tools = [];
+    this.heldTool = -1;
+  }
+
+  /**
+   * The scene's tools (from its welcome): the view draws the one the device holds, the first
+   * until a sample says another (scripted:suture: the scalpel, then the needle).
+   * @param {idms.v1.ITool[]} tools
+   */
+  setSceneTools(tools) {
+    this.tools = tools;
+    this.heldTool = -1;
+    this.holdTool(0);
+  }
+
+  /** @param {number} index the scene tool the device holds */
+  holdTool(index) {
+    if (index === this.heldTool) return;
+    this.heldTool = index;
+    const tool = this.tools[index];
+    this.view.setToolRadius(tool?.radius ?? 1.5);
+    this.view.setNeedle(needleLength(tool));
   }
 
   /**
@@ -194,7 +217,7 @@ export class LiveView {
    *   frictionForce?: {x?: number | null, y?: number | null, z?: number | null} | null, normalForce?: number | null,
    *   friction?: number | null, portEnergy?: number | null, passivityDamping?: number | null,
    *   toolOrientation?: {w?: number | null, x?: number | null, y?: number | null, z?: number | null} | null,
-   *   needlePunctured?: boolean | null}[]} samples
+   *   needlePunctured?: boolean | null, toolIndex?: number | null}[]} samples
    * @param {number} [count] the batch's samples are samples[0, count) (FrameDecoder's pool)
    */
   onSamples(samples, count = samples.length) {
@@ -228,6 +251,7 @@ export class LiveView {
     const last = samples[count - 1];
     const f = last.force, p = last.toolPos;
     const friction = last.friction || 0;  // idms.v1.FrictionState: 1 stick, 2 slip
+    this.holdTool(last.toolIndex || 0);
     this.view.setNeedlePose(last.toolOrientation, !!last.needlePunctured);
     this.view.setTool(p?.x || 0, p?.y || 0, p?.z || 0, f?.x || 0, f?.y || 0, f?.z || 0, !!last.contact, !!last.grasp, friction === 2);
     // The tool's state in words (colour alone is not enough), written only when it changes.

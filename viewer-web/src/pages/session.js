@@ -9,7 +9,7 @@ import { api } from '../net/api.js';
 import { h, page } from './dom.js';
 import { display } from '../view/display.js';
 import { Timeline } from './timeline.js';
-import { LiveView, loadModelRest, needleLength } from './live_view.js';
+import { LiveView, loadModelRest } from './live_view.js';
 import { Units } from '../view/units.js';
 import { AnnotationList, EventList, HealthPanel, SessionHeader, annotationForm, commandPanel, eventFromRecord, eventName,
   messageWords } from './session_panels.js';
@@ -109,8 +109,7 @@ function dispatch(p, env) {
     p.view.setUnits(new Units(env.welcome.scene?.units));
     const tools = env.welcome.scene?.tools || [];
     if (tools.some((t) => (t.staticFriction ?? 0) > 0)) p.view.showContactForces();
-    p.view.view.setToolRadius(tools[0]?.radius ?? 1.5);
-    p.view.view.setNeedle(needleLength(tools[0]));
+    p.view.setSceneTools(tools);
     p.commands?.setTools(tools);
     p.health.setRate(env.welcome.scene?.device?.maxRateHz || 1000);
     if (env.welcome.scene?.model) loadModelRest(p.view.view, env.welcome.scene.model, env.welcome.scene.quantStep || 1e-4);

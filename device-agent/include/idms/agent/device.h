@@ -9,6 +9,7 @@
 #include <string_view>
 
 #include "idms/agent/registration.h"
+#include "idms/sim/state.h"
 
 namespace idms {
 struct Model;
@@ -24,7 +25,9 @@ struct DeviceReading {
   double orientation[4] = {1, 0, 0, 0};
   bool oriented = false;
   bool closed = false;  // button held / tweezers closed
-  bool valid = false;   // false: no usable position this tick (not yet connected, timed out)
+  // The scene tool the device holds from this tick (its index in Scene.tools); -1: the one it held.
+  int32_t tool = -1;
+  bool valid = false;  // false: no usable position this tick (not yet connected, timed out)
 };
 
 // Counters a device keeps (read after the loop stopped, or racily for display).
@@ -61,6 +64,10 @@ struct DeviceContext {
   double mio_radius = 1.5;       // model units: where contact starts, for the scripts
   double dt_s = 1e-3;            // loop period, s: the hand's integration step, the udp timeout's unit
   double mu_s = 0;               // the tool's static friction: the drag pushes at a fraction of mu_s f_n
+  // The scene's tools' kinds, in its order: a script that changes tool (the suture's scalpel, then
+  // needle) picks the first of the kind it asks for.
+  ToolKind tool_kinds[kMaxTools] = {ToolKind::kSphere};
+  int32_t num_tools = 1;
 };
 
 // Parses a --device spec and opens the device (the UDP socket is bound here):

@@ -61,7 +61,8 @@ struct TickSample {
   // The needle through the far side, and its suture (SutureReport): this tick's new points drawn
   // through, a knot tied or refused, a break; the thread's points and knots so far.
   bool needle_exited = false;
-  bool tie = false;  // the needle's tie command (its button) this tick
+  bool tie = false;        // the needle's tie command (its button) this tick
+  uint8_t tool_index = 0;  // the scene tool the device held (DeviceSample.tool_index)
   uint8_t suture_new_punctures = 0;
   bool suture_tied = false, suture_tie_refused = false, suture_broke = false;
   uint16_t suture_punctures = 0, suture_ties = 0;
@@ -123,6 +124,10 @@ struct LoopOptions {
   double global_rate_hz = 0;
   int32_t global_threads = 1;   // StepOptions::threads of the global pass
   bool global_threaded = true;  // false: each global step inside the tick (tests: reproducible)
+  // The scene's tools (SceneTools): the device holds the first, the loop's `tool`, until it picks
+  // another (DeviceReading::tool). Without them (num_tools 0) it holds `tool` only.
+  std::array<ToolCommand, kMaxTools> tools{};
+  int32_t num_tools = 0;
 };
 
 // Counters the loop publishes (relaxed atomics: any thread may read them).
@@ -252,6 +257,7 @@ class Loop {
   bool has_pose_ = false;
   double orientation_[4] = {1, 0, 0, 0};  // the tool's, model frame, once the device gave one
   bool oriented_ = false;
+  int32_t tool_index_ = 0;         // the scene tool the device holds (LoopOptions::tools)
   int8_t tweezers_override_ = -1;  // -1 = the device decides, 0 = held open, 1 = held closed
   bool reset_this_tick_ = false;   // Reset() ran in this tick's commands: the sample says so
   bool override_button_ = false;   // the device's button when the override was commanded

@@ -2,6 +2,7 @@
 // The boundary where scene values become sim types; everything here was validated by LoadScene.
 #pragma once
 
+#include <array>
 #include <string>
 
 #include "idms/agent/registration.h"
@@ -34,9 +35,15 @@ bool ApplyPassivitySpec(const std::string& spec, const std::string& device_spec,
 // the registration's scale, forces divided by its force_scale), for a loop period of dt_s.
 PassivityOptions PassivityFromScene(const v1::Scene& scene, const Registration& registration, double dt_s);
 
-// Maps a validated scene with defaults applied. Tool 0 is the one the device drives; a scene
-// with more tools is refused (one device per agent). False with a message naming the field.
+// Maps a validated scene with defaults applied. Tool 0 is the one the device holds first (and
+// whose local_radius the step takes); the scene may name up to kMaxTools, of which the device
+// holds one at a time (SceneTools). False with a message naming the field.
 bool SceneToLoop(const v1::Scene& scene, StepOptions* step, ToolCommand* tool, Registration* registration,
                  std::string* error);
+
+// Every tool of a validated scene, in its order (LoopOptions::tools): the one device holds one at
+// a time, and a script may change it (scripted:suture: the scalpel, then the needle).
+bool SceneTools(const v1::Scene& scene, std::array<ToolCommand, kMaxTools>* tools, int32_t* num_tools,
+                std::string* error);
 
 }  // namespace idms::agent

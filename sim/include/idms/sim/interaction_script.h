@@ -115,9 +115,12 @@ inline constexpr double kSuturePullSpeed = 3.0;                            // mo
 // Its haptic window's radius (model units): the tissue around every puncture moves as the wound
 // is drawn together, not only the punctured atoms (the needle's tip radius would give 0.5).
 inline constexpr double kSutureLocalRadius = 2.0;
-// Its tools: a scalpel whose blade reaches kSutureClear below the slab from above it, and a 3-unit
+// Its scalpel's blade, model units: from kSutureClear above the slab's top to well below a slab
+// up to 1.5 units thick (the suture slab's is 0.816).
+inline constexpr double kSutureBlade = 3.0;
+// Its tools: a scalpel whose blade (kSutureBlade) reaches through the slab from above it, and a 3-unit
 // needle for a soft tissue (element k about 1.5: models/suture_slab) drawing a 24-unit thread.
-ToolCommand IncisionScalpel(const ScriptGeometry& geometry);
+ToolCommand IncisionScalpel();
 ToolCommand SutureScriptNeedle();
 // The incision's gap: the mean distance between its facing pairs of top atoms, over the stitched
 // rows (the stitches' first to last) or over every row it crosses. NaN without an incision.

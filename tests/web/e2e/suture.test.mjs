@@ -1,0 +1,124 @@
+// A suture in the browser, against the real server and agent (scripted:suture on models/suture.scene
+// at 5 times real time: the scalpel opens an incision through the soft slab in its first 9 s, then
+// the needle places three stitches across it and ties each, and holds still from 93 s): the live
+// view holds the scalpel first (no shaft drawn, the scalpel's small tip), then the needle (its
+// shaft), and at the end draws the thread through its twelve points with three knots; the replay,
+// sought to the end, draws the same from the recording. Checked in the compositor's screenshot:
+// the thread's colour along its projected line, and the punctures' colour at their points.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { join } from 'node:path';
+import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng, frames, surface, sourceDir } from './harness.mjs';
+
+/** @type {Server} */
+let server;
+/** @type {Awaited<ReturnType<typeof launchBrowser>>} */
+let browser;
+/** @type {ReturnType<typeof startAgent> | null} */
+let agent = null;
+
+before(async () => {
+  server = await new Server(tempDir('suture')).start();
+  browser = await launchBrowser();
+});
+after(async () => {
+  agent?.kill();
+  await browser?.context.close();
+  await server?.stop();
+  assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
+});
+
+// protocol/display.json's suture colours, as stitch.test.mjs checks them.
+const isThread = (/** @type {number[]} */ c) => c[2] > c[0] + 25 && c[2] > c[1] + 40;
+const isPuncture = (/** @type {number[]} */ c) => Math.abs(c[0] - 0xf2) < 24 && Math.abs(c[1] - 0xa9) < 24 && c[2] < 40;
+
+/**
+ * The screenshot; the share of the thread's nodes on the canvas with its colour (or a puncture's)
+ * within 2 pixels; the punctures with their colour within 4.
+ * @param {import('playwright-core').Page} page @param {string} name
+ */
+async function look(page, name) {
+  const s = await surface(page);
+  const png = await shot(page.locator('#view3d canvas'), name);
+  const img = await decodePng(browser.context, png);
+  const pixel = (/** @type {number} */ x, /** @type {number} */ y) => {
+    const i = 4 * (Math.round(y) * img.width + Math.round(x));
+    return [img.data[i], img.data[i + 1], img.data[i + 2]];
+  };
+  const within = (/** @type {{x: number, y: number}} */ p, /** @type {(c: number[]) => boolean} */ is, /** @type {number} */ r) => {
+    for (let dy = -r; dy <= r; dy++) {
+      for (let dx = -r; dx <= r; dx++) {
+        const x = p.x + dx, y = p.y + dy;
+        if (x >= 0 && y >= 0 && x < img.width && y < img.height && is(pixel(x, y))) return true;
+      }
+    }
+    return false;
+  };
+  const pts = await page.evaluate(() => /** @type {any} */ (window).__idmsSuturePoints());
+  /** @param {number[]} p */
+  const project = (p) => page.evaluate(([x, y, z]) => /** @type {any} */ (window).__idmsProject(x, y, z), p);
+  let on = 0, total = 0;
+  for (const n of pts.nodes) {
+    const q = await project(n);
+    if (q.x < 3 || q.y < 3 || q.x > img.width - 4 || q.y > img.height - 4) continue;
+    total++;
+    if (within(q, isThread, 2) || within(q, isPuncture, 2)) on++;
+  }
+  let holes = 0;
+  for (const p of pts.punctures) holes += within(await project(p), isPuncture, 4) ? 1 : 0;
+  console.log(`${name}: ${s.suture.nodes} nodes, ${s.suture.punctures} punctures, ${s.suture.ties} knots; `
+    + `${on} of ${total} nodes on the canvas have the thread's colour; ${holes} punctures coloured`);
+  return { s, share: total ? on / total : 0, total, holes };
+}
+
+test('live and replayed: the scalpel, then the needle; three stitches tied across the incision', async () => {
+  const { page } = browser;
+  agent = startAgent(server, 20, 'scripted:suture', { library: true, model: 'suture_slab',
+    args: ['--scene', join(sourceDir(), 'models', 'suture.scene'), '--rate', '5000'] });
+  const id = await server.liveSession();
+  await login(page, server, 'admin', `/session/${id}`);
+  // The incision: the scalpel held (its 0.05 tip, no shaft).
+  await page.waitForFunction(() => {
+    const s = /** @type {any} */ (window).__idms;
+    return s && s.keyframes >= 1 && s.renders >= 1 && s.timeS > 2;
+  }, undefined, { timeout: 60000, polling: 50 });
+  const cutting = await surface(page);
+  assert.ok((await page.evaluate(() => /** @type {any} */ (window).__idms.timeS)) < 9, 'still incising');
+  assert.equal(cutting.needle, null, 'no shaft while the scalpel is held');
+  assert.equal(cutting.toolRadius, 0.05);
+  // The needle from its first key on (9.06 s): its 3-unit shaft.
+  await page.waitForFunction(() => /** @type {any} */ (window).__idmsSurface().needle !== null, undefined,
+    { timeout: 60000, polling: 50 });
+  const stitching = await surface(page);
+  assert.equal(stitching.needle.length, 3);
+  assert.equal(stitching.toolRadius, 0.25);
+  // Three knots, twelve points the thread passes.
+  await page.waitForFunction(() => {
+    const u = /** @type {any} */ (window).__idmsSurface().suture;
+    return /** @type {any} */ (window).__idms.timeS > 95 && u.punctures === 12 && u.ties === 3;
+  }, undefined, { timeout: 120000, polling: 100 });
+  await frames(page);
+  const live = await look(page, 'suture-live.png');
+  await docShot(page.locator('#view3d canvas'), 'suture-closed.png');
+  assert.equal(live.s.suture.nodes, 129);
+  assert.equal(live.s.suture.brokenSegment, 0);
+  assert.ok(live.total > 40, `${live.total} of the thread's nodes on the canvas`);
+  assert.ok(live.share > 0.7, `${(100 * live.share).toFixed(0)} % of the thread's nodes drawn in its colour`);
+  assert.ok(live.holes >= 6, `${live.holes} of 12 punctures drawn in their colour (some lie under the lips)`);
+  assert.equal(await agent.exited, 0, agent.log());
+  // The replay at the end: the same thread from the recording.
+  for (let i = 0; i < 200; i++) {
+    if (JSON.parse((await server.get('/api/sessions')).body).sessions.find((/** @type {any} */ s) => s.id === id)?.state !== 'live') break;
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  await page.goto(`${server.base}/replay/${id}?t=97`);
+  await page.waitForFunction(() => {
+    const s = /** @type {any} */ (window).__idms;
+    return s && s.keyframes >= 1 && s.renders >= 1 && Math.abs(s.timeS - 97) < 0.05
+      && /** @type {any} */ (window).__idmsSurface().suture.ties === 3;
+  }, undefined, { timeout: 30000, polling: 50 });
+  await frames(page);
+  const replay = await look(page, 'suture-replay.png');
+  assert.equal(replay.s.suture.punctures, 12);
+  assert.ok(replay.share > 0.7, `${(100 * replay.share).toFixed(0)} % of the thread's nodes drawn in its colour in the replay`);
+});
