@@ -31,10 +31,9 @@ TEST(Devices, BadSpecsAreExplained) {
   context.model = &model;
   std::string error;
   EXPECT_FALSE(agent::MakeDevice("scripted:poke", context, &error));
-  EXPECT_NE(
-      error.find(
-          "expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch or (scripted) drag"),
-      std::string::npos)
+  EXPECT_NE(error.find("expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch, suture "
+                       "or (scripted) drag"),
+            std::string::npos)
       << error;
   EXPECT_FALSE(agent::MakeDevice("human:palpate,mass=-1", context, &error));
   EXPECT_NE(error.find("mass > 0"), std::string::npos) << error;
