@@ -216,9 +216,10 @@ void AddOptions(CLI::App& app, Args& a) {
   auto* model_opt = app.add_option("--model", a.model, "Library model NAME[@VERSION], downloaded from the server");
   auto* file_opt = app.add_option("--model-file", a.model_file, "Local model: PREFIX of PREFIX.fem + PREFIX.plg");
   model_opt->excludes(file_opt);
-  app.add_option("--device", a.device,
-                 "scripted:palpate|stroke-slow|stroke-fast|pluck|stroke-gentle|scan[,grid=N]|pierce|stitch|suture|drag, "
-                 "human:SCRIPT[,mass=,k=,zeta=], udp:PORT[,bind=,timeout_ms=], replay:FILE.mcap")
+  app.add_option(
+         "--device", a.device,
+         "scripted:palpate|stroke-slow|stroke-fast|pluck|stroke-gentle|scan[,grid=N]|pierce|stitch|suture|drag, "
+         "human:SCRIPT[,mass=,k=,zeta=], udp:PORT[,bind=,timeout_ms=], replay:FILE.mcap")
       ->required();
   auto* scene_opt = app.add_option("--scene", a.scene_file,
                                    "Scene file (idms.v1.Scene text); default: the thesis's tool for the script");
