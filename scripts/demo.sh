@@ -91,8 +91,18 @@ for run in palpate:5.5 stroke-fast:5.8 pluck:5 pierce:12 stitch:14; do
   eval "id_${script//-/_}=$id"
 done
 
+# The suture (docs/needle.md, "The scripted suture"): the scalpel opens an incision through a soft
+# slab, then three stitches across it are tied; its 98 s at five times real time.
+echo "== idms-agent: a suture on suture_slab (models/suture.scene), 100 s at 5 kHz (5x real time), recorded"
+"$bin/idms-agent" --server "$ws" --token "$agent" --model suture_slab --scene models/suture.scene \
+  --device scripted:suture --rate 5000 --duration 20 --no-realtime --cache-dir "$out/agent-cache" \
+  --summary-json "$out/suture.json" > "$out/agent-suture.log" 2>&1
+id_suture=$(sed -n 's/.*"session_id": *"\([^"]*\)".*/\1/p' "$out/suture.json")
+curl -sf -H "Authorization: Bearer $observer" -o "$out/suture.mcap" "$url/api/sessions/$id_suture/recording.mcap"
+echo "   session $id_suture: recording $out/suture.mcap ($(stat -c %s "$out/suture.mcap") bytes)"
+
 echo "== idms-render: the palpation at t = 2.5 s, the pluck lifting the tissue at 3.5 s, the needle in at 5 s,"
-echo "   the stitch tied at 12 s, the tissue at rest"
+echo "   the stitch tied at 12 s, the suture closed at 97 s, the tissue at rest"
 "$bin/idms-render" --recording "$out/palpate.mcap" --at 2.5 --size 1280x720 --show-tool --show-force \
   --out "$out/palpate.png"
 "$bin/idms-render" --model models/hex_4x5_home --size 1280x720 --out "$out/rest.png"
@@ -102,6 +112,8 @@ echo "   the stitch tied at 12 s, the tissue at rest"
   --out "$out/pierce.png"
 "$bin/idms-render" --recording "$out/stitch.mcap" --at 12 --size 1280x720 --show-tool --camera 6,-5,3:1.5,1.7,-1.5 \
   --out "$out/stitch.png"
+"$bin/idms-render" --recording "$out/suture.mcap" --at 97 --size 1280x720 --show-tool --camera 6.2,-1,6:6.2,4.3,0 \
+  --out "$out/suture.png"
 ls -l "$out"/*.png | awk '{print "   " $NF " (" $5 " bytes)"}'
 
 if $headless; then
@@ -130,8 +142,9 @@ cat <<MSG
                        $url/replay/$id_pluck           (pluck)
                        $url/replay/$id_pierce?t=5      (a needle's pierce)
                        $url/replay/$id_stitch?t=12     (a stitch, its thread tied)
+                       $url/replay/$id_suture?t=97     (an incision closed by three stitches)
   The model library:   $url/models
-  Screenshots:         $out/palpate.png, $out/pluck.png, $out/pierce.png, $out/stitch.png, $out/rest.png
+  Screenshots:         $out/palpate.png, $out/pluck.png, $out/pierce.png, $out/stitch.png, $out/suture.png, $out/rest.png
   Recordings:          $out/*.mcap (and $data/recordings/)
   Tokens:              $data/tokens
 

@@ -3,6 +3,7 @@
 
 #include <google/protobuf/text_format.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "idms/protocol/mesh_codec.h"
@@ -18,7 +19,11 @@ SceneView ViewerState::View() const {
   v.positions = mirror.positions();
   v.triangles = mirror.triangles();
   v.has_tool = has_sample;
-  v.tool_radius = tool_radius;
+  // The tool the device held at the last sample (the suture's scalpel, then its needle).
+  const int held =
+      has_sample && static_cast<int>(sample.tool_index()) < num_tools ? static_cast<int>(sample.tool_index()) : 0;
+  v.tool_radius = num_tools > 0 ? tool_radii[held] : tool_radius;
+  const double held_needle = num_tools > 0 ? needle_lengths[held] : needle_length;
   v.mm_per_unit = mm_per_unit;
   v.newtons_per_force_unit = newtons_per_force_unit;
   if (has_sample) {
@@ -28,8 +33,8 @@ SceneView ViewerState::View() const {
     v.slip = sample.friction() == v1::FRICTION_SLIP;
     v.contact = sample.contact();
     v.grasp = sample.grasp();
-    if (needle_length > 0) {
-      v.needle_length = needle_length;
+    if (held_needle > 0) {
+      v.needle_length = held_needle;
       v.needle_punctured = sample.needle_punctured();
       if (sample.has_tool_orientation()) {
         const v1::Quat& q = sample.tool_orientation();
@@ -48,11 +53,16 @@ SceneView ViewerState::View() const {
 }
 
 void ViewerState::SetScene(const v1::Scene& scene) {
-  tool_radius = scene.tools_size() > 0 && scene.tools(0).has_radius() ? scene.tools(0).radius() : 0;
-  const bool needle = scene.tools_size() > 0 && scene.tools(0).kind() == v1::Tool::KIND_NEEDLE;
-  needle_length = !needle                                ? 0
-                  : scene.tools(0).needle().has_length() ? scene.tools(0).needle().length()
-                                                         : NeedleParams{}.length;
+  num_tools = std::min<int>(scene.tools_size(), static_cast<int>(tool_radii.size()));
+  for (int i = 0; i < num_tools; ++i) {
+    const v1::Tool& t = scene.tools(i);
+    tool_radii[i] = t.has_radius() ? t.radius() : 0;
+    needle_lengths[i] = t.kind() != v1::Tool::KIND_NEEDLE ? 0
+                        : t.needle().has_length()         ? t.needle().length()
+                                                          : NeedleParams{}.length;
+  }
+  tool_radius = num_tools > 0 ? tool_radii[0] : 0;
+  needle_length = num_tools > 0 ? needle_lengths[0] : 0;
   mm_per_unit = scene.units().mm_per_unit();
   newtons_per_force_unit = scene.units().newtons_per_force_unit();
 }
@@ -166,6 +176,9 @@ bool RecordingPlayer::MoveTo(double t_s, std::string* error) {
     auto fresh = std::make_unique<ViewerState>();
     fresh->tool_radius = state_->tool_radius;
     fresh->needle_length = state_->needle_length;
+    fresh->tool_radii = state_->tool_radii;
+    fresh->needle_lengths = state_->needle_lengths;
+    fresh->num_tools = state_->num_tools;
     fresh->mm_per_unit = state_->mm_per_unit;
     fresh->newtons_per_force_unit = state_->newtons_per_force_unit;
     fresh->rest = state_->rest;

@@ -99,7 +99,6 @@ test('live and replayed: the scalpel, then the needle; three stitches tied acros
   }, undefined, { timeout: 120000, polling: 100 });
   await frames(page);
   const live = await look(page, 'suture-live.png');
-  await docShot(page.locator('#view3d canvas'), 'suture-closed.png');
   assert.equal(live.s.suture.nodes, 129);
   assert.equal(live.s.suture.brokenSegment, 0);
   assert.ok(live.total > 40, `${live.total} of the thread's nodes on the canvas`);
@@ -121,4 +120,12 @@ test('live and replayed: the scalpel, then the needle; three stitches tied acros
   const replay = await look(page, 'suture-replay.png');
   assert.equal(replay.s.suture.punctures, 12);
   assert.ok(replay.share > 0.7, `${(100 * replay.share).toFixed(0)} % of the thread's nodes drawn in its colour in the replay`);
+  // The view frames the whole thread (drawn far above the slab by the first stitch): zoomed in with
+  // the wheel, as an instructor would, for the README.
+  const box = await page.locator('#view3d canvas').boundingBox();
+  assert.ok(box);
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  for (let i = 0; i < 6; i++) await page.mouse.wheel(0, -200);
+  await frames(page);
+  await docShot(page.locator('#view3d canvas'), 'suture-closed.png');
 });

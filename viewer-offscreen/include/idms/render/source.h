@@ -3,6 +3,7 @@
 // session encoder), so an image shows exactly what a viewer of the same frames saw.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -23,9 +24,12 @@ struct ViewerState {
   MeshMirror mirror;
   bool has_sample = false;
   v1::DeviceSample sample;   // the last one received
-  double tool_radius = 0;    // from the scene (0 = unknown)
-  double needle_length = 0;  // from the scene when its tool is a needle (0 = not one)
-  double mm_per_unit = 0;    // from the scene's units (0 = not declared)
+  double tool_radius = 0;    // from the scene, its first tool (0 = unknown)
+  double needle_length = 0;  // from the scene when its first tool is a needle (0 = not one)
+  // Every tool's, in the scene's order: the device holds one (DeviceSample.tool_index).
+  std::array<double, 4> tool_radii{}, needle_lengths{};
+  int num_tools = 0;
+  double mm_per_unit = 0;  // from the scene's units (0 = not declared)
   double newtons_per_force_unit = 0;
   // The surface at rest (display.json's rule, as the browser's): the first keyframe applied, or
   // the first of another number of vertices; a model's own rest; a recording's first keyframe.
@@ -34,7 +38,7 @@ struct ViewerState {
   std::vector<double> stiffness;  // per vertex (a model's: StiffnessPerVertex); empty = unknown
   // A view of the above for Renderer::Render (valid while this state is unchanged).
   SceneView View() const;
-  // Reads the tool radius, the units and a needle's length from a scene (its first tool).
+  // Reads the tools' radii and needles' lengths, and the units, from a scene.
   void SetScene(const v1::Scene& scene);
   // Applies a mesh frame or takes a device batch; other bodies are ignored. False on a mesh frame
   // the mirror refuses (with *error). A keyframe sets rest when there is none of its size.
