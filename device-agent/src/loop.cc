@@ -236,7 +236,17 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   // The DSM step; cuts found by a scalpel are applied between steps.
   const int64_t clamped_before = state.warnings.device_force_clamped;
   const StepReport report = Step(model, state, workspace, input_);
-  if (report.pending_cuts > 0) ApplyPendingEdits(model, state, workspace);
+  if (report.pending_cuts > 0) {
+    // The incision's lips: each cut surface element's two atoms (ids stay; elements move).
+    for (int32_t i = 0; i < workspace.num_pending_cuts && num_incision_pairs_ < kMaxIncisionPairs; ++i) {
+      const int32_t e = workspace.pending_cuts[i];
+      const int32_t a = model.elem_atoms[2 * e], b = model.elem_atoms[2 * e + 1];
+      if (model.elem_home[e] || !model.atom_external[a] || !model.atom_external[b]) continue;
+      incision_pairs_[num_incision_pairs_++] = {a, b};
+      incision_open_sum_ += model.elem_leq[e];
+    }
+    ApplyPendingEdits(model, state, workspace);
+  }
 
   // Device write: zero without a fresh pose; the guard is the last line of defence.
   const ToolReport& out = report.tools[0];
@@ -311,6 +321,17 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.needle_exited = out.exited;
   s.tie = tool.tie;
   s.tool_index = static_cast<uint8_t>(tool_index_);
+  if (num_incision_pairs_ > 0) {
+    double sum = 0;
+    for (int32_t i = 0; i < num_incision_pairs_; ++i) {
+      const Real* p = &state.atom_pos[3 * incision_pairs_[i][0]];
+      const Real* q = &state.atom_pos[3 * incision_pairs_[i][1]];
+      sum += std::hypot(static_cast<double>(q[0] - p[0]), static_cast<double>(q[1] - p[1]),
+                        static_cast<double>(q[2] - p[2]));
+    }
+    s.incision_gap = std::isfinite(sum) ? sum / num_incision_pairs_ : 0.0;
+    s.incision_open = incision_open_sum_ / num_incision_pairs_;
+  }
   s.suture_new_punctures = static_cast<uint8_t>(report.suture.new_punctures);
   s.suture_tied = report.suture.tied;
   s.suture_tie_refused = report.suture.tie_refused;
@@ -415,6 +436,8 @@ void Loop::Reset() {
   reset_spent_.push(sim_.release());
   sim_.reset(rest);
   tweezers_override_ = -1;
+  num_incision_pairs_ = 0;  // the rest model is whole again
+  incision_open_sum_ = 0;
   reset_this_tick_ = true;
   counters_.resets.fetch_add(1, std::memory_order_relaxed);
 }

@@ -598,6 +598,8 @@ struct Uplink::Impl final : ConnectionHandler {
     out->set_grasp(s.grasp);
     if (s.tie) out->set_tie(true);
     if (s.tool_index != 0) out->set_tool_index(s.tool_index);
+    if (s.suture_ties != 0) out->set_suture_ties(s.suture_ties);
+    if (s.incision_open > 0) out->set_incision_gap(s.incision_gap), out->set_incision_open(s.incision_open);
     out->set_substeps(s.substeps);
     out->set_warnings(s.warnings);
     out->set_num_contacts(s.num_contacts);

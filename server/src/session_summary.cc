@@ -32,6 +32,8 @@ void SessionSummary::Add(const v1::DeviceSamples& ds) {
     punctures += s.needle_punctured() && !last_punctured ? 1 : 0;
     last_punctured = s.needle_punctured();
     needle_deepest = std::max(needle_deepest, s.needle_inserted());
+    stitches = std::max<int64_t>(stitches, s.suture_ties());
+    if (s.incision_open() > 0) incision_gap = s.incision_gap(), incision_open = s.incision_open();
   }
   overruns = ds.stats().overruns();
   tick_p99_us = ds.stats().compute_p99_us();
@@ -54,6 +56,9 @@ std::string SessionSummary::Json() const {
                    {"last_limited", last_limited},
                    {"punctures", punctures},
                    {"needle_deepest", needle_deepest},
+                   {"stitches", stitches},
+                   {"incision_gap", incision_gap},
+                   {"incision_open", incision_open},
                    {"last_punctured", last_punctured},
                    {"contact_samples", contact_samples},
                    {"first_time_s", first_time_s},
@@ -86,6 +91,9 @@ SessionSummary SessionSummary::FromJson(const std::string& text) {
   if (const auto it = j.find("last_limited"); it != j.end() && it->is_boolean()) s.last_limited = it->get<bool>();
   s.punctures = number("punctures", int64_t{0});
   s.needle_deepest = number("needle_deepest", 0.0);
+  s.stitches = number("stitches", int64_t{0});
+  s.incision_gap = number("incision_gap", 0.0);
+  s.incision_open = number("incision_open", 0.0);
   if (const auto it = j.find("last_punctured"); it != j.end() && it->is_boolean()) s.last_punctured = it->get<bool>();
   s.first_time_s = number("first_time_s", -1.0);
   s.last_time_s = number("last_time_s", 0.0);

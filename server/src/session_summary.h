@@ -27,6 +27,9 @@ struct SessionSummary {
   int64_t punctures = 0;            // a needle's entries into the tissue (runs of punctured samples)
   double needle_deepest = 0;        // its largest inserted length, model units
   bool last_punctured = false;      // the last sample's needle was in
+  int64_t stitches = 0;             // a suture's knots (the last sample's DeviceSample.suture_ties)
+  double incision_gap = 0;          // the incision's gap and open width at the last sample (0: no cut)
+  double incision_open = 0;
   bool have_last = false;
   double last_pos[3] = {0, 0, 0};
   double first_time_s = -1, last_time_s = 0;  // simulation time of the first and last sample

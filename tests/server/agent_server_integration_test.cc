@@ -454,6 +454,25 @@ TEST(AgentAndServer, ASutureIsIncisedStitchedAndTiedLive) {
   EXPECT_GT(topology, 0u);
   EXPECT_GT(knotted, 60);  // the last second at least
   IndependentReaderAccepts(dir + "/rec.mcap", 0);
+  // The samples say the incision's gap (its surface lips, pair by pair) and the knots; the session's
+  // summary keeps the last: three stitches, the stitched middle closed and the ends still open.
+  double gap_cut = 0, gap_last = 0, open = 0;
+  uint32_t knots = 0;
+  for (const v1::DeviceSample& s : RecordedSamples(dir + "/rec.mcap")) {
+    if (s.tool_index() == 1 && s.incision_open() > 0) gap_cut = s.incision_gap();
+    if (s.incision_open() > 0) gap_last = s.incision_gap(), open = s.incision_open();
+    knots = s.suture_ties();
+  }
+  EXPECT_NEAR(open, 1.0, 0.05);             // the surface elements cut: the unit grid's edges
+  EXPECT_NEAR(gap_cut, open, 0.02 * open);  // cut, nothing has moved yet
+  EXPECT_LT(gap_last, 0.8 * open);
+  EXPECT_EQ(knots, 3u);
+  const json row = Sessions(server.port(), observer)[0];
+  EXPECT_EQ(row["summary"]["stitches"], 3) << row.dump();
+  EXPECT_NEAR(row["summary"]["incision_gap"].get<double>(), gap_last, 1e-12);
+  EXPECT_NEAR(row["summary"]["incision_open"].get<double>(), open, 1e-12);
+  std::printf("[ figures  ] suture live: incision open %.3f, gap %.3f after the ties (over every cut surface edge)\n",
+              open, gap_last);
   // Replayed, the recorded tool index takes the scalpel again: the incision is cut again.
   ChildProcess replay(IDMS_AGENT_BIN,
                       {"--server", WsUrl(server), "--token", server.Token("agent"), "--scene",

@@ -68,7 +68,8 @@ export function reportPage(id, _role) {
         ['Path length', `${fixed(u.len(sum.path_length ?? NaN))} ${u.length}`],
         ['Force-limit hits', `${sum.force_limit_hits ?? '–'} (${fixed(sum.force_limited_s ?? NaN, 2)} s at the limit)`],
         ['Numerical warnings', String(sum.warnings ?? '–')],
-        ['Loop', `tick p99 ${sum.tick_p99_us ?? '–'} µs, ${sum.overruns ?? '–'} overruns`]]);
+        ['Loop', `tick p99 ${sum.tick_p99_us ?? '–'} µs, ${sum.overruns ?? '–'} overruns`],
+        ...sutureRows(sum, u)]);
       grade.replaceChildren(gradeList(s.grade, u));
       const all = /** @type {any[]} */ (s.annotations || []);
       notes.replaceChildren(...all.slice(0, kReportNotes).map((n) => h('li', {}, [h('span', { class: 'time', text: formatTime(n.time_s) }), ' ', n.text])));
@@ -92,4 +93,20 @@ export function reportPage(id, _role) {
     })
     .catch((e) => { status.textContent = `Cannot load the session: ${e instanceof Error ? e.message : String(e)}`; });
   return () => profile.dispose();
+}
+
+/**
+ * A suture's rows (issue 32), when the session had one: the knots tied, and the incision's gap left
+ * against its open width. @param {any} sum the session's summary @param {Units} u
+ * @returns {[string, string][]}
+ */
+function sutureRows(sum, u) {
+  /** @type {[string, string][]} */
+  const rows = [];
+  if (sum.stitches > 0) rows.push(['Stitches tied', String(sum.stitches)]);
+  if (sum.incision_open > 0) {
+    rows.push(['Incision gap', `${fixed(u.len(sum.incision_gap))} of ${fixed(u.len(sum.incision_open))} ${u.length} open`
+      + ` (${fixed(100 * sum.incision_gap / sum.incision_open, 0)} %)`]);
+  }
+  return rows;
 }

@@ -63,6 +63,8 @@ struct TickSample {
   bool needle_exited = false;
   bool tie = false;        // the needle's tie command (its button) this tick
   uint8_t tool_index = 0;  // the scene tool the device held (DeviceSample.tool_index)
+  // The incision's gap now and open (DeviceSample.incision_gap, incision_open); 0 before a cut.
+  double incision_gap = 0, incision_open = 0;
   uint8_t suture_new_punctures = 0;
   bool suture_tied = false, suture_tie_refused = false, suture_broke = false;
   uint16_t suture_punctures = 0, suture_ties = 0;
@@ -257,7 +259,13 @@ class Loop {
   bool has_pose_ = false;
   double orientation_[4] = {1, 0, 0, 0};  // the tool's, model frame, once the device gave one
   bool oriented_ = false;
-  int32_t tool_index_ = 0;         // the scene tool the device holds (LoopOptions::tools)
+  int32_t tool_index_ = 0;  // the scene tool the device holds (LoopOptions::tools)
+  // The incision's lips: the atom pairs of the surface elements the scalpel cut (up to
+  // kMaxIncisionPairs, the first cut), and the sum of their rest lengths. A reset forgets them.
+  static constexpr int32_t kMaxIncisionPairs = 1024;
+  std::array<std::array<int32_t, 2>, kMaxIncisionPairs> incision_pairs_{};
+  int32_t num_incision_pairs_ = 0;
+  double incision_open_sum_ = 0;
   int8_t tweezers_override_ = -1;  // -1 = the device decides, 0 = held open, 1 = held closed
   bool reset_this_tick_ = false;   // Reset() ran in this tick's commands: the sample says so
   bool override_button_ = false;   // the device's button when the override was commanded
