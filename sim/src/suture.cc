@@ -14,9 +14,10 @@
 // tools' poses are); then the thread is integrated over the tick (symplectic Euler, substeps
 // bounded by its own stiffest node) against the punctures where the tissue ended, and each
 // puncture's arc position follows the thread's nearest point (searched two segments either side,
-// never across a broken segment). The needle's eye (its tail) holds node 0 with a puncture's
-// spring-damper, and the hand feels that spring: a thread going taut is felt through it, at most
-// its stiffness times the tail's travel a tick, not through the thread's own far stiffer springs.
+// never across a broken segment). The needle's eye (its tail) holds node 0 with a spring-damper
+// as stiff as the needle's lateral hold (or the holes', if softer), and the hand feels that
+// spring: a thread going taut is felt through it, at most its stiffness times the tail's travel a
+// tick, not through the thread's own far stiffer springs nor the holes'.
 //
 // A tie (a rising edge of ToolCommand::tie) knots the current stitch: the thread at its first and
 // last punctures since the last tie is bound by a spring of rest length 0 between those two
@@ -180,6 +181,8 @@ void Lay(SutureState& ss, const ActiveTool& at, const SutureParams& p, double dt
   ss.b = p.damping >= 0 ? p.damping : std::sqrt(ss.k * ss.node_mass);
   ss.hold_k = p.hold_stiffness > 0 ? p.hold_stiffness : at.needle.lateral_stiffness;
   ss.hold_b = ss.hold_k * dt;
+  ss.eye_k = std::min(ss.hold_k, at.needle.lateral_stiffness);
+  ss.eye_b = ss.eye_k * dt;
   ss.strength = p.strength;
   ss.tie_force = p.tie_force;
   ss.tie_speed = p.tie_speed;
@@ -377,12 +380,12 @@ void CommitSuture(State& s, Workspace& ws, StepReport* report) {
       if (tension > max_tension) max_tension = tension;
       if (ss.strength > 0 && tension > ss.strength && snapped < 0) snapped = i;
     }
-    // The eye holds node 0 with the punctures' spring-damper (the hand feels it, averaged).
+    // The eye holds node 0 with its spring-damper (the hand feels it, averaged).
     if (pinned) {
       const double f = static_cast<double>(k + 1) / substeps;
       for (int c = 0; c < 3; ++c) {
         const double eye = tail0[c] + f * (tail[c] - tail0[c]), eye_v = (tail[c] - tail0[c]) / dt;
-        const double fe = ss.hold_k * (eye - ss.pos[c]) + ss.hold_b * (eye_v - ss.vel[c]);
+        const double fe = ss.eye_k * (eye - ss.pos[c]) + ss.eye_b * (eye_v - ss.vel[c]);
         force[c] += fe;
         pull[c] += fe / substeps;
       }

@@ -33,11 +33,13 @@ json ReadJson(const std::string& path) { return json::parse(ReadText(path)); }
 std::string WsUrl(const ServerProcess& server) { return "ws://127.0.0.1:" + server.port_string(); }
 
 // The newest session's id once it has ended (its recording finished); "" if it does not in time.
-std::string EndedSession(uint16_t port, const std::string& token) {
+// The newest session once it has ended, other than `not_id` (a replay's, after the session it
+// replays); empty if none did in time.
+std::string EndedSession(uint16_t port, const std::string& token, const std::string& not_id = "") {
   std::string id;
   Eventually([&] {
     const json s = Sessions(port, token);
-    if (s.empty() || s[0]["state"] != "ended") return false;
+    if (s.empty() || s[0]["state"] != "ended" || s[0]["id"] == not_id) return false;
     id = s[0]["id"];
     return true;
   });
@@ -381,13 +383,8 @@ TEST(AgentAndServer, AStitchIsRecordedWithItsThreadPuncturesAndKnot) {
        dir + "/cache", "--scene", dir + "/stitch.scene", "--device", "replay:" + dir + "/rec.mcap", "--no-realtime"},
       dir + "/replay.log");
   ASSERT_EQ(replay.Wait(seconds(120)), 0) << replay.Log();
-  std::string replayed;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(server.port(), observer);
-    if (s.empty() || s[0]["state"] != "ended" || s[0]["id"] == id) return false;
-    replayed = s[0]["id"];
-    return true;
-  }));
+  const std::string replayed = EndedSession(server.port(), observer, id);
+  ASSERT_FALSE(replayed.empty()) << server.Log();
   ASSERT_TRUE(DownloadRecording(server.port(), replayed, observer, dir + "/replayed.mcap"));
   int replayed_ties = 0, replayed_holes = 0;
   for (const v1::SessionEvent& e : RecordedSessionEvents(dir + "/replayed.mcap")) {
@@ -480,13 +477,8 @@ TEST(AgentAndServer, ASutureIsIncisedStitchedAndTiedLive) {
                        "replay:" + dir + "/rec.mcap", "--rate", "5000", "--no-realtime"},
                       dir + "/replay.log");
   ASSERT_EQ(replay.Wait(seconds(180)), 0) << replay.Log();
-  std::string replayed;
-  ASSERT_TRUE(Eventually([&] {
-    const json s = Sessions(server.port(), observer);
-    if (s.empty() || s[0]["state"] != "ended" || s[0]["id"] == id) return false;
-    replayed = s[0]["id"];
-    return true;
-  }));
+  const std::string replayed = EndedSession(server.port(), observer, id);
+  ASSERT_FALSE(replayed.empty()) << server.Log();
   ASSERT_TRUE(DownloadRecording(server.port(), replayed, observer, dir + "/replayed.mcap"));
   uint64_t replayed_topology = 0;
   for (const v1::Envelope& e : RecordedMeshFrames(dir + "/replayed.mcap")) {

@@ -194,6 +194,53 @@ export async function decodePng(context, png) {
   }
 }
 
+// protocol/display.json's suture colours: the thread #4b1d8f (a 1-pixel line, antialiased: its hue,
+// blue well above red and green, not its exact value), the punctures #f2a900 (squares: the value).
+const isThread = (/** @type {number[]} */ c) => c[2] > c[0] + 25 && c[2] > c[1] + 40;
+const isPuncture = (/** @type {number[]} */ c) => Math.abs(c[0] - 0xf2) < 24 && Math.abs(c[1] - 0xa9) < 24 && c[2] < 40;
+
+/**
+ * A suture thread as the compositor drew it (the stitch's and the suture's tests): the screenshot
+ * of the view, the share of the thread's nodes on the canvas with the thread's colour (or a
+ * puncture's) within 2 pixels, and for each puncture whether its colour is within 4.
+ * @param {import('playwright-core').BrowserContext} context @param {import('playwright-core').Page} page
+ * @param {string} name the screenshot's file
+ */
+export async function threadOnCanvas(context, page, name) {
+  const s = await surface(page);
+  const png = await shot(page.locator('#view3d canvas'), name);
+  const img = await decodePng(context, png);
+  const pixel = (/** @type {number} */ x, /** @type {number} */ y) => {
+    const i = 4 * (Math.round(y) * img.width + Math.round(x));
+    return [img.data[i], img.data[i + 1], img.data[i + 2]];
+  };
+  const within = (/** @type {{x: number, y: number}} */ p, /** @type {(c: number[]) => boolean} */ is, /** @type {number} */ r) => {
+    for (let dy = -r; dy <= r; dy++) {
+      for (let dx = -r; dx <= r; dx++) {
+        const x = p.x + dx, y = p.y + dy;
+        if (x >= 0 && y >= 0 && x < img.width && y < img.height && is(pixel(x, y))) return true;
+      }
+    }
+    return false;
+  };
+  const pts = await page.evaluate(() => /** @type {any} */ (window).__idmsSuturePoints());
+  /** @param {number[]} p */
+  const project = (p) => page.evaluate(([x, y, z]) => /** @type {any} */ (window).__idmsProject(x, y, z), p);
+  let on = 0, total = 0;
+  for (const n of pts.nodes) {
+    const q = await project(n);
+    if (q.x < 3 || q.y < 3 || q.x > img.width - 4 || q.y > img.height - 4) continue;
+    total++;
+    if (within(q, isThread, 2) || within(q, isPuncture, 2)) on++;
+  }
+  /** @type {boolean[]} */
+  const holes = [];
+  for (const p of pts.punctures) holes.push(within(await project(p), isPuncture, 4));
+  console.log(`${name}: ${s.suture.nodes} nodes, ${s.suture.punctures} punctures, ${s.suture.ties} knots; `
+    + `${on} of ${total} nodes on the canvas have the thread's colour; punctures coloured: ${holes.join(', ')}`);
+  return { s, share: total ? on / total : 0, total, holes };
+}
+
 /**
  * The share of pixels that changed clearly (some channel by more than 24 levels: a change a person
  * sees, not a level of shading; render_test.cc's ClearChange) between two images of one size, in a

@@ -6,7 +6,7 @@
 // the thread's projected line, and the punctures' colour at their points.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng, frames, surface } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, frames, threadOnCanvas } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -27,50 +27,6 @@ after(async () => {
   assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
 });
 
-// protocol/display.json's suture colours: the thread #4b1d8f (a 1-pixel line, antialiased: its hue,
-// blue well above red and green, not its exact value), the punctures #f2a900 (squares: the value).
-const isThread = (/** @type {number[]} */ c) => c[2] > c[0] + 25 && c[2] > c[1] + 40;
-const isPuncture = (/** @type {number[]} */ c) => Math.abs(c[0] - 0xf2) < 24 && Math.abs(c[1] - 0xa9) < 24 && c[2] < 40;
-
-/**
- * The screenshot, and the share of the thread's node-to-node points (CSS pixels) with a pixel of
- * the thread's colour within 2 pixels, and whether each puncture has its colour within 4.
- * @param {import('playwright-core').Page} page @param {string} name
- */
-async function look(page, name) {
-  const s = await surface(page);
-  const png = await shot(page.locator('#view3d canvas'), name);
-  const img = await decodePng(browser.context, png);
-  const pixel = (/** @type {number} */ x, /** @type {number} */ y) => {
-    const i = 4 * (Math.round(y) * img.width + Math.round(x));
-    return [img.data[i], img.data[i + 1], img.data[i + 2]];
-  };
-  const within = (/** @type {{x: number, y: number}} */ p, /** @type {(c: number[]) => boolean} */ is, /** @type {number} */ r) => {
-    for (let dy = -r; dy <= r; dy++) {
-      for (let dx = -r; dx <= r; dx++) {
-        const x = p.x + dx, y = p.y + dy;
-        if (x >= 0 && y >= 0 && x < img.width && y < img.height && is(pixel(x, y))) return true;
-      }
-    }
-    return false;
-  };
-  const pts = await page.evaluate(() => /** @type {any} */ (window).__idmsSuturePoints());
-  /** @param {number[]} p */
-  const project = (p) => page.evaluate(([x, y, z]) => /** @type {any} */ (window).__idmsProject(x, y, z), p);
-  let on = 0, total = 0;
-  for (const n of pts.nodes) {
-    const q = await project(n);
-    if (q.x < 3 || q.y < 3 || q.x > img.width - 4 || q.y > img.height - 4) continue;
-    total++;
-    if (within(q, isThread, 2) || within(q, isPuncture, 2)) on++;
-  }
-  const holes = [];
-  for (const p of pts.punctures) holes.push(within(await project(p), isPuncture, 4));
-  console.log(`${name}: ${s.suture.nodes} nodes, ${s.suture.punctures} punctures, ${s.suture.ties} knots; `
-    + `${on} of ${total} nodes on the canvas have the thread's colour; punctures coloured: ${holes.join(', ')}`);
-  return { s, share: total ? on / total : 0, total, holes };
-}
-
 test('live and replayed: the thread over the surface, its two punctures and the knot', async () => {
   const { page } = browser;
   agent = startAgent(server, 14, 'scripted:stitch', { library: true });
@@ -88,7 +44,7 @@ test('live and replayed: the thread over the surface, its two punctures and the 
     return s.timeS >= t && u.punctures === 2 && u.ties === 1;
   }, kTiedS, { timeout: 60000, polling: 50 });
   await frames(page);
-  const live = await look(page, 'stitch-live.png');
+  const live = await threadOnCanvas(browser.context, page, 'stitch-live.png');
   await docShot(page.locator('#view3d canvas'), 'stitch-tied.png');
   assert.ok(live.total > 20, `${live.total} of the thread's nodes on the canvas`);
   assert.ok(live.share > 0.8, `${(100 * live.share).toFixed(0)} % of the thread's nodes drawn in its colour`);
@@ -108,7 +64,7 @@ test('live and replayed: the thread over the surface, its two punctures and the 
       && /** @type {any} */ (window).__idmsSurface().suture.ties === 1;
   }, undefined, { timeout: 20000, polling: 50 });
   await frames(page);
-  const replay = await look(page, 'stitch-replay.png');
+  const replay = await threadOnCanvas(browser.context, page, 'stitch-replay.png');
   assert.equal(replay.s.suture.nodes, 65);
   assert.equal(replay.s.suture.punctures, 2);
   assert.ok(replay.share > 0.8, `${(100 * replay.share).toFixed(0)} % of the thread's nodes drawn in its colour in the replay`);

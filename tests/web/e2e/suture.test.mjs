@@ -9,7 +9,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
-import { Server, tempDir, launchBrowser, login, startAgent, docShot, shot, decodePng, frames, surface, sourceDir } from './harness.mjs';
+import { Server, tempDir, launchBrowser, login, startAgent, docShot, frames, surface, sourceDir, threadOnCanvas } from './harness.mjs';
 
 /** @type {Server} */
 let server;
@@ -28,49 +28,6 @@ after(async () => {
   await server?.stop();
   assert.deepEqual(browser?.errors ?? [], [], 'errors on the page');
 });
-
-// protocol/display.json's suture colours, as stitch.test.mjs checks them.
-const isThread = (/** @type {number[]} */ c) => c[2] > c[0] + 25 && c[2] > c[1] + 40;
-const isPuncture = (/** @type {number[]} */ c) => Math.abs(c[0] - 0xf2) < 24 && Math.abs(c[1] - 0xa9) < 24 && c[2] < 40;
-
-/**
- * The screenshot; the share of the thread's nodes on the canvas with its colour (or a puncture's)
- * within 2 pixels; the punctures with their colour within 4.
- * @param {import('playwright-core').Page} page @param {string} name
- */
-async function look(page, name) {
-  const s = await surface(page);
-  const png = await shot(page.locator('#view3d canvas'), name);
-  const img = await decodePng(browser.context, png);
-  const pixel = (/** @type {number} */ x, /** @type {number} */ y) => {
-    const i = 4 * (Math.round(y) * img.width + Math.round(x));
-    return [img.data[i], img.data[i + 1], img.data[i + 2]];
-  };
-  const within = (/** @type {{x: number, y: number}} */ p, /** @type {(c: number[]) => boolean} */ is, /** @type {number} */ r) => {
-    for (let dy = -r; dy <= r; dy++) {
-      for (let dx = -r; dx <= r; dx++) {
-        const x = p.x + dx, y = p.y + dy;
-        if (x >= 0 && y >= 0 && x < img.width && y < img.height && is(pixel(x, y))) return true;
-      }
-    }
-    return false;
-  };
-  const pts = await page.evaluate(() => /** @type {any} */ (window).__idmsSuturePoints());
-  /** @param {number[]} p */
-  const project = (p) => page.evaluate(([x, y, z]) => /** @type {any} */ (window).__idmsProject(x, y, z), p);
-  let on = 0, total = 0;
-  for (const n of pts.nodes) {
-    const q = await project(n);
-    if (q.x < 3 || q.y < 3 || q.x > img.width - 4 || q.y > img.height - 4) continue;
-    total++;
-    if (within(q, isThread, 2) || within(q, isPuncture, 2)) on++;
-  }
-  let holes = 0;
-  for (const p of pts.punctures) holes += within(await project(p), isPuncture, 4) ? 1 : 0;
-  console.log(`${name}: ${s.suture.nodes} nodes, ${s.suture.punctures} punctures, ${s.suture.ties} knots; `
-    + `${on} of ${total} nodes on the canvas have the thread's colour; ${holes} punctures coloured`);
-  return { s, share: total ? on / total : 0, total, holes };
-}
 
 test('live and replayed: the scalpel, then the needle; three stitches tied across the incision', async () => {
   const { page } = browser;
@@ -91,12 +48,13 @@ test('live and replayed: the scalpel, then the needle; three stitches tied acros
     return /** @type {any} */ (window).__idms.timeS > 95 && u.punctures === 12 && u.ties === 3;
   }, undefined, { timeout: 120000, polling: 100 });
   await frames(page);
-  const live = await look(page, 'suture-live.png');
+  const live = await threadOnCanvas(browser.context, page, 'suture-live.png');
   assert.equal(live.s.suture.nodes, 129);
   assert.equal(live.s.suture.brokenSegment, 0);
   assert.ok(live.total > 40, `${live.total} of the thread's nodes on the canvas`);
   assert.ok(live.share > 0.7, `${(100 * live.share).toFixed(0)} % of the thread's nodes drawn in its colour`);
-  assert.ok(live.holes >= 6, `${live.holes} of 12 punctures drawn in their colour (some lie under the lips)`);
+  const coloured = live.holes.filter(Boolean).length;
+  assert.ok(coloured >= 6, `${coloured} of 12 punctures drawn in their colour (some may lie under the lips)`);
   assert.equal(await agent.exited, 0, agent.log());
   // The replay at the end: the same thread from the recording.
   for (let i = 0; i < 200; i++) {
@@ -120,7 +78,7 @@ test('live and replayed: the scalpel, then the needle; three stitches tied acros
       && /** @type {any} */ (window).__idmsSurface().suture.ties === 3;
   }, undefined, { timeout: 30000, polling: 50 });
   await frames(page);
-  const replay = await look(page, 'suture-replay.png');
+  const replay = await threadOnCanvas(browser.context, page, 'suture-replay.png');
   assert.equal(replay.s.suture.punctures, 12);
   assert.ok(replay.share > 0.7, `${(100 * replay.share).toFixed(0)} % of the thread's nodes drawn in its colour in the replay`);
   // The view frames the whole thread (drawn far above the slab by the first stitch): zoomed in with

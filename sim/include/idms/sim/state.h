@@ -113,6 +113,10 @@ struct SutureState {
   double k = 0, b = 0;   // each segment's spring (force / length) and damper (force / (length / s))
   double hold_k = 0;     // a puncture's spring to the thread, force / length
   double hold_b = 0;     // ... and its damper
+  // The needle's eye's spring-damper to node 0, the one the hand feels the thread through: the
+  // needle's lateral stiffness (what the hand feels of the tissue along the shaft), which a stiff
+  // hole (hold_k) would otherwise make a rope's jerk.
+  double eye_k = 0, eye_b = 0;
   double strength = 0;   // segment tension at which the thread breaks, force units (0: never)
   double tie_force = 0;  // a knot's largest pull, force units
   double tie_speed = 0;  // model units / s: how fast a knot cinches its loop
