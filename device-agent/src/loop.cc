@@ -244,6 +244,7 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
       if (model.elem_home[e] || !model.atom_external[a] || !model.atom_external[b]) continue;
       incision_pairs_[num_incision_pairs_++] = {a, b};
       incision_open_sum_ += model.elem_leq[e];
+      incision_due_ = true;
     }
     ApplyPendingEdits(model, state, workspace);
   }
@@ -282,7 +283,9 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
     counters_.global_reachable_hz.store(g.reachable_hz, std::memory_order_relaxed);
   }
 
-  // Surface snapshot at the stream rate.
+  // Surface snapshot at the stream rate, and the incision's gap with it (up to 1,024 pairs: not
+  // every tick) or as soon as a cut adds lips.
+  if (incision_due_ || state.time_s >= next_mesh_time_s_ - 1e-9) MeasureIncision(state);
   if (state.time_s >= next_mesh_time_s_ - 1e-9) {
     if (!PublishMesh(false)) counters_.mesh_skipped.fetch_add(1, std::memory_order_relaxed);
     while (next_mesh_time_s_ <= state.time_s + 1e-9) next_mesh_time_s_ += mesh_interval_s_;
@@ -321,17 +324,8 @@ void Loop::Tick(int64_t wake_ns, int64_t deadline_ns) {
   s.needle_exited = out.exited;
   s.tie = tool.tie;
   s.tool_index = static_cast<uint8_t>(tool_index_);
-  if (num_incision_pairs_ > 0) {
-    double sum = 0;
-    for (int32_t i = 0; i < num_incision_pairs_; ++i) {
-      const Real* p = &state.atom_pos[3 * incision_pairs_[i][0]];
-      const Real* q = &state.atom_pos[3 * incision_pairs_[i][1]];
-      sum += std::hypot(static_cast<double>(q[0] - p[0]), static_cast<double>(q[1] - p[1]),
-                        static_cast<double>(q[2] - p[2]));
-    }
-    s.incision_gap = std::isfinite(sum) ? sum / num_incision_pairs_ : 0.0;
-    s.incision_open = incision_open_sum_ / num_incision_pairs_;
-  }
+  s.incision_gap = incision_gap_;
+  s.incision_open = num_incision_pairs_ > 0 ? incision_open_sum_ / num_incision_pairs_ : 0.0;
   s.suture_new_punctures = static_cast<uint8_t>(report.suture.new_punctures);
   s.suture_tied = report.suture.tied;
   s.suture_tie_refused = report.suture.tie_refused;
@@ -415,6 +409,19 @@ bool Loop::PublishMesh(bool final_frame) {
   return true;
 }
 
+void Loop::MeasureIncision(const State& state) {
+  incision_due_ = false;
+  if (num_incision_pairs_ == 0) return;
+  double sum = 0;
+  for (int32_t i = 0; i < num_incision_pairs_; ++i) {
+    const Real* p = &state.atom_pos[3 * incision_pairs_[i][0]];
+    const Real* q = &state.atom_pos[3 * incision_pairs_[i][1]];
+    sum += std::hypot(static_cast<double>(q[0] - p[0]), static_cast<double>(q[1] - p[1]),
+                      static_cast<double>(q[2] - p[2]));
+  }
+  incision_gap_ = std::isfinite(sum) ? sum / num_incision_pairs_ : 0.0;
+}
+
 void Loop::Reset() {
   // The rest set PushCommand queued ahead of this command; none means a broken handoff, and the
   // loop does not abort: the command is ignored.
@@ -437,7 +444,7 @@ void Loop::Reset() {
   sim_.reset(rest);
   tweezers_override_ = -1;
   num_incision_pairs_ = 0;  // the rest model is whole again
-  incision_open_sum_ = 0;
+  incision_open_sum_ = incision_gap_ = 0;
   reset_this_tick_ = true;
   counters_.resets.fetch_add(1, std::memory_order_relaxed);
 }

@@ -236,6 +236,8 @@ class Loop {
   void SetUpThread();  // real-time setup and pinning of the calling thread, said on stderr
   void ApplyCommands();
   bool PublishMesh(bool final_frame);  // false when no buffer was free
+  // The incision's gap over its lips now (at the stream rate, or once a cut added lips).
+  void MeasureIncision(const State& state);
   void Reset();
 
   // Simulation (loop thread). sim_ is replaced whole by a reset; rest_ is immutable after the
@@ -266,6 +268,8 @@ class Loop {
   std::array<std::array<int32_t, 2>, kMaxIncisionPairs> incision_pairs_{};
   int32_t num_incision_pairs_ = 0;
   double incision_open_sum_ = 0;
+  double incision_gap_ = 0;        // their mean distance when last measured (MeasureIncision)
+  bool incision_due_ = false;      // a cut added pairs: measure at once
   int8_t tweezers_override_ = -1;  // -1 = the device decides, 0 = held open, 1 = held closed
   bool reset_this_tick_ = false;   // Reset() ran in this tick's commands: the sample says so
   bool override_button_ = false;   // the device's button when the override was commanded
