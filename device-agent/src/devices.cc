@@ -33,20 +33,21 @@ struct ScriptTarget {
   ToolKind tool_kinds[kMaxTools] = {ToolKind::kSphere};
   int32_t num_tools = 1;
 
-  // The position and button; the orientation too where the script gives one (the pierce).
-  void At(double t_s, double pos_device[3], bool* closed, DeviceReading* orientation = nullptr) const {
+  // The position and button; into `reading` too, the orientation where the script gives one (the
+  // pierce) and the tool it holds (the suture).
+  void At(double t_s, double pos_device[3], bool* closed, DeviceReading* reading = nullptr) const {
     // The suture is played once and then held: played backwards, its needle would unpick it.
     const double t = script == Script::kSuture ? std::min(t_s, duration_s) : PingPong(t_s, duration_s);
     const ScriptSample s = SampleScript(script, geometry, t);
     registration.ModelToDevice(s.pos, pos_device);
     *closed = s.closed;
-    if (orientation != nullptr && s.oriented)
-      orientation->oriented = registration.OrientationToDevice(s.orientation, orientation->orientation);
+    if (reading != nullptr && s.oriented)
+      reading->oriented = registration.OrientationToDevice(s.orientation, reading->orientation);
     // The tool the script holds now: the scene's first of its kind (none: the one held).
-    if (orientation != nullptr && s.kind != ToolKind::kNone) {
+    if (reading != nullptr && s.kind != ToolKind::kNone) {
       for (int32_t i = 0; i < num_tools; ++i) {
         if (tool_kinds[i] == s.kind) {
-          orientation->tool = i;
+          reading->tool = i;
           break;
         }
       }
@@ -175,8 +176,7 @@ std::unique_ptr<Device> MakeScriptDevice(bool human, std::string_view args, cons
   if (!ParseScriptName(script_name, &target.script)) {
     *error = Cat({"unknown script '", script_name}) +
              "': expected palpate, stroke-slow, stroke-fast, pluck, stroke-gentle, scan, pierce, stitch, suture or "
-             "(scripted) "
-             "drag";
+             "(scripted) drag";
     return nullptr;
   }
   if (context.model == nullptr) {

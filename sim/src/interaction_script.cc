@@ -224,7 +224,7 @@ int SutureKeys(const ScriptGeometry& g, SutureKey keys[kMaxSutureKeys]) {
   double t = 0;
   auto add = [&](double dt, ToolKind kind, const double p[3], double theta, bool button = false) {
     t += dt;
-    SutureKey& k = keys[std::min(n++, kMaxSutureKeys - 1)];  // SutureKeyCount's test: n < kMaxSutureKeys
+    SutureKey& k = keys[std::min(n++, kMaxSutureKeys - 1)];  // 5 + 12 x 3 + 1: exactly kMaxSutureKeys
     k.t = t, k.kind = kind, k.theta = theta, k.button = button;
     std::copy(p, p + 3, k.p);
   };
